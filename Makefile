@@ -1,0 +1,54 @@
+# The two commands of the set-up contract: `make run` and `make test`.
+PY      ?= python3.11
+VENV    := .venv
+BIN     := $(VENV)/bin
+STAMP   := $(VENV)/.installed
+TSTAMP  := $(VENV)/.installed-test
+HOST    ?= 127.0.0.1
+PORT    ?= 8000
+PYTEST_ARGS ?=
+
+.PHONY: run test lint bench install system-deps clean
+
+$(BIN)/python:
+	@command -v $(PY) >/dev/null 2>&1 || PY=python3; $${PY:-$(PY)} -m venv $(VENV) || python3 -m venv $(VENV)
+	$(BIN)/pip install --quiet --upgrade pip
+
+$(STAMP): pyproject.toml | $(BIN)/python
+	$(BIN)/pip install --quiet -e .
+	@touch $@
+
+$(TSTAMP): pyproject.toml | $(BIN)/python
+	$(BIN)/pip install --quiet -e ".[test]"
+	@touch $@ $(STAMP)
+
+# open3d needs libusb; the browser tests need Debian's chromium.
+system-deps:
+	@missing=""; \
+	ldconfig -p 2>/dev/null | grep -q libusb-1.0.so.0 || missing="$$missing libusb-1.0-0"; \
+	command -v chromium >/dev/null 2>&1 || missing="$$missing chromium"; \
+	if [ -n "$$missing" ]; then \
+	  echo "installing system packages:$$missing"; \
+	  SUDO=""; [ "$$(id -u)" = 0 ] || SUDO=sudo; \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq $$missing >/dev/null; \
+	fi
+
+install: $(STAMP)
+
+run: system-deps $(STAMP)
+	$(BIN)/nbv serve --host $(HOST) --port $(PORT)
+
+test: system-deps $(TSTAMP)
+	$(BIN)/ruff check planner devices app nbv tests
+	$(BIN)/python -m pytest -q $(PYTEST_ARGS)
+
+lint: $(TSTAMP)
+	$(BIN)/ruff check planner devices app nbv tests
+	$(BIN)/ruff format --check planner devices app nbv tests
+	$(BIN)/pyright
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/profile_models.py --models ../shared/models --out out/bench --fidelity
+
+clean:
+	rm -rf $(VENV) out test-output

@@ -1,0 +1,51 @@
+"""The coverage ceiling of a cell: the union of every reachable candidate view.
+
+No planner can cover more than this in the same cell with the same candidate
+hemisphere: the plate hides the bottom and the arm cannot reach every view.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from planner import Planner
+from planner.candidates import propose_candidates
+from planner.preprocess import preprocess
+
+
+def reachable_coverage(
+    cell: Any,
+    planner: Planner,
+    surface_samples: NDArray[np.float64],
+    radius: float = 0.005,
+) -> float:
+    """Coverage of the union of all reachable candidates of the planner's final hemisphere.
+
+    cell: a simulated cell with ``render_truth(T_world_camera) -> DepthFrame`` (noise-free)
+    and ``is_reachable``. surface_samples: (M, 3) ground-truth points.
+    """
+    bbox = planner.voxel_map.bbox
+    if bbox is None or len(surface_samples) == 0:
+        return 0.0
+    cfg = planner.config
+    candidates, _, _ = propose_candidates(bbox, cfg.candidates, cfg.partitions)
+    clean = replace(cfg.preprocess, outlier_neighbors=0)
+    covered = np.zeros(len(surface_samples), dtype=bool)
+    for cand in candidates:
+        if not cell.is_reachable(cand.T_world_camera):
+            continue
+        frame = cell.render_truth(cand.T_world_camera)
+        points = preprocess(frame.points_world, None, clean)
+        if len(points) == 0:
+            continue
+        todo = np.flatnonzero(~covered)
+        if len(todo) == 0:
+            break
+        dist, _ = cKDTree(points).query(surface_samples[todo], k=1, distance_upper_bound=radius)
+        covered[todo[np.isfinite(dist)]] = True
+    return float(covered.mean())

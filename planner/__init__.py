@@ -1,0 +1,62 @@
+"""The projection-based next-best-view planner (paper §III), pure numpy/scipy/scikit-learn.
+
+Read top-down against the paper:
+
+- ``types``       value types (Pose, DepthFrame, Ellipsoid, Candidate, ViewScore, PlanResult)
+- ``config``      one dataclass per component, the paper's defaults
+- ``preprocess``  crop, plate removal, outliers, down-sampling
+- ``registration``  point-to-plane ICP with an acceptance gate
+- ``raycast``, ``voxel_map``, ``frontier``, ``bbox``   §III-C voxel structure and B's growth
+- ``clustering``, ``mvee``, ``ellipsoids``             §III-D GMM + BIC, minimum-volume ellipsoids
+- ``candidates``                                       §III-B hemisphere of candidate views
+- ``projection``, ``scoring``                          §III-E dual quadric -> conic, rank weights, F
+- ``partitions``                                       §III-F global longitude partitions
+- ``evaluators``, ``planner``                          Algorithm 1
+"""
+
+from typing import TYPE_CHECKING, Any
+
+from planner.config import PlannerConfig
+from planner.types import (
+    BoundingBox,
+    Candidate,
+    ClusterFit,
+    DepthFrame,
+    Ellipsoid,
+    Intrinsics,
+    PlanResult,
+    Pose,
+    ViewScore,
+    VoxelClass,
+    VoxelSnapshot,
+)
+
+if TYPE_CHECKING:
+    from planner.planner import IntegrationReport, Planner
+
+
+def __getattr__(name: str) -> Any:
+    """Load the facade lazily, so ``planner.types`` imports stay light."""
+    if name in ("Planner", "IntegrationReport"):
+        from planner import planner as _planner
+
+        return getattr(_planner, name)
+    raise AttributeError(f"module 'planner' has no attribute {name!r}")
+
+
+__all__ = [
+    "BoundingBox",
+    "Candidate",
+    "ClusterFit",
+    "DepthFrame",
+    "Ellipsoid",
+    "IntegrationReport",
+    "Intrinsics",
+    "PlanResult",
+    "Planner",
+    "PlannerConfig",
+    "Pose",
+    "ViewScore",
+    "VoxelClass",
+    "VoxelSnapshot",
+]

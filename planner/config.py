@@ -1,0 +1,284 @@
+"""Planner configuration: one frozen dataclass per component, nested in ``PlannerConfig``.
+
+Defaults are the paper's where it gives one (resolution 0.01 m, 400 candidates,
+beta = 4, T in [5, 50]); every default is documented once, at its field.
+Angles are in degrees here (a config edge) and converted to radians in code.
+TOML files, the CLI and the REST API use the same names, e.g.
+``[voxel] resolution = 0.01`` or ``{"voxel": {"resolution": 0.01}}``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal, TypeVar
+
+
+def _require(cond: bool, msg: str) -> None:
+    if not cond:
+        raise ValueError(msg)
+
+
+def _finite(*values: float) -> bool:
+    return all(isinstance(v, int | float) and math.isfinite(v) for v in values)
+
+
+@dataclass(frozen=True)
+class VoxelConfig:
+    """The voxel map over the bounding box B (paper §III-C)."""
+
+    resolution: float = 0.01
+    """Voxel edge length, metres (paper: 0.01)."""
+    gamma: float = 0.02
+    """Radius of the sphere around each frontier voxel that B must cover, metres (paper: gamma)."""
+    initial_diagonal_factor: float = 2.0
+    """After the first frame B is grown along the view direction until its diagonal is this many times longer (paper: 2)."""
+    max_extent: float = 1.0
+    """B never grows beyond this edge length, metres (a safety cap; the paper has none)."""
+    integration: Literal["projective", "raycast"] = "projective"
+    """'projective' projects voxel centres into the depth image (fast); 'raycast' is the Amanatides-Woo reference."""
+
+    def __post_init__(self) -> None:
+        _require(_finite(self.resolution) and self.resolution > 0, f"voxel.resolution: must be > 0, got {self.resolution!r}")
+        _require(_finite(self.gamma) and self.gamma >= 0, f"voxel.gamma: must be >= 0, got {self.gamma!r}")
+        _require(
+            _finite(self.initial_diagonal_factor) and self.initial_diagonal_factor >= 1,
+            f"voxel.initial_diagonal_factor: must be >= 1, got {self.initial_diagonal_factor!r}",
+        )
+        _require(
+            _finite(self.max_extent) and self.max_extent > self.resolution,
+            f"voxel.max_extent: must be > resolution, got {self.max_extent!r}",
+        )
+        _require(self.integration in ("projective", "raycast"), f"voxel.integration: 'projective' or 'raycast', got {self.integration!r}")
+
+
+@dataclass(frozen=True)
+class ClusterConfig:
+    """GMM clustering of occupied and frontier voxels with BIC model selection (paper §III-D)."""
+
+    t_min: int = 5
+    """Fewest Gaussian components tried (paper: 5)."""
+    t_max: int = 50
+    """Most Gaussian components tried (paper: 50)."""
+    search: Literal["fast", "exhaustive"] = "fast"
+    """'exhaustive' fits every T in [t_min, t_max]; 'fast' is a warm-started bracketed search (see docs/method.md)."""
+    min_points_per_component: int = 4
+    """With fewer than t * this voxels, t is capped at n // this (at least 1). See docs/method.md."""
+    max_iter: int = 100
+    """EM iterations per fit."""
+    tol: float = 1e-3
+    """EM convergence tolerance on the mean log-likelihood per point."""
+    reg_covar_voxels: float = 1.0 / 12.0
+    """Added to covariance diagonals, in voxel units squared: 1/12 is the variance of a point uniform in one voxel."""
+    seed: int = 0
+    """random_state of every fit."""
+
+    def __post_init__(self) -> None:
+        _require(isinstance(self.t_min, int) and self.t_min >= 1, f"cluster.t_min: must be an integer >= 1, got {self.t_min!r}")
+        _require(isinstance(self.t_max, int) and self.t_max >= 1, f"cluster.t_max: must be an integer >= 1, got {self.t_max!r}")
+        _require(self.t_min <= self.t_max, f"cluster.t_min ({self.t_min}) must be <= cluster.t_max ({self.t_max})")
+        _require(self.search in ("fast", "exhaustive"), f"cluster.search: 'fast' or 'exhaustive', got {self.search!r}")
+        _require(self.min_points_per_component >= 1, "cluster.min_points_per_component: must be >= 1")
+        _require(self.max_iter >= 1, "cluster.max_iter: must be >= 1")
+        _require(_finite(self.tol) and self.tol > 0, "cluster.tol: must be > 0")
+        _require(_finite(self.reg_covar_voxels) and self.reg_covar_voxels > 0, "cluster.reg_covar_voxels: must be > 0")
+
+
+@dataclass(frozen=True)
+class CandidateConfig:
+    """Candidate views on a hemisphere of radius R = d_c + d_b about B's centre (paper §III-B)."""
+
+    count: int = 400
+    """N, candidate views in total (paper: 400)."""
+    parallels: int = 10
+    """alpha, number of equidistant parallels (the paper gives no value)."""
+    working_distance: float = 0.35
+    """d_c, the camera's working distance, metres."""
+    min_elevation_deg: float = 10.0
+    """Lowest parallel's elevation above B's centre, degrees."""
+    max_elevation_deg: float = 85.0
+    """Highest parallel's elevation, degrees (90 is the pole, a parallel of length 0)."""
+
+    def __post_init__(self) -> None:
+        _require(isinstance(self.count, int) and self.count >= 1, f"candidates.count: must be an integer >= 1, got {self.count!r}")
+        _require(
+            isinstance(self.parallels, int) and 1 <= self.parallels <= self.count,
+            f"candidates.parallels: must be an integer in [1, count], got {self.parallels!r}",
+        )
+        _require(_finite(self.working_distance) and self.working_distance > 0, "candidates.working_distance: must be > 0")
+        _require(
+            _finite(self.min_elevation_deg, self.max_elevation_deg)
+            and -90 < self.min_elevation_deg <= self.max_elevation_deg < 90,
+            "candidates: need -90 < min_elevation_deg <= max_elevation_deg < 90",
+        )
+
+
+@dataclass(frozen=True)
+class ScoringConfig:
+    """The projection score F (paper §III-E)."""
+
+    rank_base: float = 0.5
+    """W = rank_base ** r (paper: 0.5)."""
+    area: Literal["analytic", "raster"] = "analytic"
+    """How L is counted: exact clipped-ellipse area, or rasterising pixel centres (reference)."""
+
+    def __post_init__(self) -> None:
+        _require(_finite(self.rank_base) and 0 < self.rank_base <= 1, "scoring.rank_base: must be in (0, 1]")
+        _require(self.area in ("analytic", "raster"), f"scoring.area: 'analytic' or 'raster', got {self.area!r}")
+
+
+@dataclass(frozen=True)
+class PartitionConfig:
+    """Global longitude partitions (paper §III-F)."""
+
+    sectors: int = 4
+    """beta, number of longitude sectors (paper: 4)."""
+    offset_deg: float = 0.0
+    """Longitude where sector 0 starts, degrees."""
+
+    def __post_init__(self) -> None:
+        _require(isinstance(self.sectors, int) and self.sectors >= 1, f"partitions.sectors: must be an integer >= 1, got {self.sectors!r}")
+        _require(_finite(self.offset_deg), "partitions.offset_deg: must be finite")
+
+
+@dataclass(frozen=True)
+class TerminationConfig:
+    """When Algorithm 1 stops: any of these."""
+
+    max_views: int = 10
+    """Stop after this many captured views (paper: 10)."""
+    growth_threshold: float = 0.0
+    """Stop when the point count grows by less than this fraction in one view; 0 disables (paper's table: < 0.1 after view 5)."""
+    stop_without_frontier: bool = True
+    """Stop when no frontier voxel is left."""
+
+    def __post_init__(self) -> None:
+        _require(isinstance(self.max_views, int) and self.max_views >= 1, f"termination.max_views: must be an integer >= 1, got {self.max_views!r}")
+        _require(_finite(self.growth_threshold) and self.growth_threshold >= 0, "termination.growth_threshold: must be >= 0")
+
+
+@dataclass(frozen=True)
+class PreprocessConfig:
+    """Cleaning a frame before it is registered and integrated."""
+
+    crop_margin: float = 0.03
+    """Points farther than this outside B are dropped, metres."""
+    workspace_radius: float = 0.3
+    """Before B exists (first frame): keep points within this radius of the turntable axis, metres."""
+    workspace_height: float = 0.6
+    """Before B exists: keep points below this height, metres."""
+    plate_clearance: float = 0.002
+    """Points below this height (the turntable plate) are removed, metres."""
+    outlier_neighbors: int = 16
+    """Statistical outlier removal: neighbours per point (0 disables)."""
+    outlier_std: float = 2.5
+    """Statistical outlier removal: drop points whose mean neighbour distance exceeds mean + this * std."""
+    downsample: float = 0.0025
+    """Voxel down-sampling edge length for the accumulated cloud, metres (0 disables)."""
+
+    def __post_init__(self) -> None:
+        for name in ("crop_margin", "workspace_radius", "workspace_height", "plate_clearance", "outlier_std", "downsample"):
+            v = getattr(self, name)
+            _require(_finite(v) and v >= 0, f"preprocess.{name}: must be >= 0, got {v!r}")
+        _require(isinstance(self.outlier_neighbors, int) and self.outlier_neighbors >= 0, "preprocess.outlier_neighbors: must be >= 0")
+
+
+@dataclass(frozen=True)
+class RegistrationConfig:
+    """Point-to-plane ICP of each frame to the accumulated cloud, with an acceptance gate."""
+
+    enabled: bool = True
+    """Run ICP from the second frame on."""
+    max_correspondence: float = 0.01
+    """ICP correspondence distance, metres."""
+    max_iterations: int = 30
+    """ICP iterations."""
+    min_fitness: float = 0.3
+    """Reject the ICP result when fewer than this fraction of points found a partner."""
+    max_rmse: float = 0.004
+    """Reject the ICP result when the inlier RMSE exceeds this, metres."""
+    max_correction: float = 0.03
+    """Reject corrections that move the camera farther than this, metres."""
+
+    def __post_init__(self) -> None:
+        for name in ("max_correspondence", "max_rmse", "max_correction"):
+            v = getattr(self, name)
+            _require(_finite(v) and v > 0, f"registration.{name}: must be > 0, got {v!r}")
+        _require(0 <= self.min_fitness <= 1, "registration.min_fitness: must be in [0, 1]")
+        _require(self.max_iterations >= 1, "registration.max_iterations: must be >= 1")
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Everything the planner needs; nested per component."""
+
+    voxel: VoxelConfig = field(default_factory=VoxelConfig)
+    cluster: ClusterConfig = field(default_factory=ClusterConfig)
+    candidates: CandidateConfig = field(default_factory=CandidateConfig)
+    scoring: ScoringConfig = field(default_factory=ScoringConfig)
+    partitions: PartitionConfig = field(default_factory=PartitionConfig)
+    termination: TerminationConfig = field(default_factory=TerminationConfig)
+    preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
+    registration: RegistrationConfig = field(default_factory=RegistrationConfig)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @staticmethod
+    def from_dict(data: dict[str, Any]) -> PlannerConfig:
+        """Build from a nested dict; any subset of fields; unknown names are an error."""
+        return from_dict(PlannerConfig, data)
+
+    @staticmethod
+    def from_toml(path: str | Path) -> PlannerConfig:
+        with open(path, "rb") as fh:
+            try:
+                data = tomllib.load(fh)
+            except tomllib.TOMLDecodeError as exc:
+                raise ValueError(f"{path}: invalid TOML ({exc})") from None
+        return PlannerConfig.from_dict(data)
+
+    def replace(self, **sections: Any) -> PlannerConfig:
+        """Override fields by nested dict, e.g. ``replace(voxel={"resolution": 0.005})``."""
+        return merge(self, sections)
+
+
+C = TypeVar("C")
+
+
+def from_dict(cls: type[C], data: dict[str, Any], prefix: str = "") -> C:
+    """Instantiate dataclass ``cls`` from ``data``, recursing into nested dataclasses."""
+    return merge(cls(), data, prefix)
+
+
+def merge(base: C, data: dict[str, Any], prefix: str = "") -> C:
+    """A copy of dataclass instance ``base`` with the fields in ``data`` replaced (recursively)."""
+    if not isinstance(data, dict):
+        raise ValueError(f"{prefix.rstrip('.') or 'config'}: expected a table/object, got {type(data).__name__}")
+    fields = {f.name: f for f in dataclasses.fields(base)}  # type: ignore[arg-type]
+    changes: dict[str, Any] = {}
+    for key, value in data.items():
+        if key not in fields:
+            known = ", ".join(sorted(fields))
+            raise ValueError(f"{prefix}{key}: unknown setting (known: {known})")
+        current = getattr(base, key)
+        if dataclasses.is_dataclass(current) and not isinstance(current, type):
+            changes[key] = merge(current, value, f"{prefix}{key}.")
+        else:
+            if isinstance(current, bool) and not isinstance(value, bool):
+                raise ValueError(f"{prefix}{key}: expected true/false, got {value!r}")
+            if isinstance(current, int) and not isinstance(current, bool) and isinstance(value, float) and value.is_integer():
+                value = int(value)
+            if isinstance(current, float) and isinstance(value, int) and not isinstance(value, bool):
+                value = float(value)
+            if isinstance(current, int | float) and not isinstance(value, int | float):
+                raise ValueError(f"{prefix}{key}: expected a number, got {value!r}")
+            changes[key] = value
+    try:
+        return dataclasses.replace(base, **changes)  # type: ignore[type-var]
+    except ValueError as exc:
+        msg = str(exc)
+        raise ValueError(msg if msg.startswith(prefix) or not prefix else f"{msg}") from None

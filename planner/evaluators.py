@@ -1,0 +1,125 @@
+"""View evaluators: how a planner turns the voxel map into a score per candidate.
+
+The paper's evaluator (``projection``) fits ellipsoids to the occupied and
+frontier voxels (§III-D) and scores each candidate by projecting them (§III-E).
+Baselines (ray casting, random) plug in through the same protocol and are
+registered in ``EVALUATORS`` by their own modules.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.config import PlannerConfig
+from planner.ellipsoids import EllipsoidFitter
+from planner.scoring import score_views
+from planner.types import Candidate, ClusterFit, Ellipsoid, Intrinsics, ViewScore, VoxelClass
+
+if TYPE_CHECKING:
+    from planner.voxel_map import VoxelMap
+
+
+@dataclass(frozen=True, eq=False)
+class EvaluationContext:
+    """What an evaluator may look at.
+
+    eligible: (C,) bool, candidates the partition rule and reachability allow.
+    """
+
+    voxel_map: VoxelMap
+    candidates: tuple[Candidate, ...]
+    intrinsics: Intrinsics
+    eligible: NDArray[np.bool_]
+    rng: np.random.Generator
+
+
+@dataclass(frozen=True, eq=False)
+class Evaluation:
+    """Scores in candidate order, plus what the evaluator built to get them."""
+
+    scores: tuple[ViewScore, ...]
+    ellipsoids: tuple[Ellipsoid, ...] = ()
+    fits: tuple[ClusterFit, ...] = ()
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+class ViewEvaluator(Protocol):
+    """Scores every candidate of a context; higher is better."""
+
+    name: str
+
+    def evaluate(self, ctx: EvaluationContext) -> Evaluation: ...
+
+    def reset(self) -> None: ...
+
+
+class ProjectionEvaluator:
+    """The paper's method: GMM + BIC clusters, MVEE ellipsoids, projected conics with rank weights."""
+
+    name = "projection"
+
+    def __init__(self, config: PlannerConfig) -> None:
+        self.config = config
+        res = config.voxel.resolution
+        self._fitters = {
+            "occupied": EllipsoidFitter(config.cluster, res, "occupied"),
+            "frontier": EllipsoidFitter(config.cluster, res, "frontier"),
+        }
+
+    def reset(self) -> None:
+        for fitter in self._fitters.values():
+            fitter.reset()
+
+    def evaluate(self, ctx: EvaluationContext) -> Evaluation:
+        timings = {"cluster": 0.0, "ellipsoids": 0.0}
+        ellipsoids: list[Ellipsoid] = []
+        fits: list[ClusterFit] = []
+        for kind, cls in (("occupied", VoxelClass.OCCUPIED), ("frontier", VoxelClass.FRONTIER)):
+            fitter = self._fitters[kind]
+            found, fit = fitter.fit(ctx.voxel_map.centers(cls))
+            ellipsoids.extend(found)
+            fits.append(fit)
+            for stage in ("cluster", "ellipsoids"):
+                timings[stage] += fitter.last_timings.get(stage, 0.0)
+        t0 = time.perf_counter()
+        scores = score_views(ellipsoids, ctx.candidates, ctx.intrinsics, self.config.scoring, ctx.eligible)
+        timings["score"] = time.perf_counter() - t0
+        return Evaluation(tuple(scores), tuple(ellipsoids), tuple(fits), timings)
+
+
+EVALUATORS: dict[str, Callable[[PlannerConfig], ViewEvaluator]] = {
+    "projection": ProjectionEvaluator,
+}
+
+
+def make_evaluator(name: str, config: PlannerConfig) -> ViewEvaluator:
+    """The evaluator registered as ``name``; ValueError lists the known names."""
+    _load_plugins()
+    try:
+        factory = EVALUATORS[name]
+    except KeyError:
+        raise ValueError(f"planner: unknown planner {name!r} (known: {', '.join(sorted(EVALUATORS))})") from None
+    return factory(config)
+
+
+def evaluator_names() -> list[str]:
+    _load_plugins()
+    return sorted(EVALUATORS)
+
+
+def _load_plugins() -> None:
+    """Import modules that register further evaluators (baselines), if present."""
+    import importlib
+
+    for module in ("planner.baselines",):
+        try:
+            importlib.import_module(module)
+        except ModuleNotFoundError as exc:
+            if exc.name != module:
+                raise

@@ -1,0 +1,195 @@
+"""Algorithm 1 of the paper as a stateful object: frames in, next views out.
+
+One loop of the scan::
+
+    report = planner.integrate(frame)   # Preprocess, register (ICP), VoxelStructConstruct
+    plan = planner.plan(reachable)      # EllipsoidsFit, ProposeCandidateViewpoints,
+                                        # InValidPartition, QualityEvaluate, SelectNBV
+
+The planner never talks to a device. ``integrate`` either succeeds or raises
+``ValueError`` and leaves every piece of state as it was.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.candidates import propose_candidates
+from planner.config import PlannerConfig
+from planner.evaluators import EvaluationContext, ViewEvaluator, make_evaluator
+from planner.partitions import azimuth_of, default_tolerance, eligible_sectors, not_taken, sector_edges, sector_of
+from planner.partitions import select_best as select_best_view
+from planner.preprocess import preprocess, voxel_downsample
+from planner.registration import RegistrationResult, register
+from planner.types import DepthFrame, Intrinsics, PlanResult, Pose, VoxelClass
+from planner.voxel_map import VoxelMap
+
+
+@dataclass(frozen=True)
+class IntegrationReport:
+    """What one ``Planner.integrate`` did.
+
+    growth: relative growth of the accumulated point count (None on the first frame).
+    timings: seconds for "preprocess", "register" and "integrate".
+    """
+
+    iteration: int
+    n_points_frame: int
+    n_points_total: int
+    growth: float | None
+    registration: RegistrationResult | None
+    T_world_camera: Pose
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+class Planner:
+    """The projection-based NBV planner (or a baseline evaluator in its place)."""
+
+    def __init__(self, config: PlannerConfig | None = None, evaluator: str = "projection") -> None:
+        self.config = config or PlannerConfig()
+        self.evaluator: ViewEvaluator = make_evaluator(evaluator, self.config)
+        self.voxel_map = VoxelMap(self.config.voxel)
+        self.views: list[Pose] = []
+        self.cloud: NDArray[np.float64] = np.zeros((0, 3))
+        self.point_counts: list[int] = []
+        self.intrinsics: Intrinsics | None = None
+        self.last_plan: PlanResult | None = None
+        self._rng = np.random.default_rng(self.config.cluster.seed)
+
+    @property
+    def iteration(self) -> int:
+        """Frames integrated so far."""
+        return len(self.views)
+
+    @property
+    def terminated(self) -> str | None:
+        """Why Algorithm 1 stops now: "max_views", "no_frontier", "growth", or None."""
+        term = self.config.termination
+        if self.iteration >= term.max_views:
+            return "max_views"
+        if self.iteration == 0:
+            return None
+        if term.stop_without_frontier and self.voxel_map.count(VoxelClass.FRONTIER) == 0:
+            return "no_frontier"
+        if term.growth_threshold > 0 and len(self.point_counts) >= 2:
+            prev, cur = self.point_counts[-2], self.point_counts[-1]
+            if prev > 0 and (cur - prev) / prev < term.growth_threshold:
+                return "growth"
+        return None
+
+    # ------------------------------------------------------------------ integrate
+
+    def integrate(self, frame: DepthFrame) -> IntegrationReport:
+        """Preprocess, register and integrate one frame.
+
+        Raises ValueError (state unchanged) for an empty frame, a frame with no
+        point on the object after preprocessing, or intrinsics that differ from
+        the first frame's.
+        """
+        if not isinstance(frame, DepthFrame):
+            raise ValueError(f"frame: expected a DepthFrame, got {type(frame).__name__}")
+        if self.intrinsics is not None and frame.intrinsics != self.intrinsics:
+            raise ValueError("frame: intrinsics differ from the first frame's")
+        if not np.any(frame.valid):
+            raise ValueError("empty frame: the depth image has no returns")
+        timings: dict[str, float] = {}
+
+        t0 = time.perf_counter()
+        points = preprocess(frame.points_world, self.voxel_map.bbox, self.config.preprocess)
+        timings["preprocess"] = time.perf_counter() - t0
+        if len(points) == 0:
+            raise ValueError("empty frame: no point left on the object after cropping and plate removal")
+
+        t0 = time.perf_counter()
+        registration: RegistrationResult | None = None
+        if self.config.registration.enabled and len(self.cloud) > 0:
+            registration = register(points, self.cloud, self.config.registration)
+            if registration.accepted:
+                frame = frame.with_pose(registration.correction @ frame.T_world_camera)
+                points = registration.correction.apply(points)
+        timings["register"] = time.perf_counter() - t0
+
+        t0 = time.perf_counter()
+        self.voxel_map.integrate(frame, points)  # atomic: raises before changing anything
+        timings["integrate"] = time.perf_counter() - t0
+
+        merged = np.concatenate([self.cloud, points]) if len(self.cloud) else points
+        size = self.config.preprocess.downsample
+        self.cloud = voxel_downsample(merged, size) if size > 0 else merged
+        growth = None
+        if self.point_counts:
+            prev = self.point_counts[-1]
+            growth = (len(self.cloud) - prev) / prev if prev > 0 else None
+        self.point_counts.append(len(self.cloud))
+        self.views.append(frame.T_world_camera)
+        self.intrinsics = frame.intrinsics
+        return IntegrationReport(
+            iteration=self.iteration,
+            n_points_frame=len(points),
+            n_points_total=len(self.cloud),
+            growth=growth,
+            registration=registration,
+            T_world_camera=frame.T_world_camera,
+            timings=timings,
+        )
+
+    # ------------------------------------------------------------------ plan
+
+    def plan(self, reachable: Callable[[Pose], bool] | None = None) -> PlanResult:
+        """Score every candidate and pick the next best view.
+
+        reachable: the cell's check; unreachable candidates are ineligible.
+        Raises ValueError before the first frame.
+        """
+        if self.iteration == 0 or self.voxel_map.bbox is None or self.intrinsics is None:
+            raise ValueError("plan: no frame has been integrated yet; capture one first")
+        cfg = self.config
+        timings: dict[str, float] = {}
+
+        t0 = time.perf_counter()
+        bbox = self.voxel_map.bbox
+        candidates, center, radius = propose_candidates(bbox, cfg.candidates, cfg.partitions)
+        timings["candidates"] = time.perf_counter() - t0
+
+        t0 = time.perf_counter()
+        scanned = {sector_of(azimuth_of(view.translation, center), cfg.partitions) for view in self.views}
+        allowed = eligible_sectors(scanned, cfg.partitions.sectors)
+        eligible = np.array([c.sector in allowed for c in candidates], dtype=bool)
+        eligible &= not_taken(candidates, self.views, default_tolerance(candidates, center))
+        if reachable is not None:
+            eligible &= np.array([bool(reachable(c.T_world_camera)) for c in candidates], dtype=bool)
+        timings["select"] = time.perf_counter() - t0
+
+        evaluation = self.evaluator.evaluate(
+            EvaluationContext(self.voxel_map, candidates, self.intrinsics, eligible, self._rng)
+        )
+        timings.update(evaluation.timings)
+
+        t0 = time.perf_counter()
+        best = select_best_view(evaluation.scores)
+        timings["select"] += time.perf_counter() - t0
+
+        plan = PlanResult(
+            iteration=self.iteration,
+            bbox=bbox,
+            voxels=self.voxel_map.snapshot(),
+            ellipsoids=evaluation.ellipsoids,
+            fits=evaluation.fits,
+            candidates=candidates,
+            scores=evaluation.scores,
+            best_index=best,
+            hemisphere_center=center,
+            hemisphere_radius=radius,
+            sector_edges=sector_edges(cfg.partitions),
+            scanned_sectors=frozenset(scanned),
+            eligible_sectors=frozenset(allowed),
+            timings=timings,
+            terminated=self.terminated,
+        )
+        self.last_plan = plan
+        return plan

@@ -1,0 +1,482 @@
+"""Frozen value types that cross module boundaries.
+
+Conventions (see ARCHITECTURE.md):
+
+- The planner's ``world`` frame is the turntable frame: z-up, origin at the
+  centre of the plate's top surface, rotating with the plate. Devices convert
+  from the robot base frame.
+- ``T_a_b`` maps coordinates in frame ``b`` to frame ``a``.
+- Cameras use OpenCV axes: +z forward, +x right, +y down.
+- Lengths in metres, angles in radians.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import IntEnum
+from functools import cached_property
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from planner._validate import check_positive, checked_array
+
+EllipsoidKind = Literal["occupied", "frontier"]
+
+
+class VoxelClass(IntEnum):
+    """The five voxel classes of paper §III-C (values are the stored uint8 codes)."""
+
+    NONE = 0
+    EMPTY = 1
+    OCCUPIED = 2
+    UNKNOWN = 3
+    FRONTIER = 4
+
+
+# --------------------------------------------------------------------------- Pose
+
+
+@dataclass(frozen=True, eq=False)
+class Pose:
+    """A rigid transform ``T_a_b``: ``x_a = rotation @ x_b + translation``.
+
+    rotation: (3, 3) float64, orthonormal with det +1.
+    translation: (3,) float64.
+    """
+
+    rotation: NDArray[np.float64]
+    translation: NDArray[np.float64]
+
+    def __post_init__(self) -> None:
+        R = checked_array("rotation", self.rotation, (3, 3))
+        t = checked_array("translation", self.translation, (3,))
+        if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+            raise ValueError("rotation: not a proper rotation matrix (R^T R != I or det < 0)")
+        object.__setattr__(self, "rotation", R)
+        object.__setattr__(self, "translation", t)
+
+    @staticmethod
+    def identity() -> Pose:
+        return Pose(np.eye(3), np.zeros(3))
+
+    @staticmethod
+    def from_matrix(T: ArrayLike) -> Pose:
+        """From a (4, 4) homogeneous matrix."""
+        M = checked_array("T", T, (4, 4))
+        return Pose(M[:3, :3], M[:3, 3])
+
+    @staticmethod
+    def from_wxyz(wxyz: ArrayLike, position: ArrayLike) -> Pose:
+        """From a unit quaternion (w, x, y, z) and a position (3,)."""
+        q = checked_array("wxyz", wxyz, (4,))
+        n = np.linalg.norm(q)
+        if n < 1e-9:
+            raise ValueError("wxyz: zero quaternion")
+        w, x, y, z = q / n
+        R = np.array(
+            [
+                [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+            ]
+        )
+        return Pose(R, position)
+
+    @staticmethod
+    def look_at(eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> Pose:
+        """``T_world_camera`` of an OpenCV camera at ``eye`` looking at ``target``.
+
+        Image +y points along world ``-up`` as far as possible; when the view
+        direction is parallel to ``up`` the image +y is world +x.
+        """
+        eye_w = checked_array("eye", eye, (3,))
+        target_w = checked_array("target", target, (3,))
+        up_w = checked_array("up", up, (3,))
+        z = target_w - eye_w
+        dist = np.linalg.norm(z)
+        if dist < 1e-12:
+            raise ValueError("look_at: eye and target coincide")
+        z = z / dist
+        x = np.cross(z, up_w)
+        if np.linalg.norm(x) < 1e-9:
+            x = np.cross(z, np.array([-1.0, 0.0, 0.0]))
+        x = x / np.linalg.norm(x)
+        y = np.cross(z, x)
+        return Pose(np.column_stack([x, y, z]), eye_w)
+
+    @property
+    def matrix(self) -> NDArray[np.float64]:
+        """(4, 4) homogeneous matrix."""
+        M = np.eye(4)
+        M[:3, :3] = self.rotation
+        M[:3, 3] = self.translation
+        return M
+
+    @property
+    def wxyz(self) -> NDArray[np.float64]:
+        """(4,) unit quaternion (w, x, y, z) with w >= 0."""
+        R = self.rotation
+        tr = np.trace(R)
+        if tr > 0:
+            s = 2.0 * np.sqrt(tr + 1.0)
+            q = np.array([0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s])
+        else:
+            i = int(np.argmax(np.diag(R)))
+            j, k = (i + 1) % 3, (i + 2) % 3
+            s = 2.0 * np.sqrt(1.0 + R[i, i] - R[j, j] - R[k, k])
+            q = np.empty(4)
+            q[0] = (R[k, j] - R[j, k]) / s
+            q[1 + i] = 0.25 * s
+            q[1 + j] = (R[j, i] + R[i, j]) / s
+            q[1 + k] = (R[k, i] + R[i, k]) / s
+        q /= np.linalg.norm(q)
+        return q if q[0] >= 0 else -q
+
+    def inverse(self) -> Pose:
+        return Pose(self.rotation.T, -self.rotation.T @ self.translation)
+
+    def __matmul__(self, other: Pose) -> Pose:
+        return Pose(self.rotation @ other.rotation, self.rotation @ other.translation + self.translation)
+
+    def apply(self, points: ArrayLike) -> NDArray[np.float64]:
+        """Map points (N, 3) from frame b to frame a."""
+        p = np.asarray(points, dtype=np.float64)
+        return p @ self.rotation.T + self.translation
+
+    def to_dict(self) -> dict[str, list[float]]:
+        return {"position": self.translation.tolist(), "wxyz": self.wxyz.tolist()}
+
+    @staticmethod
+    def from_dict(d: dict) -> Pose:
+        try:
+            return Pose.from_wxyz(d["wxyz"], d["position"])
+        except KeyError as exc:
+            raise ValueError(f"pose: missing field {exc}") from None
+
+    def __repr__(self) -> str:
+        return f"Pose(position={np.round(self.translation, 4).tolist()}, wxyz={np.round(self.wxyz, 4).tolist()})"
+
+
+# --------------------------------------------------------------------------- camera
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """Pinhole intrinsics of a ``width`` x ``height`` image (pixels)."""
+
+    width: int = 640
+    height: int = 480
+    fx: float = 610.0
+    fy: float = 610.0
+    cx: float = 319.5
+    cy: float = 239.5
+
+    def __post_init__(self) -> None:
+        if int(self.width) != self.width or self.width < 1:
+            raise ValueError(f"width: must be a positive integer, got {self.width!r}")
+        if int(self.height) != self.height or self.height < 1:
+            raise ValueError(f"height: must be a positive integer, got {self.height!r}")
+        check_positive("fx", self.fx)
+        check_positive("fy", self.fy)
+        for name in ("cx", "cy"):
+            if not np.isfinite(getattr(self, name)):
+                raise ValueError(f"{name}: must be finite")
+
+    @property
+    def K(self) -> NDArray[np.float64]:
+        """(3, 3) camera matrix."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+
+@dataclass(frozen=True, eq=False)
+class DepthFrame:
+    """One depth image with its pose.
+
+    depth: (H, W) float32 planar z-depth in metres; 0 means no return.
+    T_world_camera: camera pose in the planner's world (turntable) frame.
+    intrinsics: pinhole model; ``depth.shape == (height, width)``.
+    """
+
+    depth: NDArray[np.float32]
+    T_world_camera: Pose
+    intrinsics: Intrinsics = field(default_factory=Intrinsics)
+
+    def __post_init__(self) -> None:
+        d = checked_array("depth", self.depth, (self.intrinsics.height, self.intrinsics.width), np.float32)
+        if np.any(d < 0):
+            raise ValueError("depth: negative values")
+        if not isinstance(self.T_world_camera, Pose):
+            raise ValueError("T_world_camera: must be a Pose")
+        object.__setattr__(self, "depth", d)
+
+    @property
+    def valid(self) -> NDArray[np.bool_]:
+        """(H, W) bool mask of pixels with a return."""
+        return self.depth > 0
+
+    @cached_property
+    def points_camera(self) -> NDArray[np.float64]:
+        """(N, 3) float64 back-projected valid pixels, camera frame, row-major pixel order."""
+        v, u = np.nonzero(self.depth > 0)
+        z = self.depth[v, u].astype(np.float64)
+        k = self.intrinsics
+        return np.column_stack([(u - k.cx) * z / k.fx, (v - k.cy) * z / k.fy, z])
+
+    @cached_property
+    def points_world(self) -> NDArray[np.float64]:
+        """(N, 3) float64 back-projected valid pixels in the world frame."""
+        return self.T_world_camera.apply(self.points_camera)
+
+    def with_pose(self, T_world_camera: Pose) -> DepthFrame:
+        """The same image with a corrected pose (e.g. after ICP)."""
+        return DepthFrame(self.depth, T_world_camera, self.intrinsics)
+
+    @staticmethod
+    def from_points(points_world: ArrayLike, T_world_camera: Pose, intrinsics: Intrinsics) -> DepthFrame:
+        """Z-buffer world points (N, 3) into a depth image (nearest point per pixel).
+
+        This is how recorded point clouds (PLY + pose) enter the planner.
+        """
+        p_w = checked_array("points_world", points_world, (None, 3))
+        p_c = T_world_camera.inverse().apply(p_w)
+        z = p_c[:, 2]
+        front = z > 1e-6
+        p_c, z = p_c[front], z[front]
+        k = intrinsics
+        u = np.round(k.fx * p_c[:, 0] / z + k.cx).astype(np.int64)
+        v = np.round(k.fy * p_c[:, 1] / z + k.cy).astype(np.int64)
+        inside = (u >= 0) & (u < k.width) & (v >= 0) & (v < k.height)
+        u, v, z = u[inside], v[inside], z[inside]
+        depth = np.full((k.height, k.width), np.inf)
+        np.minimum.at(depth, (v, u), z)
+        depth[~np.isfinite(depth)] = 0.0
+        return DepthFrame(depth.astype(np.float32), T_world_camera, intrinsics)
+
+
+# --------------------------------------------------------------------------- geometry
+
+
+@dataclass(frozen=True, eq=False)
+class BoundingBox:
+    """Axis-aligned box in the world frame. lower, upper: (3,) float64, lower <= upper."""
+
+    lower: NDArray[np.float64]
+    upper: NDArray[np.float64]
+
+    def __post_init__(self) -> None:
+        lo = checked_array("lower", self.lower, (3,))
+        hi = checked_array("upper", self.upper, (3,))
+        if np.any(hi < lo):
+            raise ValueError(f"upper: must be >= lower componentwise, got {hi} < {lo}")
+        object.__setattr__(self, "lower", lo)
+        object.__setattr__(self, "upper", hi)
+
+    @property
+    def center(self) -> NDArray[np.float64]:
+        return 0.5 * (self.lower + self.upper)
+
+    @property
+    def extent(self) -> NDArray[np.float64]:
+        return self.upper - self.lower
+
+    @property
+    def diagonal(self) -> float:
+        return float(np.linalg.norm(self.extent))
+
+    def contains(self, points: ArrayLike, margin: float = 0.0) -> NDArray[np.bool_]:
+        """(N,) bool: points (N, 3) inside the box grown by ``margin``."""
+        p = np.asarray(points, dtype=np.float64)
+        return np.all((p >= self.lower - margin) & (p <= self.upper + margin), axis=1)
+
+
+@dataclass(frozen=True, eq=False)
+class Ellipsoid:
+    """{x : (x - center)^T R diag(axes)^-2 R^T (x - center) <= 1}.
+
+    center: (3,) float64; axes: (3,) float64 semi-axis lengths > 0;
+    rotation: (3, 3) float64, columns are the principal directions.
+    kind: which voxel class the cluster came from.
+    n_points: voxels in the cluster.
+    gmm_mean, gmm_covariance: the Gaussian component the cluster came from
+    ((3,), (3, 3)), kept for debugging fits by eye.
+    """
+
+    center: NDArray[np.float64]
+    axes: NDArray[np.float64]
+    rotation: NDArray[np.float64]
+    kind: EllipsoidKind
+    n_points: int = 0
+    gmm_mean: NDArray[np.float64] | None = None
+    gmm_covariance: NDArray[np.float64] | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "center", checked_array("center", self.center, (3,)))
+        axes = checked_array("axes", self.axes, (3,))
+        if np.any(axes <= 0):
+            raise ValueError(f"axes: semi-axes must be > 0, got {axes}")
+        object.__setattr__(self, "axes", axes)
+        R = checked_array("rotation", self.rotation, (3, 3))
+        if not np.allclose(R.T @ R, np.eye(3), atol=1e-6):
+            raise ValueError("rotation: columns must be orthonormal")
+        object.__setattr__(self, "rotation", R)
+        if self.kind not in ("occupied", "frontier"):
+            raise ValueError(f"kind: must be 'occupied' or 'frontier', got {self.kind!r}")
+        if self.gmm_mean is not None:
+            object.__setattr__(self, "gmm_mean", checked_array("gmm_mean", self.gmm_mean, (3,)))
+        if self.gmm_covariance is not None:
+            object.__setattr__(self, "gmm_covariance", checked_array("gmm_covariance", self.gmm_covariance, (3, 3)))
+
+    @property
+    def shape_matrix(self) -> NDArray[np.float64]:
+        """(3, 3) A with (x - c)^T A (x - c) <= 1 inside."""
+        return (self.rotation / self.axes**2) @ self.rotation.T
+
+    def as_quadric(self) -> NDArray[np.float64]:
+        """(4, 4) symmetric Q with X^T Q X = 0 on the surface, < 0 inside (X homogeneous)."""
+        A = self.shape_matrix
+        c = self.center
+        Q = np.empty((4, 4))
+        Q[:3, :3] = A
+        Q[:3, 3] = Q[3, :3] = -A @ c
+        Q[3, 3] = c @ A @ c - 1.0
+        return Q
+
+    def dual(self) -> NDArray[np.float64]:
+        """(4, 4) dual quadric Q* = Q^-1 (up to scale), computed in closed form.
+
+        Q* = T diag(axes^2 R-frame, -1) T^T with T the translation by ``center``.
+        """
+        Minv = (self.rotation * self.axes**2) @ self.rotation.T
+        c = self.center
+        Qs = np.empty((4, 4))
+        Qs[:3, :3] = Minv - np.outer(c, c)
+        Qs[:3, 3] = Qs[3, :3] = -c
+        Qs[3, 3] = -1.0
+        return Qs
+
+    def contains(self, points: ArrayLike, tol: float = 1e-9) -> NDArray[np.bool_]:
+        """(N,) bool for points (N, 3)."""
+        d = np.asarray(points, dtype=np.float64) - self.center
+        return np.einsum("ni,ij,nj->n", d, self.shape_matrix, d) <= 1.0 + tol
+
+    @property
+    def volume(self) -> float:
+        return float(4.0 / 3.0 * np.pi * np.prod(self.axes))
+
+
+# --------------------------------------------------------------------------- planning
+
+
+@dataclass(frozen=True, eq=False)
+class Candidate:
+    """One candidate view on the hemisphere.
+
+    index: position in the candidate list of its plan.
+    T_world_camera: camera pose, looking at the bounding box centre.
+    elevation, azimuth: of the camera position about the box centre (rad).
+    parallel: which of the alpha parallels it lies on.
+    sector: which of the beta longitude sectors it lies in.
+    """
+
+    index: int
+    T_world_camera: Pose
+    elevation: float
+    azimuth: float
+    parallel: int
+    sector: int
+
+    @property
+    def position(self) -> NDArray[np.float64]:
+        return self.T_world_camera.translation
+
+
+@dataclass(frozen=True, eq=False)
+class ViewScore:
+    """Score of one candidate and why (paper eqs. for W, L-hat, F).
+
+    F = frontier - occupied, each the sum of w * L over ellipsoids of its kind.
+    Per-ellipsoid arrays are indexed like ``PlanResult.ellipsoids``
+    (occupied first, then frontier), length E:
+    ranks: (E,) int64 depth rank, -1 for ellipsoids that are behind the camera;
+    weights: (E,) float64 0.5**rank (0 when behind);
+    pixels: (E,) float64 L, image pixels inside the projected conic;
+    weighted: (E,) float64 L-hat = w * L.
+    eligible: the partition rule (and reachability) allow it.
+    """
+
+    index: int
+    score: float
+    frontier: float
+    occupied: float
+    eligible: bool
+    ranks: NDArray[np.int64]
+    weights: NDArray[np.float64]
+    pixels: NDArray[np.float64]
+    weighted: NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
+class ClusterFit:
+    """The model selection of one voxel kind.
+
+    t_chosen: the number of components; bic: (T, BIC) pairs that were evaluated;
+    n_points: voxels fitted; seconds: wall time of the fit.
+    """
+
+    kind: EllipsoidKind
+    t_chosen: int
+    bic: tuple[tuple[int, float], ...]
+    n_points: int
+    seconds: float = 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class VoxelSnapshot:
+    """Voxel centres by class, for drawing. Each: (N, 3) float64 world frame."""
+
+    resolution: float
+    occupied: NDArray[np.float64]
+    frontier: NDArray[np.float64]
+    unknown: NDArray[np.float64]
+    empty: NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
+class PlanResult:
+    """Everything one planning step produced; the UI draws from this alone.
+
+    ellipsoids: occupied ellipsoids first, then frontier.
+    scores[i] belongs to candidates[i]. best_index is None when no candidate is eligible.
+    sector_edges: (beta,) float64 longitudes (rad) where sectors start.
+    timings: seconds per stage ("cluster", "ellipsoids", "candidates", "score", "select").
+    """
+
+    iteration: int
+    bbox: BoundingBox
+    voxels: VoxelSnapshot
+    ellipsoids: tuple[Ellipsoid, ...]
+    fits: tuple[ClusterFit, ...]
+    candidates: tuple[Candidate, ...]
+    scores: tuple[ViewScore, ...]
+    best_index: int | None
+    hemisphere_center: NDArray[np.float64]
+    hemisphere_radius: float
+    sector_edges: NDArray[np.float64]
+    scanned_sectors: frozenset[int]
+    eligible_sectors: frozenset[int]
+    timings: dict[str, float]
+    terminated: str | None = None
+
+    @property
+    def best(self) -> Candidate | None:
+        return None if self.best_index is None else self.candidates[self.best_index]
+
+    @property
+    def occupied_ellipsoids(self) -> tuple[Ellipsoid, ...]:
+        return tuple(e for e in self.ellipsoids if e.kind == "occupied")
+
+    @property
+    def frontier_ellipsoids(self) -> tuple[Ellipsoid, ...]:
+        return tuple(e for e in self.ellipsoids if e.kind == "frontier")
