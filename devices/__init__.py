@@ -1,0 +1,44 @@
+"""Devices: the protocols a real driver implements, and simulated ones (a ray-cast camera, arm, turntable).
+
+- ``protocols``  Camera / Arm / Turntable protocols, DeviceError and its kinds
+- ``config``     CameraConfig, CellConfig, DeviceConfig
+- ``mesh``       load_mesh, place_on_plate, sample_surface, MeshError
+- ``builtins``   BUILTIN_OBJECTS, make_builtin, resolve_model
+- ``cell``       Cell: frames (base / table / camera), reachability, move_to, capture
+- ``sim``        SimulatedCamera / Arm / Turntable, make_sim_cell
+
+Importing ``devices`` does not import open3d (the simulated camera does, when built).
+"""
+
+from devices.builtins import BUILTIN_OBJECTS, make_builtin, resolve_model
+from devices.cell import Cell, Motion
+from devices.config import CameraConfig, CellConfig, DeviceConfig
+from devices.mesh import MeshError, load_mesh, place_on_plate, sample_surface
+from devices.protocols import Arm, Camera, CaptureError, DeviceError, Turntable, UnreachableError
+from devices.sim import SimulatedArm, SimulatedCamera, SimulatedTurntable, make_sim_cell, sim_cell_from_config
+
+__all__ = [
+    "BUILTIN_OBJECTS",
+    "Arm",
+    "Camera",
+    "CameraConfig",
+    "CaptureError",
+    "Cell",
+    "CellConfig",
+    "DeviceConfig",
+    "DeviceError",
+    "MeshError",
+    "Motion",
+    "SimulatedArm",
+    "SimulatedCamera",
+    "SimulatedTurntable",
+    "Turntable",
+    "UnreachableError",
+    "load_mesh",
+    "make_builtin",
+    "make_sim_cell",
+    "place_on_plate",
+    "resolve_model",
+    "sample_surface",
+    "sim_cell_from_config",
+]

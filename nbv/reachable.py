@@ -15,7 +15,8 @@ from scipy.spatial import cKDTree
 
 from planner import Planner
 from planner.candidates import propose_candidates
-from planner.preprocess import preprocess
+from planner.preprocess import preprocess, voxel_downsample
+from planner.types import DepthFrame
 
 
 def reachable_coverage(
@@ -26,8 +27,8 @@ def reachable_coverage(
 ) -> float:
     """Coverage of the union of all reachable candidates of the planner's final hemisphere.
 
-    cell: a simulated cell with ``render_truth(T_world_camera) -> DepthFrame`` (noise-free)
-    and ``is_reachable``. surface_samples: (M, 3) ground-truth points.
+    cell: a simulated cell (``cell.camera.render(T_world_camera)`` gives noise-free depth)
+    with ``is_reachable``. surface_samples: (M, 3) ground-truth points.
     """
     bbox = planner.voxel_map.bbox
     if bbox is None or len(surface_samples) == 0:
@@ -39,8 +40,11 @@ def reachable_coverage(
     for cand in candidates:
         if not cell.is_reachable(cand.T_world_camera):
             continue
-        frame = cell.render_truth(cand.T_world_camera)
+        depth = cell.camera.render(cand.T_world_camera)
+        frame = DepthFrame(depth, cand.T_world_camera, cell.camera.intrinsics)
         points = preprocess(frame.points_world, None, clean)
+        if clean.downsample > 0:  # the same down-sampling as the planner's accumulated cloud
+            points = voxel_downsample(points, clean.downsample)
         if len(points) == 0:
             continue
         todo = np.flatnonzero(~covered)

@@ -198,8 +198,8 @@ class RegistrationConfig:
     """ICP iterations."""
     min_fitness: float = 0.3
     """Reject the ICP result when fewer than this fraction of points found a partner."""
-    max_rmse: float = 0.004
-    """Reject the ICP result when the inlier RMSE exceeds this, metres."""
+    max_rmse: float = 0.0025
+    """Reject the ICP result when the inlier point-to-plane RMSE exceeds this, metres (correct fits: 0.4-1.9 mm)."""
     max_correction: float = 0.03
     """Reject corrections that move the camera farther than this, metres."""
 

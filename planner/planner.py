@@ -160,7 +160,7 @@ class Planner:
         scanned = {sector_of(azimuth_of(view.translation, center), cfg.partitions) for view in self.views}
         allowed = eligible_sectors(scanned, cfg.partitions.sectors)
         eligible = np.array([c.sector in allowed for c in candidates], dtype=bool)
-        eligible &= not_taken(candidates, self.views, default_tolerance(candidates, center))
+        eligible &= not_taken(candidates, self.views, default_tolerance(candidates, center), center=center)
         if reachable is not None:
             eligible &= np.array([bool(reachable(c.T_world_camera)) for c in candidates], dtype=bool)
         timings["select"] = time.perf_counter() - t0

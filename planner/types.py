@@ -400,7 +400,7 @@ class ViewScore:
     Per-ellipsoid arrays are indexed like ``PlanResult.ellipsoids``
     (occupied first, then frontier), length E:
     ranks: (E,) int64 depth rank, -1 for ellipsoids that are behind the camera;
-    weights: (E,) float64 0.5**rank (0 when behind);
+    weights: (E,) float64 rank_base**rank (0.5 in the paper; 0 when behind);
     pixels: (E,) float64 L, image pixels inside the projected conic;
     weighted: (E,) float64 L-hat = w * L.
     eligible: the partition rule (and reachability) allow it.

@@ -1,0 +1,172 @@
+"""Device configuration: the simulated camera, the cell geometry, the scanned object.
+
+Frozen dataclasses in the style of ``planner/config.py``: every default is
+documented once, at its field; bad values raise ``ValueError`` naming the field
+(``camera.fx: ...``). Lengths in metres, angles in degrees (a config edge).
+TOML files and the REST API use the same names, e.g. ``[camera] depth_noise_std = 0.001``;
+``planner.config.from_dict(DeviceConfig, data)`` builds one from a nested dict.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+from planner.types import Intrinsics
+
+
+def _require(cond: bool, msg: str) -> None:
+    if not cond:
+        raise ValueError(msg)
+
+
+def _finite(*values: object) -> bool:
+    return all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in values)
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    """The simulated depth camera: pinhole intrinsics, working range and noise."""
+
+    width: int = 640
+    """Image width, pixels."""
+    height: int = 480
+    """Image height, pixels."""
+    fx: float = 610.0
+    """Focal length along x, pixels (about a 55 degree horizontal field of view at 640 px)."""
+    fy: float = 610.0
+    """Focal length along y, pixels."""
+    cx: float = 319.5
+    """Principal point x, pixels (pixel centres are at integer coordinates)."""
+    cy: float = 239.5
+    """Principal point y, pixels."""
+    min_depth: float = 0.1
+    """Returns nearer than this (planar z-depth) are dropped (depth 0), metres."""
+    max_depth: float = 1.5
+    """Returns farther than this are dropped (depth 0), metres."""
+    depth_noise_std: float = 0.0
+    """Standard deviation of zero-mean Gaussian noise added to every depth value, metres (0 = exact)."""
+    pose_noise_translation: float = 0.0
+    """Std of the error of the reported camera position, per axis, metres (the render uses the true pose)."""
+    pose_noise_rotation_deg: float = 0.0
+    """Std of the error of the reported camera orientation, per rotation-vector component, degrees."""
+
+    def __post_init__(self) -> None:
+        for name in ("width", "height"):
+            v = getattr(self, name)
+            _require(
+                isinstance(v, int) and not isinstance(v, bool) and v >= 1,
+                f"camera.{name}: must be an integer >= 1, got {v!r}",
+            )
+        for name in ("fx", "fy"):
+            v = getattr(self, name)
+            _require(_finite(v) and v > 0, f"camera.{name}: must be > 0, got {v!r}")
+        for name in ("cx", "cy"):
+            v = getattr(self, name)
+            _require(_finite(v), f"camera.{name}: must be a finite number, got {v!r}")
+        _require(
+            _finite(self.min_depth) and self.min_depth >= 0, f"camera.min_depth: must be >= 0, got {self.min_depth!r}"
+        )
+        _require(
+            _finite(self.max_depth) and self.max_depth > self.min_depth,
+            f"camera.max_depth: must be > min_depth ({self.min_depth!r}), got {self.max_depth!r}",
+        )
+        for name in ("depth_noise_std", "pose_noise_translation", "pose_noise_rotation_deg"):
+            v = getattr(self, name)
+            _require(_finite(v) and v >= 0, f"camera.{name}: must be >= 0, got {v!r}")
+
+    @property
+    def intrinsics(self) -> Intrinsics:
+        """The pinhole model of this camera's images."""
+        return Intrinsics(self.width, self.height, self.fx, self.fy, self.cx, self.cy)
+
+
+@dataclass(frozen=True)
+class CellConfig:
+    """Geometry of the robot cell, in the base frame (lab frame, z-up, origin at the centre of the plate top)."""
+
+    arm_base: tuple[float, float, float] = (-0.45, 0.0, 0.0)
+    """Position of the arm base (shoulder) in the base frame, metres. Its azimuth is where cameras are turned to."""
+    arm_reach: float = 0.8
+    """The camera can be at most this far from the arm base, metres."""
+    arm_min_reach: float = 0.15
+    """The camera must be at least this far from the arm base, metres."""
+    min_height: float = 0.01
+    """The camera must be at least this high above the plate top (z = 0), metres."""
+    plate_radius: float = 0.2
+    """Radius of the turntable plate, metres."""
+    plate_thickness: float = 0.02
+    """Thickness of the plate below its top surface z = 0, metres."""
+    initial_elevation_deg: float = 30.0
+    """First view: elevation of the camera above the look-at point, degrees."""
+    initial_azimuth_deg: float = 180.0
+    """First view: azimuth of the camera in the table frame, degrees (180 = on the -x side, facing the arm)."""
+    initial_distance: float = 0.55
+    """First view: distance from the camera to the look-at point, metres."""
+    initial_target_height: float = 0.1
+    """First view: the camera looks at the point this high above the plate centre, metres."""
+
+    def __post_init__(self) -> None:
+        try:
+            base = tuple(float(v) for v in self.arm_base)
+        except (TypeError, ValueError):
+            raise ValueError(f"cell.arm_base: must be 3 numbers, got {self.arm_base!r}") from None
+        _require(len(base) == 3 and _finite(*base), f"cell.arm_base: must be 3 finite numbers, got {self.arm_base!r}")
+        object.__setattr__(self, "arm_base", base)
+        _require(
+            _finite(self.arm_min_reach) and self.arm_min_reach >= 0,
+            f"cell.arm_min_reach: must be >= 0, got {self.arm_min_reach!r}",
+        )
+        _require(
+            _finite(self.arm_reach) and self.arm_reach > self.arm_min_reach,
+            f"cell.arm_reach: must be > arm_min_reach ({self.arm_min_reach!r}), got {self.arm_reach!r}",
+        )
+        _require(
+            _finite(self.min_height) and self.min_height >= 0, f"cell.min_height: must be >= 0, got {self.min_height!r}"
+        )
+        for name in ("plate_radius", "plate_thickness", "initial_distance"):
+            v = getattr(self, name)
+            _require(_finite(v) and v > 0, f"cell.{name}: must be > 0, got {v!r}")
+        _require(
+            _finite(self.initial_elevation_deg) and -90 < self.initial_elevation_deg <= 90,
+            f"cell.initial_elevation_deg: must be in (-90, 90], got {self.initial_elevation_deg!r}",
+        )
+        _require(
+            _finite(self.initial_azimuth_deg),
+            f"cell.initial_azimuth_deg: must be finite, got {self.initial_azimuth_deg!r}",
+        )
+        _require(
+            _finite(self.initial_target_height),
+            f"cell.initial_target_height: must be finite, got {self.initial_target_height!r}",
+        )
+
+
+@dataclass(frozen=True)
+class DeviceConfig:
+    """The simulated devices of one session: camera, cell, and the object on the plate."""
+
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    cell: CellConfig = field(default_factory=CellConfig)
+    model: str = "l-block"
+    """A built-in object name (see ``devices.builtins.BUILTIN_OBJECTS``) or the path of a mesh file."""
+    size: float = 0.2
+    """The object is scaled so its largest bounding-box extent is this, metres."""
+    up: Literal["y", "z"] = "y"
+    """Up axis of a mesh file ('y' for the Stanford models); built-in objects are always z-up."""
+    seed: int = 0
+    """Seeds the depth noise and the pose noise."""
+
+    def __post_init__(self) -> None:
+        _require(isinstance(self.camera, CameraConfig), "devices.camera: must be a CameraConfig")
+        _require(isinstance(self.cell, CellConfig), "devices.cell: must be a CellConfig")
+        _require(
+            isinstance(self.model, str) and self.model.strip() != "",
+            f"devices.model: must be a name or path, got {self.model!r}",
+        )
+        _require(_finite(self.size) and self.size > 0, f"devices.size: must be > 0, got {self.size!r}")
+        _require(self.up in ("y", "z"), f"devices.up: 'y' or 'z', got {self.up!r}")
+        _require(
+            isinstance(self.seed, int) and not isinstance(self.seed, bool) and self.seed >= 0,
+            f"devices.seed: must be an integer >= 0, got {self.seed!r}",
+        )

@@ -1,0 +1,81 @@
+"""What a device driver implements, and the errors devices raise.
+
+A real camera, arm or turntable only has to provide these few methods and
+properties (structural typing: no base class needed). The :class:`devices.cell.Cell`
+combines one of each into the planner's view of the world.
+
+Frames (see ``devices/cell.py``): the arm works in the ``base`` frame (lab frame,
+z-up, origin at the centre of the plate top); the turntable angle rotates the
+``table`` frame (the planner's world) about the base z axis.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+from planner.types import DepthFrame, Intrinsics, Pose
+
+
+class DeviceError(Exception):
+    """A device could not do what it was asked (base class of all device errors)."""
+
+
+class UnreachableError(DeviceError):
+    """The arm cannot put the camera at the requested pose (too far, too close, below the plate)."""
+
+
+class CaptureError(DeviceError):
+    """The camera did not deliver a depth image."""
+
+
+@runtime_checkable
+class Camera(Protocol):
+    """A depth camera.
+
+    ``capture`` returns the depth image of the current view. The camera does not
+    know where it is: the ``T_world_camera`` of the returned frame may be the
+    identity; :meth:`devices.cell.Cell.capture` replaces it with the pose from the
+    arm and the turntable. Raises :class:`CaptureError` when no image arrives.
+    """
+
+    @property
+    def intrinsics(self) -> Intrinsics:
+        """The pinhole model of every image this camera returns."""
+        ...
+
+    def capture(self) -> DepthFrame:
+        """One depth image, (height, width) float32 planar z-depth in metres, 0 = no return."""
+        ...
+
+
+@runtime_checkable
+class Arm(Protocol):
+    """A robot arm carrying the camera (hand-eye calibrated: it moves the camera, not the flange).
+
+    ``move_to`` blocks until the camera is at ``T_base_camera`` (camera pose in
+    the base frame, OpenCV camera axes). Raises :class:`UnreachableError` when the
+    pose cannot be reached, :class:`DeviceError` for other faults.
+    """
+
+    @property
+    def pose(self) -> Pose:
+        """``T_base_camera``, the current camera pose in the base frame."""
+        ...
+
+    def move_to(self, T_base_camera: Pose) -> None: ...
+
+
+@runtime_checkable
+class Turntable(Protocol):
+    """A turntable rotating the object about the base z axis.
+
+    ``angle`` (radians, counter-clockwise seen from above) is theta in
+    ``T_base_table = Rz(theta)``. ``rotate_to`` blocks until the plate is there.
+    """
+
+    @property
+    def angle(self) -> float:
+        """Current plate angle, radians."""
+        ...
+
+    def rotate_to(self, angle: float) -> None: ...

@@ -1,0 +1,106 @@
+"""Candidate views on a partial hemisphere about the bounding box (paper §III-B).
+
+The hemisphere is centred on B's centre with radius ``R = d_c + d_b``: ``d_c`` the
+camera's working distance, ``d_b`` half of B's diagonal, so every point of B is
+at least ``d_c`` from every candidate (and in front of it: B lies in the ball of
+radius ``d_b`` around the centre, which sits at depth ``R`` on the optical axis).
+
+Layout (documented choices where the paper gives none):
+
+- ``alpha`` parallels at equidistant elevations from ``min_elevation_deg`` to
+  ``max_elevation_deg``, both ends included (with ``alpha == 1``: their midpoint).
+  The lowest elevation keeps the camera above the turntable: it is the knob for that,
+  nothing here clips against the plate.
+- ``N`` views shared out in proportion to each parallel's length (``cos elevation``)
+  by largest-remainder rounding, so exactly ``N`` in total (remainder ties go to the
+  lower parallel). A short parallel may get no view at all.
+- On a parallel with ``n`` views the azimuths are ``2 pi j / n``, odd parallels shifted
+  by half a step so neighbouring parallels interleave.
+- Order: parallel by parallel from the lowest, by increasing azimuth index ``j``.
+- Every camera looks at B's centre (``Pose.look_at``, world z up).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.config import CandidateConfig, PartitionConfig
+from planner.partitions import sector_of
+from planner.types import BoundingBox, Candidate, Pose
+
+
+def parallel_elevations(config: CandidateConfig) -> NDArray[np.float64]:
+    """(alpha,) float64: elevations (rad) of the parallels, lowest first, ends inclusive."""
+    lo, hi = math.radians(config.min_elevation_deg), math.radians(config.max_elevation_deg)
+    if config.parallels == 1:
+        return np.array([0.5 * (lo + hi)])
+    return np.linspace(lo, hi, config.parallels)
+
+
+def share_out(total: int, weights: NDArray[np.float64]) -> NDArray[np.int64]:
+    """(K,) int64 counts summing to ``total``, proportional to ``weights`` (K,) >= 0.
+
+    Largest-remainder (Hamilton) rounding: floor every quota, then give the
+    leftover units to the largest fractional parts (ties: lower index first).
+    """
+    w = np.asarray(weights, dtype=np.float64)
+    if w.ndim != 1 or w.size == 0 or not np.all(np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
+        raise ValueError(f"weights: need a non-empty 1-D array of finite values >= 0 with a positive sum, got {w}")
+    if not isinstance(total, int | np.integer) or total < 0:
+        raise ValueError(f"total: must be an integer >= 0, got {total!r}")
+    quota = total * w / w.sum()
+    counts = np.floor(quota).astype(np.int64)
+    # floating error could push a floor one past the quota sum; never hand out more than total
+    while counts.sum() > total:
+        counts[int(np.argmax(counts - quota))] -= 1
+    leftover = total - int(counts.sum())
+    order = np.lexsort((np.arange(w.size), -(quota - counts)))  # largest remainder, then lowest index
+    counts[order[:leftover]] += 1
+    return counts
+
+
+def propose_candidates(
+    bbox: BoundingBox, config: CandidateConfig, partitions: PartitionConfig
+) -> tuple[tuple[Candidate, ...], NDArray[np.float64], float]:
+    """The candidate views for bounding box ``bbox``.
+
+    Returns (candidates, center (3,) float64, radius): ``config.count`` candidates in
+    the order described in the module docstring, ``candidates[i].index == i``.
+    """
+    if not isinstance(bbox, BoundingBox):
+        raise ValueError(f"bbox: expected a BoundingBox, got {type(bbox).__name__}")
+    if not isinstance(config, CandidateConfig):
+        raise ValueError(f"config: expected a CandidateConfig, got {type(config).__name__}")
+    if not isinstance(partitions, PartitionConfig):
+        raise ValueError(f"partitions: expected a PartitionConfig, got {type(partitions).__name__}")
+    center = np.array(bbox.center, dtype=np.float64)
+    radius = float(config.working_distance + 0.5 * bbox.diagonal)
+    elevations = parallel_elevations(config)
+    counts = share_out(config.count, np.cos(elevations))
+
+    candidates: list[Candidate] = []
+    for p, (elev, n) in enumerate(zip(elevations, counts, strict=True)):
+        n = int(n)
+        if n == 0:
+            continue
+        step = 2.0 * math.pi / n
+        shift = 0.5 * step if p % 2 else 0.0
+        ce, se = math.cos(elev), math.sin(elev)
+        for j in range(n):
+            azimuth = shift + j * step  # < 2 pi by construction
+            eye = center + radius * np.array([ce * math.cos(azimuth), ce * math.sin(azimuth), se])
+            candidates.append(
+                Candidate(
+                    index=len(candidates),
+                    T_world_camera=Pose.look_at(eye, center),
+                    elevation=float(elev),
+                    azimuth=float(azimuth),
+                    parallel=p,
+                    sector=sector_of(azimuth, partitions),
+                )
+            )
+    center.setflags(write=False)
+    return tuple(candidates), center, radius

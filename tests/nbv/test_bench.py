@@ -1,0 +1,208 @@
+"""``nbv bench``: a tiny end-to-end bench (inline and with worker processes), the summary's numbers, bad input."""
+
+from __future__ import annotations
+
+import csv
+import json
+import struct
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from nbv.bench import RunOutcome, RunTask, run_tasks
+from nbv.bench_report import COLUMNS, summary_markdown
+from nbv.cli import main
+from planner.config import PlannerConfig
+from planner.evaluators import EVALUATORS
+
+TINY = ["--views", "2", "--candidates", "40", "--resolution", "0.02", "--t-min", "2", "--t-max", "6"]
+
+
+def bench(out: Path, *extra: str) -> int:
+    return main(["bench", "--models", "l-block", "--planners", "projection,random", *TINY, "--out", str(out), *extra])
+
+
+def read_csv(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def png_size(path: Path) -> tuple[int, int]:
+    """(width, height) from a PNG's IHDR; fails if the file is not a PNG."""
+    data = path.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n", f"{path.name} is not a PNG"
+    assert data[12:16] == b"IHDR"
+    return struct.unpack(">II", data[16:24])
+
+
+@pytest.fixture(scope="module")
+def inline(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("bench1")
+    assert bench(out, "--jobs", "1") == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def pooled(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("bench2")
+    assert bench(out, "--jobs", "2", "--no-reachable") == 0
+    return out
+
+
+def check_outputs(out: Path, reachable: bool) -> list[dict[str, str]]:
+    rows = read_csv(out / "results.csv")
+    assert tuple(rows[0]) == COLUMNS
+    assert len(rows) == 2 * 2  # 2 planners x 1 seed x 2 views
+    assert sorted((r["planner"], r["iteration"]) for r in rows) == [
+        ("projection", "1"),
+        ("projection", "2"),
+        ("random", "1"),
+        ("random", "2"),
+    ]
+    for r in rows:
+        assert r["model"] == "l-block" and r["seed"] == "0"
+        assert 0.0 < float(r["coverage"]) <= 1.0
+        assert int(r["points"]) > 0
+        assert 0.0 < float(r["eval_seconds"]) < float(r["plan_seconds"])
+        assert (float(r["fit_seconds"]) > 0.0) == (r["planner"] == "projection")
+    ceilings = {r["reachable_coverage"] for r in rows}
+    if reachable:  # computed once (in projection's run) and shared by every planner's rows
+        assert len(ceilings) == 1
+        ceiling = float(ceilings.pop())
+        assert max(float(r["coverage"]) for r in rows) <= ceiling + 0.02
+    else:
+        assert ceilings == {""}
+
+    runs = json.loads((out / "runs.json").read_text())
+    assert {r["planner"] for r in runs} == {"projection", "random"}
+    first = [r["poses"][0] for r in runs]
+    assert first[0] == first[1], "every planner must start from the same view"
+    first_cov = {r["coverage"] for r in rows if r["iteration"] == "1"}
+    assert len(first_cov) == 1, "same first view and camera seed -> same first coverage"
+
+    text = (out / "summary.md").read_text()
+    for heading in ("## Total planning time (s)", "## Ratio, baseline over projection", "## Coverage at view 2"):
+        assert heading in text
+    assert "| planner | l-block | average per iteration |" in text
+    assert "| random |" in text and "×" in text
+    assert "eval + fit" in text
+    for name in ("coverage.png", "time.png"):
+        width, height = png_size(out / name)
+        assert width > 200 and height > 200
+    return rows
+
+
+def test_inline_bench_writes_every_output(inline: Path) -> None:
+    check_outputs(inline, reachable=True)
+
+
+def test_pooled_bench_writes_every_output(pooled: Path, inline: Path) -> None:
+    rows = check_outputs(pooled, reachable=False)
+    # The first view does not depend on how the runs are scheduled.
+    first = json.loads((inline / "runs.json").read_text())[0]["poses"][0]
+    assert all(r["poses"][0] == first for r in json.loads((pooled / "runs.json").read_text()))
+    assert {r["coverage"] for r in rows if r["iteration"] == "1"} == {
+        r["coverage"] for r in read_csv(inline / "results.csv") if r["iteration"] == "1"
+    }
+
+
+class _Boom:
+    name = "boom"
+
+    def __init__(self, config: PlannerConfig) -> None:
+        pass
+
+    def reset(self) -> None:
+        pass
+
+    def evaluate(self, ctx: Any) -> Any:
+        raise RuntimeError("boom\nat evaluation")
+
+
+def test_a_failed_run_keeps_the_others(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setitem(EVALUATORS, "boom", _Boom)
+    args = ["--models", "box", "--planners", "random,boom", *TINY, "--jobs", "1", "--no-reachable"]
+    code = main(["bench", *args, "--out", str(tmp_path)])
+    assert code == 1
+    err = capsys.readouterr().err
+    assert "failed run box / boom / seed 0: RuntimeError: boom at evaluation" in err
+    assert {r["planner"] for r in read_csv(tmp_path / "results.csv")} == {"random"}
+    assert "RuntimeError: boom at evaluation" in (tmp_path / "summary.md").read_text()
+    assert "Projection did not take part" in (tmp_path / "summary.md").read_text()
+
+
+def test_worker_failure_is_one_outcome(tmp_path: Path) -> None:
+    config = PlannerConfig().replace(termination={"max_views": 1}, voxel={"resolution": 0.02}, candidates={"count": 40})
+    good = RunTask("box", "box", "random", 0, config)
+    bad = RunTask(str(tmp_path / "missing.ply"), "missing", "random", 0, config)
+    outcomes: list[RunOutcome] = []
+    run_tasks([good, bad], 2, outcomes.append)
+    by_label = {o.label: o for o in outcomes}
+    assert by_label["box"].error is None and len(by_label["box"].rows) == 1
+    assert by_label["missing"].rows == [] and "missing.ply" in (by_label["missing"].error or "")
+
+
+def _outcome(planner: str, evals: list[float], fits: list[float], cov: float) -> RunOutcome:
+    rows = [
+        {
+            "model": "m",
+            "planner": planner,
+            "seed": 0,
+            "iteration": i + 1,
+            "coverage": cov,
+            "points": 10,
+            "plan_seconds": 2 * e + f,
+            "eval_seconds": e,
+            "fit_seconds": f,
+        }
+        for i, (e, f) in enumerate(zip(evals, fits, strict=True))
+    ]
+    return RunOutcome("m", planner, 0, rows=rows, terminated="max_views", seconds=1.0, reachable_coverage=0.9)
+
+
+def test_summary_numbers() -> None:
+    outcomes = [
+        _outcome("projection", [0.01, 0.03], [0.02, 0.02], 0.8),  # eval 0.02, eval+fit 0.04, plan 0.06 per iteration
+        _outcome("raycast-oa", [1.0, 3.0], [0.0, 0.0], 0.7),  # eval 2.0, plan 4.0
+    ]
+    meta = {
+        "models": ["m"],
+        "planners": ["projection", "raycast-oa"],
+        "seeds": [0],
+        "views": 2,
+        "resolution": 0.02,
+        "candidates": 40,
+        "jobs": 1,
+        "threads": None,
+        "wall_seconds": 1.0,
+    }
+    text = summary_markdown(outcomes, meta)
+    assert "| projection | 0.120 | 0.060 |" in text  # total plan time, average per iteration
+    assert "| raycast-oa | 8.000 | 4.000 |" in text
+    assert "| raycast-oa | 100.0× | 50.0× | 66.7× |" in text
+    assert "| projection | 0.8000 | 0.8000 |" in text
+    assert "| reachable (ceiling) | 0.9000 | 0.9000 |" in text
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--models", "l-block", "--planners", "projection,nope"], "--planners: unknown planner 'nope'"),
+        (["--models", "l-block", "--planners", "random,random"], "--planners: 'random' is listed twice"),
+        (["--models", "/no/such/mesh.ply"], "--models:"),
+        (["--models", "l-block", "--views", "0"], "--views: must be >= 1, got 0"),
+        (["--models", "l-block", "--jobs", "0"], "--jobs: must be >= 1, got 0"),
+        (["--models", "l-block", "--seeds", "0"], "--seeds: must be >= 1, got 0"),
+    ],
+)
+def test_bad_input_is_one_line_before_any_work(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str], message: str
+) -> None:
+    out = tmp_path / "out"
+    assert main(["bench", *extra, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("nbv: error: ") and message in err and "\n" not in err
+    assert not out.exists()

@@ -1,0 +1,128 @@
+"""preprocess: crop to B or the workspace, plate removal, statistical outliers; voxel_downsample."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from planner.config import PreprocessConfig
+from planner.preprocess import preprocess, remove_statistical_outliers, voxel_downsample
+from planner.types import BoundingBox
+
+NO_OUTLIERS = PreprocessConfig(outlier_neighbors=0)
+
+
+def _grid(lo: float, hi: float, n: int, z: float = 0.05) -> np.ndarray:
+    g = np.linspace(lo, hi, n)
+    x, y = np.meshgrid(g, g, indexing="ij")
+    return np.column_stack([x.ravel(), y.ravel(), np.full(x.size, z)])
+
+
+def test_crop_to_bbox_with_margin() -> None:
+    bbox = BoundingBox(np.array([-0.05, -0.05, 0.0]), np.array([0.05, 0.05, 0.1]))
+    pts = np.array(
+        [
+            [0.0, 0.0, 0.05],  # inside
+            [0.079, 0.0, 0.05],  # 0.029 outside in x: within the 0.03 margin
+            [0.081, 0.0, 0.05],  # 0.031 outside: dropped
+            [0.0, -0.079, 0.129],  # within the margin in y and z
+            [0.0, 0.0, 0.131],  # too high
+            [0.0, 0.0, 0.001],  # inside B but on the plate: dropped
+        ]
+    )
+    out = preprocess(pts, bbox, NO_OUTLIERS)
+    np.testing.assert_array_equal(out, pts[[0, 1, 3]])
+    assert out.dtype == np.float64
+
+
+def test_workspace_cylinder_before_b_exists() -> None:
+    cfg = PreprocessConfig(outlier_neighbors=0, workspace_radius=0.3, workspace_height=0.6, plate_clearance=0.002)
+    pts = np.array(
+        [
+            [0.2, 0.2, 0.1],  # radius 0.283: kept
+            [0.25, 0.2, 0.1],  # radius 0.320: dropped
+            [0.0, 0.0, 0.59],  # kept
+            [0.0, 0.0, 0.61],  # above the workspace
+            [0.1, 0.0, 0.0019],  # the plate
+            [0.1, 0.0, 0.0021],  # just above the plate
+            [0.1, 0.0, -0.05],  # below the plate
+        ]
+    )
+    np.testing.assert_array_equal(preprocess(pts, None, cfg), pts[[0, 2, 5]])
+
+
+def test_statistical_outliers_are_removed_and_the_surface_is_kept() -> None:
+    surface = _grid(-0.05, 0.05, 41)  # 2.5 mm grid
+    stray = np.array([[0.0, 0.0, 0.2], [0.1, 0.1, 0.12], [-0.08, 0.02, 0.3]])
+    pts = np.concatenate([surface, stray])
+    out = preprocess(pts, None, PreprocessConfig(outlier_neighbors=8, outlier_std=2.5))
+    assert len(out) == len(surface)
+    np.testing.assert_array_equal(out, surface)
+    # disabled: the strays stay
+    assert len(preprocess(pts, None, NO_OUTLIERS)) == len(pts)
+
+
+def test_remove_statistical_outliers_threshold() -> None:
+    # 10 points on a line 1 apart, one point 5 away: mean 1-NN distances are 1 (x9), 1 (end), 5.
+    line = np.column_stack([np.arange(10.0), np.zeros(10), np.zeros(10)])
+    pts = np.concatenate([line, [[9.0, 5.0, 0.0]]])
+    out = remove_statistical_outliers(pts, k=1, std=1.0)
+    np.testing.assert_array_equal(out, line)
+    # with std large enough, nothing goes
+    assert len(remove_statistical_outliers(pts, k=1, std=10.0)) == 11
+    # too few points to judge: unchanged
+    assert len(remove_statistical_outliers(pts[:3], k=5, std=1.0)) == 3
+    with pytest.raises(ValueError, match="k: must be an integer >= 1"):
+        remove_statistical_outliers(pts, k=0, std=1.0)
+
+
+def test_preprocess_does_not_downsample() -> None:
+    pts = _grid(-0.01, 0.01, 50)  # 0.4 mm spacing, far denser than PreprocessConfig.downsample
+    cfg = PreprocessConfig(outlier_neighbors=0, downsample=0.0025)
+    assert len(preprocess(pts, None, cfg)) == len(pts)
+
+
+@pytest.mark.parametrize(
+    ("points", "pattern"),
+    [
+        (np.array([[0.0, 0.0, np.nan]]), r"points_world: 1 non-finite"),
+        (np.array([[np.inf, 0.0, 0.1], [0.0, 0.0, 0.1]]), r"points_world: 1 non-finite"),
+        (np.zeros((4, 2)), r"points_world: expected shape \(N, 3\)"),
+    ],
+)
+def test_bad_input(points: np.ndarray, pattern: str) -> None:
+    with pytest.raises(ValueError, match=pattern):
+        preprocess(points, None, PreprocessConfig())
+
+
+def test_empty_input_gives_empty_output() -> None:
+    assert preprocess(np.zeros((0, 3)), None, PreprocessConfig()).shape == (0, 3)
+
+
+def test_voxel_downsample_centroids() -> None:
+    pts = np.array(
+        [
+            [0.001, 0.001, 0.001],
+            [0.003, 0.003, 0.001],  # same 5 mm voxel as the first
+            [0.006, 0.0, 0.0],  # next voxel in x
+            [-0.001, 0.0, 0.0],  # voxel -1 in x
+            [0.0061, 0.0041, 0.0049],
+        ]
+    )
+    out = voxel_downsample(pts, 0.005)
+    expected = np.array([[-0.001, 0.0, 0.0], [0.002, 0.002, 0.001], [0.00605, 0.00205, 0.00245]])
+    np.testing.assert_allclose(out, expected, atol=1e-15)
+
+
+def test_voxel_downsample_density_and_edge_cases() -> None:
+    rng = np.random.default_rng(0)
+    pts = rng.random((20000, 3)) * 0.1  # a 10 cm cube
+    out = voxel_downsample(pts, 0.01)
+    assert len(out) == 1000  # every 1 cm voxel is hit
+    assert np.all(np.abs(out - (np.floor(out / 0.01) * 0.01 + 0.005)) < 0.004)  # centroids near voxel centres
+    np.testing.assert_array_equal(voxel_downsample(pts, 0.0), pts)
+    assert voxel_downsample(np.zeros((0, 3)), 0.01).shape == (0, 3)
+    with pytest.raises(ValueError, match="size: must be >= 0"):
+        voxel_downsample(pts, -0.01)
+    far = np.array([[0.0, 0.0, 0.0], [1e6, 1e6, 1e6]])  # a huge lattice: falls back to unique rows
+    np.testing.assert_array_equal(voxel_downsample(far, 1e-6), far)
