@@ -139,12 +139,18 @@ class Cell:
         return Motion(theta, T_base_camera)
 
     def is_reachable(self, T_table_camera: Pose) -> bool:
-        """Whether :meth:`plan_motion` succeeds for this view."""
-        try:
-            self.plan_motion(T_table_camera)
-        except UnreachableError:
+        """Whether :meth:`plan_motion` succeeds for this view (closed form, no Pose built).
+
+        plan_motion turns the camera onto the arm base's azimuth, so its distance to
+        the base is that of two points in one vertical half-plane.
+        """
+        x, y, z = T_table_camera.translation
+        cfg = self.config
+        if z < cfg.min_height:
             return False
-        return True
+        base_radial = math.hypot(self._arm_base[0], self._arm_base[1])
+        distance = math.hypot(math.hypot(x, y) - base_radial, z - self._arm_base[2])
+        return cfg.arm_min_reach <= distance <= cfg.arm_reach
 
     def initial_pose(self) -> Pose:
         """``T_table_camera`` of the first view: at ``initial_elevation_deg`` / ``initial_azimuth_deg`` /

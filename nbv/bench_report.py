@@ -3,8 +3,8 @@
 Everything here works on the finished runs (:class:`nbv.bench.RunOutcome`) of one bench.
 Timing columns, per iteration:
 
-- ``plan_seconds``: the whole loop's planner time (preprocess, registration, integration,
-  candidates, clustering, ellipsoids, scoring, selection), as in ``nbv scan``;
+- ``plan_seconds``: frame in -> next view out (integration, candidates, clustering, ellipsoids,
+  scoring, selection), as in ``nbv scan``; preprocessing and ICP are timed apart;
 - ``eval_seconds``: the candidate-evaluation stage alone (``timings["score"]``): for
   ``projection`` the projection of the ellipsoids, for the ray casters everything they do;
 - ``fit_seconds``: ``projection``'s clustering + ellipsoid fitting (0 for the baselines).
@@ -146,7 +146,7 @@ def summary_markdown(outcomes: Sequence[RunOutcome], meta: dict[str, Any]) -> st
         "",
         "Shaped like the paper's Table I: the sum of `plan_seconds` over a scan's views (mean over seeds);",
         "the last column is the mean `plan_seconds` per iteration over all models and seeds. `plan_seconds`",
-        "includes preprocessing, registration and integration of the new frame: the same work for every planner.",
+        "includes integrating the new frame into the voxel map (the same work for every planner), not preprocessing or ICP.",
         "",
     ]
     header = ["planner", *models, "average per iteration"]

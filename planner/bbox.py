@@ -100,12 +100,19 @@ def lattice_range(box: BoundingBox, resolution: float) -> LatticeRange:
     return lo, np.maximum(hi, lo + 1)
 
 
+def index_range(idx: NDArray[np.int64]) -> LatticeRange | None:
+    """Lattice range ``[min, max + 1)`` of voxel indices ``idx`` (N, 3); None when N == 0."""
+    if idx.shape[0] == 0:
+        return None
+    # per column: numpy's axis-0 reduction of an (N, 3) array is ~15x slower
+    lo = np.array([idx[:, a].min() for a in range(3)], dtype=np.int64)
+    hi = np.array([idx[:, a].max() for a in range(3)], dtype=np.int64) + 1
+    return lo, hi
+
+
 def point_range(points: NDArray[np.float64], resolution: float) -> LatticeRange | None:
     """Lattice range of the voxels containing ``points`` (N, 3) (voxel of p is ``floor(p / resolution)``)."""
-    if points.shape[0] == 0:
-        return None
-    idx = np.floor(points / resolution).astype(np.int64)
-    return idx.min(axis=0), idx.max(axis=0) + 1
+    return index_range(np.floor(points / resolution).astype(np.int64))
 
 
 def range_union(a: LatticeRange | None, b: LatticeRange | None) -> LatticeRange | None:

@@ -81,26 +81,29 @@ def propose_candidates(
     elevations = parallel_elevations(config)
     counts = share_out(config.count, np.cos(elevations))
 
-    candidates: list[Candidate] = []
+    eyes: list[NDArray[np.float64]] = []
+    layout: list[tuple[float, float, int]] = []  # (elevation, azimuth, parallel) per candidate
     for p, (elev, n) in enumerate(zip(elevations, counts, strict=True)):
         n = int(n)
         if n == 0:
             continue
         step = 2.0 * math.pi / n
         shift = 0.5 * step if p % 2 else 0.0
+        azimuths = shift + step * np.arange(n)  # < 2 pi by construction
         ce, se = math.cos(elev), math.sin(elev)
-        for j in range(n):
-            azimuth = shift + j * step  # < 2 pi by construction
-            eye = center + radius * np.array([ce * math.cos(azimuth), ce * math.sin(azimuth), se])
-            candidates.append(
-                Candidate(
-                    index=len(candidates),
-                    T_world_camera=Pose.look_at(eye, center),
-                    elevation=float(elev),
-                    azimuth=float(azimuth),
-                    parallel=p,
-                    sector=sector_of(azimuth, partitions),
-                )
-            )
+        eyes.append(center + radius * np.column_stack([ce * np.cos(azimuths), ce * np.sin(azimuths), np.full(n, se)]))
+        layout += [(float(elev), float(a), p) for a in azimuths]
+    poses = Pose.look_at_many(np.concatenate(eyes), center)
+    candidates = [
+        Candidate(
+            index=i,
+            T_world_camera=pose,
+            elevation=elev,
+            azimuth=azimuth,
+            parallel=p,
+            sector=sector_of(azimuth, partitions),
+        )
+        for i, (pose, (elev, azimuth, p)) in enumerate(zip(poses, layout, strict=True))
+    ]
     center.setflags(write=False)
     return tuple(candidates), center, radius

@@ -15,14 +15,17 @@ Few points. With n points T is capped at ``t_hi = max(1, n // min_points_per_com
 (never more than ``t_max``), and ``t_lo = min(t_min, t_hi)``; n == 0 gives no model (T = 0).
 
 Search ("fast", the default). EM is our own numpy code: the log-densities of all components are one
-matrix product of quadratic features ``[x^2, y^2, z^2, xy, xz, yz, x, y, z, 1]`` with a (10, T)
-matrix, evaluated in float32 (the M-step and every reported likelihood use float64). New models
-come from neighbours: a split halves the component whose points a local two-Gaussian EM explains
-best (moment-preserving split along the major axis); a merge joins the pair with the smallest
-Runnalls KL bound. Cold: k-means init at ``t_lo``, then grow by a factor ~1.5 until the BIC rose
-twice. Warm (``warm`` = the previous iteration's mixture): EM from it, then step outwards in both
-directions with doubling steps until the BIC rises. Both end with a bisection between the best T
-and its evaluated neighbours. ``search="exhaustive"`` fits every T with scikit-learn (reference).
+product of quadratic features ``[x^2, y^2, z^2, xy, xz, yz, x, y, z, 1]`` with a (T, 10) matrix, in
+float32 (M-steps and the reported BIC of the chosen model are float64, the latter with scikit-learn's
+formula). New models come from evaluated neighbours: a split halves the components whose points a
+local two-Gaussian EM explains best (moment-preserving, along the major axis); a merge joins the
+pairs with the smallest Runnalls KL bound. Cold: one Gaussian split up to ``t_lo``, then T grows by
+~1.5x per step until the BIC is far above the best. Warm (``warm`` = the previous iteration's
+mixture, what ``EllipsoidFitter`` keeps): EM from it, then steps of 1, 2, 4, ... outwards while the
+BIC drops. Then both bisect towards clearly worse evaluated neighbours, and polish: T - 1, T + 1 and
+a split-and-merge move at the best T, walking on while that helps. BIC drops smaller than
+``_MIN_GAIN`` per point (EM noise at tol) do not steer the search. ``search="exhaustive"`` fits
+every T with scikit-learn (the reference).
 """
 
 from __future__ import annotations
@@ -39,9 +42,11 @@ from planner.config import ClusterConfig
 _LOG2PI = float(np.log(2.0 * np.pi))
 _EPS10 = 10.0 * float(np.finfo(np.float64).eps)  # sklearn's floor on component mass
 _GROW = 1.5  # cold search: T grows by this factor per coarse step
-_FLAT = 0.01
+_FLAT = 0.01  # refine: no bisection towards a neighbour within this BIC per point of the best
+_MIN_GAIN = 0.005  # per point: smaller BIC drops are EM noise (tol) and do not steer the search
+_WARM_TOL = 0.5  # warm start: the previous model is refitted to this fraction of tol
 _FAR = 0.5  # cold search: stop growing once the BIC is this much per point above the best
-_SYM = np.array([0, 3, 4, 3, 1, 5, 4, 5, 2])  # feature index of each entry of x x^T  # stop bisecting when both neighbours are within this BIC per point of the best
+_SYM = np.array([0, 3, 4, 3, 1, 5, 4, 5, 2])  # feature index of each entry of x x^T
 
 
 @dataclass(frozen=True, eq=False)
@@ -96,7 +101,12 @@ def checked_points(name: str, points: NDArray[np.float64] | Iterable, min_rows: 
 
 def log_likelihood(points_vox: NDArray[np.float64], mixture: Mixture) -> float:
     """sum_i log p(x_i), computed like scikit-learn (Cholesky of the precision). points_vox: (N, 3)."""
-    return float(_log_prob(points_vox, mixture).sum())
+    chol = np.transpose(np.linalg.inv(np.linalg.cholesky(mixture.covariances)), (0, 2, 1))  # U U^T = cov^-1
+    log_det = np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1)
+    y = np.matmul(points_vox[None], chol) - np.matmul(mixture.means[:, None, :], chol)  # (T, N, 3)
+    lp = -0.5 * (3 * _LOG2PI + (y * y).sum(axis=2)) + (log_det + np.log(mixture.weights))[:, None]
+    m = lp.max(axis=0)
+    return float((m + np.log(np.exp(lp - m).sum(axis=0))).sum())
 
 
 def bic_value(points_vox: NDArray[np.float64], mixture: Mixture) -> float:
@@ -149,27 +159,6 @@ def single_thread_blas() -> AbstractContextManager:
 
         _controller.append(ThreadpoolController())
     return _controller[0].limit(limits=1, user_api="blas")
-
-
-# --------------------------------------------------------------------------- exact evaluation
-
-
-def _precision_cholesky(cov: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(T, 3, 3) upper factors U with U U^T = inv(cov), as in scikit-learn."""
-    return np.transpose(np.linalg.inv(np.linalg.cholesky(cov)), (0, 2, 1))
-
-
-def _weighted_log_prob(x: NDArray[np.float64], mix: Mixture, chol: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(T, N) log w_t + log N(x | mu_t, cov_t)."""
-    log_det = np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1)
-    y = np.matmul(x[None], chol) - np.matmul(mix.means[:, None, :], chol)  # (T, N, 3)
-    return (-0.5 * (3 * _LOG2PI + (y * y).sum(axis=2)) + log_det[:, None]) + np.log(mix.weights)[:, None]
-
-
-def _log_prob(x: NDArray[np.float64], mix: Mixture) -> NDArray[np.float64]:
-    lp = _weighted_log_prob(x, mix, _precision_cholesky(mix.covariances))
-    m = lp.max(axis=0)
-    return m + np.log(np.exp(lp - m).sum(axis=0))
 
 
 def _checked_resolution(resolution: float) -> float:
@@ -239,8 +228,10 @@ class _FastSearch:
         self.FT32 = np.ascontiguousarray(self.F.T, dtype=np.float32)
         self.models: dict[int, tuple[float, Mixture]] = {}
         self.gains: dict[int, tuple[Mixture, NDArray[np.float64]]] = {}
+        self.steps: dict[tuple[int, int], tuple[Mixture, tuple[Mixture, float]]] = {}
 
     def run(self, warm: Mixture | None) -> Selection:
+        """Search, then return the best model with its exact BIC."""
         if warm is None or warm.n_components == 0:
             self._cold()
         else:
@@ -266,15 +257,15 @@ class _FastSearch:
 
     def _warm(self, warm: Mixture) -> None:
         t0 = min(max(warm.n_components, self.t_lo), self.t_hi)
-        t0 = self._record(self._em(self._resize(warm, t0)))
+        t0 = self._record(self._em(self._resize(warm, t0), _WARM_TOL * self.cfg.tol))  # a well-settled base
         for direction in (1, -1):
-            t, step = t0, max(1, round(0.1 * t0))
+            t, step = t0, 1
             while True:
                 t_next = min(max(t + direction * step, self.t_lo), self.t_hi)
                 if t_next == t or t_next in self.models:
                     break
                 t_next = self._record(self._step(t, t_next))
-                if t_next == t or self.models[t_next][0] >= self.models[t][0]:
+                if t_next == t or self.models[t_next][0] > self.models[t][0] - _MIN_GAIN * self.n:
                     break
                 t, step = t_next, 2 * step
 
@@ -285,9 +276,14 @@ class _FastSearch:
             best_t, best_bic = self._best()
             ts = sorted(self.models)
             i = ts.index(best_t)
-            sides = [ts[j] for j in (i - 1, i + 1) if 0 <= j < len(ts) and abs(ts[j] - best_t) > 1]
-            flat = all(self.models[s][0] - best_bic < _FLAT * self.n for s in sides)
-            if not sides or (flat and len(sides) == 2):
+            # Bisect towards evaluated neighbours that are not adjacent and clearly worse (a flat side: the
+            # T between are about as good as both ends, within the fidelity budget).
+            sides = [
+                ts[j]
+                for j in (i - 1, i + 1)
+                if 0 <= j < len(ts) and abs(ts[j] - best_t) > 1 and self.models[ts[j]][0] - best_bic > _FLAT * self.n
+            ]
+            if not sides:
                 return
             far = max(sides, key=lambda s: (abs(s - best_t), -self.models[s][0]))
             mid = (far + best_t) // 2
@@ -309,9 +305,9 @@ class _FastSearch:
             g = int(np.argmax(self._gains(mix)))
             self._record(self._em(_merge(_split(mix, np.array([g])), 1, forbid=(g, best_t))))
         t, bic = self._best()
-        step = int(np.sign(t - best_t))
-        while step and bic < best_bic and self.t_lo <= t + step <= self.t_hi:
-            best_bic = bic
+        step, margin = int(np.sign(t - best_t)), 0.0  # the first step after a move needs no margin
+        while step and bic < best_bic - margin and self.t_lo <= t + step <= self.t_hi:
+            best_bic, margin = bic, _MIN_GAIN * self.n
             self._record(self._step(t, t + step))
             t, bic = self._best()
 
@@ -330,7 +326,12 @@ class _FastSearch:
         return t
 
     def _step(self, t_from: int, t_to: int) -> tuple[Mixture, float]:
-        return self._em(self._resize(self.models[t_from][1], t_to))
+        """EM on the current best T = t_from model resized to t_to (memoised per base model)."""
+        base = self.models[t_from][1]
+        key = (id(base), t_to)
+        if key not in self.steps:
+            self.steps[key] = (base, self._em(self._resize(base, t_to)))  # base kept alive: ids stay unique
+        return self.steps[key][1]
 
     def _e_step(self, mix: Mixture) -> tuple[NDArray[np.float32], float]:
         """Responsibilities (T, N) float32 and the log-likelihood of ``mix``."""
@@ -344,16 +345,17 @@ class _FastSearch:
         return L, ll
 
     def _m_step(self, R: NDArray) -> Mixture:
+        """Mixture from responsibilities R (T, N); components with less than one point of mass are dropped."""
         nk, mu, cov = _moments(R.astype(np.float64) @ self.F, self.cfg.reg_covar_voxels)
         keep = nk >= 1.0 if np.count_nonzero(nk >= 1.0) > 0 else np.ones(len(nk), bool)  # drop dead components
         return Mixture(nk[keep] / nk[keep].sum(), mu[keep], cov[keep])
 
-    def _em(self, mix: Mixture) -> tuple[Mixture, float]:
+    def _em(self, mix: Mixture, tol: float | None = None) -> tuple[Mixture, float]:
         """EM until the mean log-likelihood changes by < tol; returns the mixture and its log-likelihood."""
-        prev = -np.inf
+        prev, tol = -np.inf, self.cfg.tol if tol is None else tol
         for _ in range(self.cfg.max_iter):
             R, ll = self._e_step(mix)
-            if abs(ll / self.n - prev) < self.cfg.tol:
+            if abs(ll / self.n - prev) < tol:
                 return mix, ll
             prev = ll / self.n
             mix = self._m_step(R)
@@ -365,10 +367,14 @@ class _FastSearch:
             k = min(t_to - mix.n_components, mix.n_components)
             mix = _split(mix, np.argsort(-self._gains(mix))[:k])
         while mix.n_components > t_to:
-            mix = _merge(mix, mix.n_components - t_to)
+            merged = _merge(mix, mix.n_components - t_to)
+            if merged.n_components == mix.n_components:
+                break
+            mix = merged
         return mix
 
     def _gains(self, mix: Mixture) -> NDArray[np.float64]:
+        """Memoised ``_split_gains``."""
         if id(mix) not in self.gains:
             self.gains[id(mix)] = (mix, self._split_gains(mix))  # keeps mix alive, so ids stay unique
         return self.gains[id(mix)][1]
@@ -405,7 +411,7 @@ class _FastSearch:
 
 
 def _split(mix: Mixture, idx: NDArray[np.int64]) -> Mixture:
-    """Split components ``idx`` in two along the major axis (moment preserving): idx keep one half, appended the other."""
+    """Split components ``idx`` along their major axes (moment preserving); second halves are appended."""
     lam, V = np.linalg.eigh(mix.covariances[idx])
     v, var = V[:, :, -1], lam[:, -1]
     d = np.sqrt(2.0 / np.pi * var)[:, None] * v

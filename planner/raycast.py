@@ -16,6 +16,9 @@ no return (``t_hit = inf``) marks every voxel it crosses EMPTY.
 Within one frame a voxel crossed by several rays is UNKNOWN if any ray calls it
 UNKNOWN (conservative: EMPTY is final, so a voxel is only carved when every ray
 that touched it passed all the way through it).
+
+This is the exact reference; ``planner.voxel_map.observe_projective`` is the fast
+default that samples the same rule at each voxel's centre and corners.
 """
 
 from __future__ import annotations

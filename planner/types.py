@@ -58,6 +58,14 @@ class Pose:
         object.__setattr__(self, "translation", t)
 
     @staticmethod
+    def trusted(rotation: NDArray[np.float64], translation: NDArray[np.float64]) -> Pose:
+        """A Pose from arrays the caller has already validated (hot paths only: no checks, no copy)."""
+        pose = object.__new__(Pose)
+        object.__setattr__(pose, "rotation", rotation)
+        object.__setattr__(pose, "translation", translation)
+        return pose
+
+    @staticmethod
     def identity() -> Pose:
         return Pose(np.eye(3), np.zeros(3))
 
@@ -105,6 +113,29 @@ class Pose:
         x = x / np.linalg.norm(x)
         y = np.cross(z, x)
         return Pose(np.column_stack([x, y, z]), eye_w)
+
+    @staticmethod
+    def look_at_many(eyes: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> list[Pose]:
+        """``look_at`` for many eyes (C, 3) and one target (3,), vectorised."""
+        eyes_w = checked_array("eyes", eyes, (None, 3))
+        target_w = checked_array("target", target, (3,))
+        up_w = checked_array("up", up, (3,))
+        z = target_w - eyes_w
+        dist = np.linalg.norm(z, axis=1)
+        if np.any(dist < 1e-12):
+            raise ValueError("look_at: eye and target coincide")
+        z /= dist[:, None]
+        x = np.cross(z, up_w)
+        norm = np.linalg.norm(x, axis=1)
+        degenerate = norm < 1e-9
+        if np.any(degenerate):
+            x[degenerate] = np.cross(z[degenerate], np.array([-1.0, 0.0, 0.0]))
+            norm[degenerate] = np.linalg.norm(x[degenerate], axis=1)
+        x /= norm[:, None]
+        y = np.cross(z, x)
+        R = np.stack([x, y, z], axis=2)
+        R.setflags(write=False)
+        return [Pose.trusted(R[i], eyes_w[i]) for i in range(len(eyes_w))]
 
     @property
     def matrix(self) -> NDArray[np.float64]:

@@ -278,7 +278,7 @@ class VoxelMap:
 
         # (1) grow B to cover the new points
         pidx = np.floor(pts / res).astype(np.int64)  # (N, 3) lattice voxel of each point
-        pts_rng = (pidx.min(axis=0), pidx.max(axis=0) + 1) if len(pidx) else None
+        pts_rng = bb.index_range(pidx)
         content = bb.range_union(self._occupied_range(), pts_rng)
         assert content is not None
         center = 0.5 * (content[0] + content[1])
@@ -300,11 +300,10 @@ class VoxelMap:
         new = before.copy()
         new[mutable & (obs == VoxelClass.EMPTY)] = VoxelClass.EMPTY
         new[mutable & (obs == VoxelClass.UNKNOWN)] = VoxelClass.UNKNOWN
-        gi = pidx - lo
         X, Y, Z = new.shape
-        inside = (gi[:, 0] >= 0) & (gi[:, 0] < X) & (gi[:, 1] >= 0) & (gi[:, 1] < Y) & (gi[:, 2] >= 0) & (gi[:, 2] < Z)
-        gi = gi[inside]
-        flat = (gi[:, 0] * Y + gi[:, 1]) * Z + gi[:, 2]
+        gx, gy, gz = (pidx[:, a] - lo[a] for a in range(3))
+        inside = (gx >= 0) & (gx < X) & (gy >= 0) & (gy < Y) & (gz >= 0) & (gz < Z)
+        flat = ((gx * Y + gy) * Z + gz)[inside]
         np.put(new, flat[mutable.reshape(-1)[flat]], np.uint8(VoxelClass.OCCUPIED))
 
         # (3) frontier

@@ -204,3 +204,20 @@ def test_bad_arguments() -> None:
         cell.plan_motion((0.0, 0.0, 0.5))  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="pose_noise_translation: must be >= 0"):
         Cell(cell.camera, cell.arm, cell.turntable, pose_noise_translation=-1.0)
+
+
+def test_is_reachable_closed_form_agrees_with_plan_motion() -> None:
+    cell = make_sim_cell(None, CameraConfig(), CellConfig(), seed=0)
+    rng = np.random.default_rng(3)
+    agree = 0
+    for _ in range(300):
+        eye = rng.uniform([-1.2, -1.2, -0.1], [1.2, 1.2, 1.2])
+        pose = Pose.look_at(eye, [0.0, 0.0, 0.1])
+        try:
+            cell.plan_motion(pose)
+            expected = True
+        except UnreachableError:
+            expected = False
+        assert cell.is_reachable(pose) == expected
+        agree += expected
+    assert 20 < agree < 280  # both outcomes were exercised

@@ -1,0 +1,106 @@
+"""The FastAPI application: REST API, the static page, and (in the lifespan) the viser server.
+
+``create_app(settings)`` builds the app; nothing starts until its lifespan runs
+(uvicorn, or ``with TestClient(create_app(settings)) as client``). The lifespan
+starts one viser server on ``settings.viser_port`` (viser moves to the next free
+port when it is taken; ``GET /api/viewer`` reports the real one), wires the scene
+to the session registry, and on shutdown stops auto modes and viser.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from pathlib import Path
+
+from fastapi import FastAPI, Request
+from fastapi.encoders import jsonable_encoder
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import FileResponse, JSONResponse
+from fastapi.staticfiles import StaticFiles
+
+from app.api import router
+from app.errors import WorkbenchError
+from app.scene import SceneController
+from app.serialize import SafeJSONResponse
+from app.sessions import SessionRegistry
+from app.settings import AppSettings
+from app.workbench import Workbench
+
+STATIC_DIR = Path(__file__).resolve().parent / "static"
+log = logging.getLogger(__name__)
+
+
+def _wire_scene(registry: SessionRegistry, scene: SceneController) -> None:
+    """The scene shows the first session created until the page focuses another; a deleted one leaves it."""
+
+    def created(wb: Workbench) -> None:
+        if scene.session is None:
+            scene.focus(wb)
+
+    def deleted(wb: Workbench) -> None:
+        if scene.session is wb:
+            scene.focus(None)
+
+    registry.on_create.append(created)
+    registry.on_delete.append(deleted)
+
+
+def create_app(settings: AppSettings | None = None) -> FastAPI:
+    """The workbench app for ``settings`` (defaults: 127.0.0.1:8000, viser on 8080, model l-block)."""
+    settings = settings or AppSettings()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        registry = SessionRegistry(settings)
+        server = None
+        scene = None
+        if settings.scene:
+            import viser
+
+            server = viser.ViserServer(
+                host=settings.viser_host, port=settings.viser_port, verbose=settings.viser_verbose
+            )
+            scene = SceneController(server)
+            _wire_scene(registry, scene)
+            log.info("viser on port %d", server.get_port())
+        app.state.registry = registry
+        app.state.viser = server
+        app.state.scene = scene
+        try:
+            yield
+        finally:
+            registry.close()
+            if server is not None:
+                server.stop()
+
+    app = FastAPI(
+        title="NBV workbench",
+        version="0.1.0",
+        description="Supervised next-best-view scanning: plan, inspect, override, approve.",
+        lifespan=lifespan,
+        default_response_class=SafeJSONResponse,
+    )
+    app.state.settings = settings
+    app.state.registry = None
+    app.state.viser = None
+    app.state.scene = None
+
+    @app.exception_handler(WorkbenchError)
+    async def _workbench_error(request: Request, exc: WorkbenchError) -> JSONResponse:
+        return JSONResponse({"detail": exc.detail}, status_code=exc.status)
+
+    @app.exception_handler(RequestValidationError)
+    async def _validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
+        # like FastAPI's own handler, but a NaN in the rejected input must not turn the 422 into a 500
+        return SafeJSONResponse({"detail": jsonable_encoder(exc.errors())}, status_code=422)
+
+    app.include_router(router)
+    app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
+
+    @app.get("/", include_in_schema=False)
+    def index() -> FileResponse:
+        return FileResponse(STATIC_DIR / "index.html", headers={"Cache-Control": "no-cache"})
+
+    return app

@@ -1,0 +1,83 @@
+"""PlanResult pieces as JSON-ready dicts, and a JSON response that never fails on NaN or inf."""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any
+
+import numpy as np
+from fastapi.responses import JSONResponse
+
+from planner import PlanResult
+
+
+def clean(value: Any) -> Any:
+    """``value`` with numpy scalars/arrays made plain and non-finite floats replaced by None."""
+    if isinstance(value, dict):
+        return {str(k): clean(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [clean(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return clean(value.tolist())
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+class SafeJSONResponse(JSONResponse):
+    """JSON where NaN / inf become null (the standard encoder would refuse them with a 500)."""
+
+    def render(self, content: Any) -> bytes:
+        return json.dumps(clean(content), ensure_ascii=False, separators=(",", ":")).encode("utf-8")
+
+
+def candidate_json(plan: PlanResult, i: int) -> dict[str, Any]:
+    """``{"index", "pose", "score", "eligible", "frontier", "occupied", ...}`` of candidate ``i``."""
+    c, s = plan.candidates[i], plan.scores[i]
+    return {
+        "index": i,
+        "pose": c.T_world_camera.to_dict(),
+        "score": float(s.score),
+        "eligible": bool(s.eligible),
+        "frontier": float(s.frontier),
+        "occupied": float(s.occupied),
+        "sector": int(c.sector),
+        "elevation_deg": math.degrees(c.elevation),
+        "azimuth_deg": math.degrees(c.azimuth),
+        "best": plan.best_index == i,
+    }
+
+
+def ellipsoid_labels(plan: PlanResult) -> list[str]:
+    """``O0, O1, ..., F0, F1, ...``: kind initial and index within the kind, in PlanResult order."""
+    counters = {"occupied": 0, "frontier": 0}
+    labels = []
+    for e in plan.ellipsoids:
+        labels.append(f"{e.kind[0].upper()}{counters[e.kind]}")
+        counters[e.kind] += 1
+    return labels
+
+
+def candidate_detail(plan: PlanResult, plan_id: str, i: int) -> dict[str, Any]:
+    """The candidate plus its score breakdown per ellipsoid (rank, weight, pixels, weighted pixels)."""
+    s = plan.scores[i]
+    terms = []
+    per = len(s.ranks) == len(plan.ellipsoids)
+    for j, (e, label) in enumerate(zip(plan.ellipsoids, ellipsoid_labels(plan), strict=True)):
+        terms.append(
+            {
+                "index": j,
+                "kind": e.kind,
+                "label": label,
+                "center": e.center.tolist(),
+                "axes": e.axes.tolist(),
+                "rank": int(s.ranks[j]) if per else -1,
+                "weight": float(s.weights[j]) if per else 0.0,
+                "pixels": float(s.pixels[j]) if per else 0.0,
+                "weighted": float(s.weighted[j]) if per else 0.0,
+            }
+        )
+    return {**candidate_json(plan, i), "plan_id": plan_id, "ellipsoids": terms}

@@ -1,0 +1,85 @@
+// Tiny inline-SVG line charts (no library, nothing fetched from the internet).
+"use strict";
+
+const SVG_NS = "http://www.w3.org/2000/svg";
+
+function svgEl(tag, attrs, parent) {
+  const el = document.createElementNS(SVG_NS, tag);
+  for (const [k, v] of Object.entries(attrs || {})) el.setAttribute(k, v);
+  if (parent) parent.appendChild(el);
+  return el;
+}
+
+function niceTicks(lo, hi, n) {
+  if (!isFinite(lo) || !isFinite(hi)) return [];
+  if (hi === lo) { hi = lo + 1; }
+  const raw = (hi - lo) / Math.max(1, n);
+  const mag = Math.pow(10, Math.floor(Math.log10(raw)));
+  const step = [1, 2, 5, 10].map((m) => m * mag).find((s) => s >= raw) || raw;
+  const ticks = [];
+  for (let t = Math.ceil(lo / step) * step; t <= hi + 1e-9 * step; t += step) ticks.push(+t.toPrecision(12));
+  return ticks;
+}
+
+function fmt(v) {
+  const a = Math.abs(v);
+  if (a === 0) return "0";
+  if (a >= 10000 || a < 0.01) return v.toExponential(1);
+  if (a >= 100) return v.toFixed(0);
+  return +v.toPrecision(3) + "";
+}
+
+/**
+ * Draw series [{points: [[x, y], ...], color, label, marker: [x, y] | null}] into an <svg>.
+ * opts: {yMin, yMax, xInteger}
+ */
+function lineChart(svg, series, opts) {
+  opts = opts || {};
+  while (svg.firstChild) svg.removeChild(svg.firstChild);
+  const W = svg.clientWidth || 300, H = svg.clientHeight || 150;
+  svg.setAttribute("viewBox", `0 0 ${W} ${H}`);
+  const m = { l: 44, r: 8, t: 6, b: 18 };
+  const pts = series.flatMap((s) => s.points).filter((p) => p[1] !== null && isFinite(p[1]));
+  if (pts.length === 0) {
+    svgEl("text", { x: W / 2, y: H / 2, "text-anchor": "middle" }, svg).textContent = "no data yet";
+    return;
+  }
+  let xs = pts.map((p) => p[0]), ys = pts.map((p) => p[1]);
+  let x0 = Math.min(...xs), x1 = Math.max(...xs);
+  let y0 = opts.yMin !== undefined ? opts.yMin : Math.min(...ys);
+  let y1 = opts.yMax !== undefined ? opts.yMax : Math.max(...ys);
+  if (x1 === x0) { x0 -= 1; x1 += 1; }
+  if (y1 === y0) { const d = Math.abs(y0) * 0.1 || 1; y0 -= d; y1 += d; }
+  const X = (x) => m.l + ((x - x0) / (x1 - x0)) * (W - m.l - m.r);
+  const Y = (y) => H - m.b - ((y - y0) / (y1 - y0)) * (H - m.t - m.b);
+  for (const t of niceTicks(y0, y1, 4)) {
+    svgEl("line", { x1: m.l, x2: W - m.r, y1: Y(t), y2: Y(t), stroke: "#eceef2" }, svg);
+    svgEl("text", { x: m.l - 4, y: Y(t) + 3, "text-anchor": "end" }, svg).textContent = fmt(t);
+  }
+  let xt = niceTicks(x0, x1, 6);
+  if (opts.xInteger) xt = xt.filter((t) => Number.isInteger(t));
+  for (const t of xt) {
+    svgEl("text", { x: X(t), y: H - 4, "text-anchor": "middle" }, svg).textContent = fmt(t);
+  }
+  svgEl("line", { x1: m.l, x2: m.l, y1: m.t, y2: H - m.b, stroke: "#b9bfca" }, svg);
+  svgEl("line", { x1: m.l, x2: W - m.r, y1: H - m.b, y2: H - m.b, stroke: "#b9bfca" }, svg);
+  let legendY = m.t + 8;
+  for (const s of series) {
+    const good = s.points.filter((p) => p[1] !== null && isFinite(p[1]));
+    if (good.length === 0) continue;
+    const d = good.map((p, i) => `${i ? "L" : "M"}${X(p[0]).toFixed(1)},${Y(p[1]).toFixed(1)}`).join("");
+    svgEl("path", { d, fill: "none", stroke: s.color, "stroke-width": 1.8 }, svg);
+    for (const p of good) svgEl("circle", { cx: X(p[0]), cy: Y(p[1]), r: 2.2, fill: s.color }, svg);
+    if (s.marker) {
+      svgEl("circle", { cx: X(s.marker[0]), cy: Y(s.marker[1]), r: 5, fill: "none", stroke: s.color, "stroke-width": 2 }, svg);
+    }
+    if (s.label) {
+      const t = svgEl("text", { x: W - m.r - 2, y: legendY, "text-anchor": "end" }, svg);
+      t.textContent = s.label;
+      t.setAttribute("style", `fill:${s.color}`);
+      legendY += 11;
+    }
+  }
+}
+
+window.lineChart = lineChart;

@@ -1,0 +1,102 @@
+"""Fixtures for the workbench API tests: a small, fast planner config and an app per test."""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from fastapi.testclient import TestClient
+
+from app.main import create_app
+from app.settings import AppSettings
+
+SMALL: dict[str, Any] = {
+    "voxel": {"resolution": 0.02},
+    "candidates": {"count": 60, "parallels": 4},
+    "cluster": {"t_min": 2, "t_max": 6},
+}
+"""A coarse map and few candidates: a capture + plan takes well under a second."""
+
+CUBE_OBJ = """v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+v 0 0 1
+v 1 0 1
+v 1 1 1
+v 0 1 1
+f 1 3 2
+f 1 4 3
+f 5 6 7
+f 5 7 8
+f 1 2 6
+f 1 6 5
+f 2 3 7
+f 2 7 6
+f 3 4 8
+f 3 8 7
+f 4 1 5
+f 4 5 8
+"""
+
+
+@pytest.fixture
+def models_dir(tmp_path: Path) -> Path:
+    d = tmp_path / "models"
+    d.mkdir()
+    (d / "cube.obj").write_text(CUBE_OBJ)
+    (d / "notes.txt").write_text("not a model")
+    return d
+
+
+@pytest.fixture
+def settings(tmp_path: Path, models_dir: Path) -> AppSettings:
+    return AppSettings(viser_port=0, scene=False, models_dir=models_dir, data_dir=tmp_path / "data")
+
+
+@pytest.fixture
+def client(settings: AppSettings) -> Iterator[TestClient]:
+    with TestClient(create_app(settings)) as c:
+        yield c
+
+
+def _new_session(
+    client: TestClient, model: str = "l-block", config: dict[str, Any] | None = None, seed: int = 0
+) -> str:
+    r = client.post("/api/sessions", json={"model": model, "config": SMALL if config is None else config, "seed": seed})
+    assert r.status_code == 201, r.text
+    return r.json()["id"]
+
+
+def _planned_session(client: TestClient, **kw: Any) -> tuple[str, dict[str, Any]]:
+    """A session that captured its first view and holds a pending plan: (id, plan response)."""
+    sid = _new_session(client, **kw)
+    assert client.post(f"/api/sessions/{sid}/capture").status_code == 200
+    r = client.post(f"/api/sessions/{sid}/plan")
+    assert r.status_code == 200, r.text
+    return sid, r.json()
+
+
+@pytest.fixture
+def new_session() -> Callable[..., str]:
+    """``new_session(client, model="l-block", config=SMALL, seed=0) -> id``."""
+    return _new_session
+
+
+@pytest.fixture
+def planned_session() -> Callable[..., tuple[str, dict[str, Any]]]:
+    """``planned_session(client, **kw) -> (id, plan)``: captured once, with a pending plan."""
+    return _planned_session
+
+
+@pytest.fixture
+def small_config() -> dict[str, Any]:
+    return copy.deepcopy(SMALL)
+
+
+@pytest.fixture
+def cube_obj() -> str:
+    return CUBE_OBJ

@@ -1,0 +1,88 @@
+"""Settings from TOML and flags; the ``nbv serve`` options; the scene's pure geometry helpers."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from app.scene_geometry import VIRIDIS, box_segments, candidate_colors, colormap, gmm_instance, sector_segments
+from app.settings import AppSettings, load_settings
+from nbv import serve
+from planner import BoundingBox, Ellipsoid, Pose
+
+
+def test_toml_and_overrides(tmp_path: Path) -> None:
+    path = tmp_path / "wb.toml"
+    path.write_text(
+        '[server]\nport = 9001\nhost = "0.0.0.0"\nmodels_dir = "meshes"\n'
+        "[planner]\nvoxel = { resolution = 0.02 }\n"
+        '[devices]\nmodel = "mug"\ncamera = { depth_noise_std = 0.001 }\n'
+    )
+    s = load_settings(path, port=9002)
+    assert (s.port, s.host, s.viser_host, s.models_dir) == (9002, "0.0.0.0", "0.0.0.0", Path("meshes"))
+    assert s.planner.voxel.resolution == 0.02 and s.planner.candidates.count == 400
+    assert s.devices.model == "mug" and s.devices.camera.depth_noise_std == 0.001
+    assert load_settings(path, model="sphere").devices.model == "sphere"
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("[sever]\nport = 1\n", "unknown table"),
+        ("[server]\nprt = 1\n", "unknown setting"),
+        ("[server]\nport = 70000\n", "server.port"),
+        ("[planner]\nvoxel = { resolution = -1 }\n", "resolution"),
+        ("[devices]\ncamera = { fx = 0 }\n", "camera.fx"),
+        ("[server\n", "invalid TOML"),
+    ],
+)
+def test_bad_settings_name_the_problem(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=message):
+        load_settings(path)
+
+
+def test_serve_arguments() -> None:
+    parser = argparse.ArgumentParser()
+    serve.add_arguments(parser)
+    args = parser.parse_args(["--port", "8100", "--viser-port", "8190", "--model", "box", "--data-dir", "/tmp/x"])
+    s = serve.settings_from_args(args)
+    assert (s.host, s.port, s.viser_port, s.devices.model, s.data_dir) == (
+        "127.0.0.1",
+        8100,
+        8190,
+        "box",
+        Path("/tmp/x"),
+    )
+    assert AppSettings().host == "127.0.0.1"
+
+
+def test_colormap_and_candidate_colors() -> None:
+    c = colormap(np.array([0.0, 0.5, 1.0]))
+    assert c[0].tolist() == list(VIRIDIS[0]) and c[2].tolist() == list(VIRIDIS[-1])
+    colors, lo, hi = candidate_colors([5.0, -2.0, 100.0], [True, True, False])
+    assert (lo, hi) == (-2.0, 5.0)  # the range of the eligible scores
+    assert colors[0].tolist() == list(VIRIDIS[-1]) and colors[1].tolist() == list(VIRIDIS[0])
+    assert colors[2].tolist() == [175, 175, 175]
+
+
+def test_box_and_sector_segments() -> None:
+    segs = box_segments(BoundingBox(np.zeros(3), np.array([1.0, 2.0, 3.0])))
+    lengths = sorted(np.linalg.norm(segs[:, 1] - segs[:, 0], axis=1).round(9).tolist())
+    assert lengths == [1.0] * 4 + [2.0] * 4 + [3.0] * 4
+    s = sector_segments(np.array([0.1, 0.0, 0.2]), 0.5, np.array([0.0, np.pi / 2]))
+    assert np.allclose(s[0], [[0.1, 0, 0], [0.6, 0, 0]]) and np.allclose(s[1], [[0.1, 0, 0], [0.1, 0.5, 0]])
+
+
+def test_gmm_instance_is_the_two_sigma_ellipsoid() -> None:
+    cov = np.diag([0.01, 0.04, 0.09])
+    e = Ellipsoid(np.zeros(3), np.ones(3), np.eye(3), "occupied", 10, np.array([1.0, 2.0, 3.0]), cov)
+    wxyz, pos, axes = gmm_instance(e)  # type: ignore[misc]
+    assert np.allclose(sorted(axes), [0.2, 0.4, 0.6]) and np.allclose(pos, [1, 2, 3])
+    R = Pose.from_wxyz(wxyz, pos).rotation
+    assert np.allclose((R * axes**2) @ R.T, 4.0 * cov)  # the 2-sigma ellipsoid of the covariance
+    assert gmm_instance(Ellipsoid(np.zeros(3), np.ones(3), np.eye(3), "frontier")) is None

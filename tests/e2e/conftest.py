@@ -1,0 +1,100 @@
+"""Fixtures of the browser tests: a live workbench (uvicorn + viser on free ports, in this process) and a
+headless Debian Chromium page. The helpers are plain functions so ``tests/e2e/screenshot.py`` can use them."""
+
+from __future__ import annotations
+
+import shutil
+import socket
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+import uvicorn
+from fastapi import FastAPI
+
+from app.main import create_app
+from app.settings import AppSettings
+
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-sync",
+]
+
+
+def chromium_path() -> str:
+    for name in ("chromium", "chromium-browser"):
+        path = shutil.which(name)
+        if path:
+            return path
+    raise RuntimeError("Debian's chromium is needed for the browser tests (make system-deps installs it)")
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@dataclass
+class LiveServer:
+    url: str
+    app: FastAPI
+
+
+@contextmanager
+def running_server(settings: AppSettings) -> Iterator[LiveServer]:
+    """uvicorn serving ``create_app(settings)`` on 127.0.0.1:settings.port in a thread of this process."""
+    app = create_app(settings)
+    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=settings.port, log_level="warning"))
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    deadline = time.time() + 30
+    while not server.started:
+        if time.time() > deadline or not thread.is_alive():
+            raise RuntimeError("uvicorn did not start")
+        time.sleep(0.05)
+    try:
+        yield LiveServer(f"http://127.0.0.1:{settings.port}", app)
+    finally:
+        server.should_exit = True
+        thread.join(30)
+
+
+OUTPUT_DIR = Path(__file__).resolve().parents[2] / "test-output" / "e2e"
+
+
+@pytest.fixture
+def output_dir() -> Path:
+    """Where the browser tests leave their screenshots (``test-output/e2e``; ``make clean`` removes it)."""
+    OUTPUT_DIR.mkdir(parents=True, exist_ok=True)
+    return OUTPUT_DIR
+
+
+@pytest.fixture
+def live_server(tmp_path: Path) -> Iterator[LiveServer]:
+    settings = AppSettings(port=free_port(), viser_port=0, data_dir=tmp_path / "data", models_dir=tmp_path)
+    with running_server(settings) as server:
+        yield server
+
+
+@pytest.fixture
+def browser_page() -> Iterator:
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=chromium_path(), args=CHROMIUM_ARGS)
+        page = browser.new_page(viewport={"width": 1500, "height": 950}, device_scale_factor=1)
+        try:
+            yield page
+        finally:
+            browser.close()
