@@ -151,6 +151,20 @@ def cap_range(want: LatticeRange, keep: LatticeRange | None, center: ArrayLike, 
     return lo, hi
 
 
+def floor_range(rng: LatticeRange, floor_height: float | None, resolution: float) -> LatticeRange:
+    """Raise the bottom of ``rng`` to the voxel layer at ``floor_height`` (None: unchanged).
+
+    Nothing below the turntable plate can be seen, so B (and its frontier) stops there.
+    The range keeps at least one layer.
+    """
+    if floor_height is None:
+        return rng
+    lo, hi = rng[0].copy(), rng[1].copy()
+    lo[2] = max(int(lo[2]), math.floor(floor_height / resolution + _SNAP_TOL))
+    hi[2] = max(int(hi[2]), int(lo[2]) + 1)
+    return lo, hi
+
+
 def max_voxels(max_extent: float, resolution: float) -> int:
     """Most voxels per edge that fit in ``max_extent`` (at least 1)."""
     return max(1, math.floor(max_extent / resolution + _SNAP_TOL))

@@ -38,6 +38,11 @@ class VoxelConfig:
     """After the first frame B is grown along the view direction until its diagonal is this many times longer (paper: 2)."""
     max_extent: float = 1.0
     """B never grows beyond this edge length, metres (a safety cap; the paper has none)."""
+    floor: bool = True
+    """Keep B above ``floor_height``: nothing under the plate can be seen. The paper has no floor; without one
+    the first-frame growth pushes B, and a ring of frontier voxels, under the plate."""
+    floor_height: float = 0.0
+    """The floor, metres (the plate top in the turntable frame)."""
     integration: Literal["projective", "raycast"] = "projective"
     """'projective' projects voxel centres into the depth image (fast); 'raycast' is the Amanatides-Woo reference."""
 
@@ -52,6 +57,7 @@ class VoxelConfig:
             _finite(self.max_extent) and self.max_extent > self.resolution,
             f"voxel.max_extent: must be > resolution, got {self.max_extent!r}",
         )
+        _require(_finite(self.floor_height), f"voxel.floor_height: must be a finite number, got {self.floor_height!r}")
         _require(self.integration in ("projective", "raycast"), f"voxel.integration: 'projective' or 'raycast', got {self.integration!r}")
 
 

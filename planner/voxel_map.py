@@ -291,6 +291,7 @@ class VoxelMap:
             want = bb.range_union(old_rng, pts_rng)
             assert want is not None
             rng = bb.cap_range(want, old_rng, center, n_max)
+        rng = bb.floor_range(rng, cfg.floor_height if cfg.floor else None, res)
         before = _regrid(self._classes, self._lo, rng)
         lo = rng[0]
 
@@ -320,6 +321,7 @@ class VoxelMap:
             content = bb.range_union(None if occ is None else (occ[0] + lo, occ[1] + lo), pts_rng) or content
             assert want is not None
             rng2 = bb.cap_range(want, cur, 0.5 * (content[0] + content[1]), n_max)
+            rng2 = bb.floor_range(rng2, cfg.floor_height if cfg.floor else None, res)
             new, before = _regrid(new, lo, rng2), _regrid(before, lo, rng2)
             lo = rng2[0]
 

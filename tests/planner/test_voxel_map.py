@@ -62,7 +62,7 @@ def at(m: VoxelMap, x: range | int, y: range | int, z: range | int) -> np.ndarra
 
 
 def wall_map(integration: str = "projective", **kw: float) -> tuple[VoxelMap, DepthFrame]:
-    m = VoxelMap(VoxelConfig(resolution=0.01, gamma=kw.pop("gamma", 0.0), integration=integration, **kw))  # type: ignore[arg-type]
+    m = VoxelMap(VoxelConfig(resolution=0.01, gamma=kw.pop("gamma", 0.0), integration=integration, floor=kw.pop("floor", False), **kw))  # type: ignore[arg-type]
     frame = render(T_FRONT, K_SMALL, (BOX, WALL))
     m.integrate(frame, frame.points_world)
     return m, frame
@@ -140,7 +140,7 @@ def test_max_extent_caps_every_edge_centred_on_the_content() -> None:
 
 
 def test_stats_count_new_voxels() -> None:
-    m = VoxelMap(VoxelConfig(gamma=0.0))
+    m = VoxelMap(VoxelConfig(gamma=0.0, floor=False))
     frame = render(T_FRONT, K_SMALL, (BOX, WALL))
     stats = m.integrate(frame, frame.points_world)
     assert stats.bbox_grew and stats.seconds > 0
@@ -282,7 +282,7 @@ def _near_depth_edge(frame: DepthFrame, centers: np.ndarray, res: float) -> np.n
 
 def _compare(frame: DepthFrame, res: float, check_map: bool = True) -> tuple[float, int, VoxelMap]:
     """Agreement of the two observation models on the map's grid; asserts where they may differ."""
-    m = VoxelMap(VoxelConfig(resolution=res, gamma=0.0))
+    m = VoxelMap(VoxelConfig(resolution=res, gamma=0.0, floor=False))
     m.integrate(frame, frame.points_world)
     proj = observe_projective(frame, m.origin, res, m.shape)
     empty_seen, unknown_seen = ray_observations(*pixel_rays(frame), m.origin, res, m.shape)
@@ -303,7 +303,7 @@ def _compare(frame: DepthFrame, res: float, check_map: bool = True) -> tuple[flo
     # where 'projective' carves and 'raycast' does not, some pixel ray did pass the whole voxel
     assert np.all(empty_seen[(proj == E) & (ray == U)])
     if check_map:  # occupied comes from the points: identical in both modes
-        m_ray = VoxelMap(VoxelConfig(resolution=res, gamma=0.0, integration="raycast"))
+        m_ray = VoxelMap(VoxelConfig(resolution=res, gamma=0.0, integration="raycast", floor=False))
         m_ray.integrate(frame, frame.points_world)
         np.testing.assert_array_equal(m.classes == O, m_ray.classes == O)
     return float(np.count_nonzero(touched & ~differ) / np.count_nonzero(touched)), int(touched.sum()), m
@@ -334,3 +334,21 @@ def test_fine_grid_agrees_and_projective_is_fast() -> None:
     t0 = time.perf_counter()
     observe_projective(frame, m.origin, 0.005, m.shape)
     assert time.perf_counter() - t0 < 0.25  # measured ~10 ms; generous for loaded CI machines
+
+
+def test_floor_keeps_bounding_box_above_the_plate() -> None:
+    """Departure from the paper (documented at VoxelConfig.floor): B stops at the plate top."""
+    eye = np.array([0.3, 0.0, 0.45])  # looking down at a box standing on the plate (z = 0)
+    T = Pose.look_at(eye, [0.0, 0.0, 0.03])
+    lifted: Box = ((-0.05, -0.05, 0.0), (0.05, 0.05, 0.06))
+    frame = render(T, K_SMALL, (lifted,))
+    points = frame.points_world[frame.points_world[:, 2] > 0.002]
+    free = VoxelMap(VoxelConfig(gamma=0.02, floor=False))
+    free.integrate(frame, points)
+    floored = VoxelMap(VoxelConfig(gamma=0.02))
+    floored.integrate(frame, points)
+    assert free.bbox is not None and floored.bbox is not None
+    assert free.bbox.lower[2] < -0.02  # the paper's growth along the view direction goes under the plate
+    assert floored.bbox.lower[2] == pytest.approx(0.0)
+    assert np.all(floored.centers(VoxelClass.FRONTIER)[:, 2] > 0.0)
+    assert np.array_equal(floored.bbox.upper, free.bbox.upper)
