@@ -1,0 +1,102 @@
+"""`nbv scan`: the output files, and one-line errors with a non-zero exit for bad input."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nbv.cli import main
+
+SMALL = ["--resolution", "0.02", "--candidates", "60", "--t-min", "2", "--t-max", "6"]
+
+
+def test_scan_writes_metrics_and_cloud(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "scan"
+    code = main(["scan", "--model", "l-block", "--views", "3", *SMALL, "--out", str(out)])
+    assert code == 0
+    doc = json.loads((out / "metrics.json").read_text())
+    assert doc["model"] == "l-block" and doc["planner"] == "projection"
+    assert doc["config"]["voxel"]["resolution"] == 0.02 and doc["config"]["candidates"]["count"] == 60
+    its = doc["iterations"]
+    assert [it["index"] for it in its] == [1, 2, 3]
+    for it in its:
+        assert set(it["timings"]) >= {"integrate", "cluster", "ellipsoids", "candidates", "score", "select"}
+        assert it["plan_seconds"] == pytest.approx(
+            sum(it["timings"][k] for k in ("integrate", "cluster", "ellipsoids", "candidates", "score", "select"))
+        )
+        assert len(it["pose"]["position"]) == 3 and len(it["pose"]["wxyz"]) == 4
+        assert it["t_occupied"] >= 1 and it["n_occupied"] > 0
+    coverage = [it["coverage"] for it in its]
+    assert coverage == sorted(coverage) and coverage[-1] > coverage[0] > 0.05
+    assert doc["final_coverage"] == coverage[-1]
+    assert coverage[-1] <= doc["reachable_coverage"] + 0.02
+    head = (out / "cloud.ply").read_bytes()[:200].decode("ascii", "replace")
+    assert f"element vertex {its[-1]['points']}" in head
+    printed = capsys.readouterr().out
+    assert "coverage" in printed and "T_o" in printed
+
+
+def write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--model", "no/such/file.obj"], "no/such/file.obj"),
+        (["--model", "no-such-builtin"], "no-such-builtin"),
+        (["--resolution", "0"], "voxel.resolution: must be > 0"),
+        (["--resolution", "-1"], "voxel.resolution"),
+        (["--views", "0"], "termination.max_views"),
+        (["--t-min", "9", "--t-max", "5"], "cluster.t_min (9) must be <= cluster.t_max (5)"),
+        (["--candidates", "0"], "candidates.count"),
+        (["--size", "0"], "--size"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(args: list[str], message: str, tmp_path: Path) -> None:
+    full = ["scan", *(["--model", "l-block"] if "--model" not in args else []), *args, "--out", str(tmp_path)]
+    proc = subprocess.run([sys.executable, "-m", "nbv.cli", *full], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("nbv: error:"), proc.stderr
+    assert message in lines[0]
+    assert "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize(
+    ("name", "content", "message"),
+    [
+        ("garbage.obj", "this is not a mesh\n", "garbage.obj"),
+        ("empty.obj", "", "empty.obj"),
+        ("nan.obj", "v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n", "non-finite"),
+        ("binary.stl", "\x00\x01garbage", "binary.stl"),
+    ],
+)
+def test_bad_meshes(name: str, content: str, message: str, tmp_path: Path) -> None:
+    path = write(tmp_path / name, content)
+    proc = subprocess.run(
+        [sys.executable, "-m", "nbv.cli", "scan", "--model", str(path), "--out", str(tmp_path / "o")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0], proc.stderr
+
+
+def test_scan_is_reproducible(tmp_path: Path) -> None:
+    docs = []
+    for run in ("a", "b"):
+        out = tmp_path / run
+        assert main(["scan", "--model", "mug", "--views", "2", *SMALL, "--no-reachable", "--out", str(out)]) == 0
+        docs.append(json.loads((out / "metrics.json").read_text()))
+    poses = [[it["pose"]["position"] for it in d["iterations"]] for d in docs]
+    assert np.allclose(poses[0], poses[1])
+    assert [it["points"] for it in docs[0]["iterations"]] == [it["points"] for it in docs[1]["iterations"]]

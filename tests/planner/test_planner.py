@@ -1,0 +1,88 @@
+"""The planner facade: Algorithm 1's state, atomic integration, partitions, termination."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from devices.builtins import make_builtin
+from devices.config import CameraConfig, CellConfig
+from devices.sim import make_sim_cell
+from planner import Planner, PlannerConfig, VoxelClass
+from planner.types import DepthFrame
+
+SMALL = PlannerConfig().replace(
+    voxel={"resolution": 0.02},
+    candidates={"count": 80},
+    cluster={"t_min": 2, "t_max": 6},
+    termination={"max_views": 4},
+)
+
+
+@pytest.fixture(scope="module")
+def cell():
+    return make_sim_cell(make_builtin("l-block"), CameraConfig(), CellConfig(), seed=0)
+
+
+def first_frame(cell) -> DepthFrame:
+    cell.move_to(cell.initial_pose())
+    return cell.capture()
+
+
+def test_plan_before_any_frame_is_refused() -> None:
+    with pytest.raises(ValueError, match="no frame has been integrated"):
+        Planner(SMALL).plan()
+
+
+def test_bad_frames_leave_state_unchanged(cell) -> None:
+    planner = Planner(SMALL)
+    frame = first_frame(cell)
+    planner.integrate(frame)
+    classes, cloud, views = planner.voxel_map.classes.copy(), planner.cloud.copy(), list(planner.views)
+    empty = DepthFrame(np.zeros_like(frame.depth), frame.T_world_camera, frame.intrinsics)
+    with pytest.raises(ValueError, match="empty frame"):
+        planner.integrate(empty)
+    # every return far behind the object: nothing is left after cropping
+    far = DepthFrame(np.where(frame.depth > 0, np.float32(5.0), np.float32(0.0)), frame.T_world_camera, frame.intrinsics)
+    with pytest.raises(ValueError, match="no point left"):
+        planner.integrate(far)
+    assert np.array_equal(planner.voxel_map.classes, classes)
+    assert np.array_equal(planner.cloud, cloud) and planner.views == views
+
+
+def test_loop_respects_partitions_and_terminates(cell) -> None:
+    planner = Planner(SMALL)
+    pose = cell.initial_pose()
+    sectors_visited = []
+    for _ in range(SMALL.termination.max_views):
+        cell.move_to(pose)
+        planner.integrate(cell.capture())
+        plan = planner.plan(reachable=cell.is_reachable)
+        assert plan.best is not None
+        best = plan.candidates[plan.best_index]
+        # only unscanned sectors next to the scanned arc, until all are scanned
+        if len(plan.scanned_sectors) < SMALL.partitions.sectors:
+            assert best.sector in plan.eligible_sectors
+            assert best.sector not in plan.scanned_sectors
+            for s in plan.eligible_sectors:
+                assert (s - 1) % 4 in plan.scanned_sectors or (s + 1) % 4 in plan.scanned_sectors
+        eligible = [s for s in plan.scores if s.eligible]
+        assert plan.scores[plan.best_index].score == max(s.score for s in eligible)
+        sectors_visited.append(best.sector)
+        pose = best.T_world_camera
+    assert planner.terminated == "max_views"
+    assert plan.terminated == "max_views"
+    assert planner.iteration == 4
+    counts = planner.point_counts
+    assert counts == sorted(counts) and counts[-1] > counts[0]
+    assert planner.voxel_map.count(VoxelClass.OCCUPIED) > 0
+
+
+def test_growth_threshold_stops_the_scan(cell) -> None:
+    cfg = SMALL.replace(termination={"growth_threshold": 10.0, "max_views": 10})
+    planner = Planner(cfg)
+    frame = first_frame(cell)
+    planner.integrate(frame)
+    assert planner.terminated is None
+    planner.integrate(frame)  # the same view again: no growth
+    assert planner.terminated == "growth"
