@@ -11,7 +11,10 @@ For voxel-centre sets made from trimesh surfaces (0.01 m lattice) and a frontier
   MVEEs of every voxel's 8 corners (volume ratio).
 
 Times are medians of several runs (the machine may be shared: look at min too).
-Run: ``.venv/bin/python benchmarks/bench_fit.py [--quick] [--sets union-S,torus]``.
+- ``--sequence``: warm-started chains like a scan (a growing surface, a moving frontier band), each
+  step checked against its own exhaustive sweep.
+
+Run: ``.venv/bin/python benchmarks/bench_fit.py [--quick] [--sets union-S,torus] [--sequence]``.
 """
 
 from __future__ import annotations
@@ -34,7 +37,7 @@ RES = 0.01
 
 def voxelize(points: NDArray[np.float64], res: float = RES) -> NDArray[np.float64]:
     """Unique voxel centres (M, 3) of points (N, 3) on a lattice of edge ``res``."""
-    return np.unique(np.round(points / res).astype(np.int64), axis=0) * res
+    return np.unique(np.round(points / res).astype(np.int64), axis=0).astype(np.float64) * res
 
 
 def union_surface(scale: float, samples: int = 300_000, seed: int = 0) -> NDArray[np.float64]:
@@ -48,7 +51,12 @@ def union_surface(scale: float, samples: int = 300_000, seed: int = 0) -> NDArra
         trimesh.creation.icosphere(subdivisions=4, radius=sph_r).apply_translation(sph_c),
     ]
     total = sum(m.area for m in meshes)
-    p = np.vstack([trimesh.sample.sample_surface(m, int(samples * m.area / total), seed=seed + i)[0] for i, m in enumerate(meshes)])
+    p = np.vstack(
+        [
+            trimesh.sample.sample_surface(m, int(samples * m.area / total), seed=seed + i)[0]
+            for i, m in enumerate(meshes)
+        ]
+    )
     eps = 1e-9
     inside = (
         np.all(np.abs(p - box_c) < box_h - eps, axis=1)
@@ -146,7 +154,8 @@ def bench_set(name: str, points: NDArray[np.float64], config: ClusterConfig, rep
         f"{name:8s} n={n:5d} | sweep {t_sweep:6.1f}s T*={best_t:2d} | cold {row['cold_s'] * 1e3:6.1f}ms "
         f"T={row['cold_t']:2d} gap={row['cold_gap']:+.4f} | warm {row['warm_s'] * 1e3:6.1f}ms "
         f"(min {row['warm_min_s'] * 1e3:5.1f}; cluster {row['warm_cluster_s'] * 1e3:5.1f} + ellipsoids "
-        f"{row['warm_ellipsoids_s'] * 1e3:5.1f}) T={row['warm_t']:2d} gap={row['warm_gap']:+.4f} evals={row['warm_evals']}",
+        f"{row['warm_ellipsoids_s'] * 1e3:5.1f}) T={row['warm_t']:2d} gap={row['warm_gap']:+.4f} "
+        f"evals={row['warm_evals']}",
         flush=True,
     )
     return row
@@ -180,11 +189,42 @@ def bench_tightness(points: NDArray[np.float64], config: ClusterConfig) -> None:
     print(f"ellipsoid volume / converged MVEE: median {np.median(r):.4f} max {r.max():.4f} ({len(r)} clusters)")
 
 
+def band(lo: float, hi: float, radius: float = 0.2) -> NDArray[np.float64]:
+    """Frontier-like band of a sphere shell: polar angle in [lo, hi) (moves as the scan proceeds)."""
+    r = radius / RES
+    g = np.arange(-int(r) - 2, int(r) + 3)
+    P = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3).astype(float)
+    d = np.linalg.norm(P, axis=1)
+    polar = np.arccos(np.clip(P[:, 2] / np.maximum(d, 1e-9), -1.0, 1.0))
+    return P[(np.abs(d - r) <= 0.5) & (polar >= lo) & (polar < hi)] * RES
+
+
+def bench_sequence(config: ClusterConfig) -> None:
+    """Warm-started chains like a scan: a growing surface (occupied) and a moving band (frontier)."""
+    full = union_surface(3.0)
+    proj = full @ np.array([0.6, 0.48, 0.64])
+    chains = {
+        "occupied (union grows 40% -> 100%)": [full[proj <= np.quantile(proj, q)] for q in (0.4, 0.55, 0.7, 0.85, 1.0)],
+        "frontier (band moves 0.15 rad/step)": [band(0.3 + 0.15 * k, 0.9 + 0.15 * k) for k in range(5)],
+    }
+    for name, chain in chains.items():
+        fitter = EllipsoidFitter(config, RES, "frontier")
+        cells = []
+        for points in chain:
+            fit = fitter.fit(points)[1]
+            sweep = bic_sweep(points, range(config.t_min, config.t_max + 1), config, RES)
+            gap = bic_gap(dict(fit.bic)[fit.t_chosen], sweep, len(points))
+            best_t = min(sweep, key=lambda t: sweep[t])
+            cells.append(f"n={len(points)} T={fit.t_chosen}/{best_t} {fit.seconds * 1e3:.0f}ms gap={gap:+.3f}")
+        print(f"{name}: " + " | ".join(cells), flush=True)
+
+
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--sets", default=",".join(SETS), help="comma-separated names: " + ", ".join(SETS))
     parser.add_argument("--quick", action="store_true", help="union-S, union-M and shell-M only, 3 repeats")
     parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--sequence", action="store_true", help="also warm-started scan-like chains (slow: sweeps)")
     args = parser.parse_args()
     names = ["union-S", "union-M", "shell-M"] if args.quick else args.sets.split(",")
     repeats = 3 if args.quick else args.repeats
@@ -200,6 +240,8 @@ def main() -> None:
     )
     bench_mvee(repeats * 3)
     bench_tightness(SETS[names[-1]](), config)
+    if args.sequence:
+        bench_sequence(config)
 
 
 if __name__ == "__main__":

@@ -120,7 +120,7 @@ def stage_table(records: list[IterationRecord]) -> dict[str, dict[str, float]]:
 
 def fidelity(scan: SimScan, iterations: list[int], console: Console | None) -> list[dict[str, Any]]:
     """BIC gap per voxel of the chosen model against the exhaustive sklearn sweep."""
-    from planner.clustering import bic_sweep, feasible_range
+    from planner.clustering import bic_sweep, t_range
 
     cfg = scan.config.cluster
     res = scan.config.voxel.resolution
@@ -136,7 +136,7 @@ def fidelity(scan: SimScan, iterations: list[int], console: Console | None) -> l
             if n == 0 or fit.t_chosen == 0:
                 continue
             chosen = dict(fit.bic)[fit.t_chosen]
-            t_lo, t_hi = feasible_range(n, cfg)
+            t_lo, t_hi = t_range(n, cfg)
             t0 = time.perf_counter()
             sweep = bic_sweep(points, range(t_lo, t_hi + 1), cfg, res)
             best_t = min(sweep, key=lambda t: sweep[t])

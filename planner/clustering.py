@@ -16,16 +16,17 @@ Few points. With n points T is capped at ``t_hi = max(1, n // min_points_per_com
 
 Search ("fast", the default). EM is our own numpy code: the log-densities of all components are one
 product of quadratic features ``[x^2, y^2, z^2, xy, xz, yz, x, y, z, 1]`` with a (T, 10) matrix, in
-float32 (M-steps and the reported BIC of the chosen model are float64, the latter with scikit-learn's
-formula). New models come from evaluated neighbours: a split halves the components whose points a
-local two-Gaussian EM explains best (moment-preserving, along the major axis); a merge joins the
-pairs with the smallest Runnalls KL bound. Cold: one Gaussian split up to ``t_lo``, then T grows by
-~1.5x per step until the BIC is far above the best. Warm (``warm`` = the previous iteration's
-mixture, what ``EllipsoidFitter`` keeps): EM from it, then steps of 1, 2, 4, ... outwards while the
-BIC drops. Then both bisect towards clearly worse evaluated neighbours, and polish: T - 1, T + 1 and
-a split-and-merge move at the best T, walking on while that helps. BIC drops smaller than
-``_MIN_GAIN`` per point (EM noise at tol) do not steer the search. ``search="exhaustive"`` fits
-every T with scikit-learn (the reference).
+float32; M-steps are float64, and the models within ``_EXACT_BAND`` of the best get exact float64
+BICs (scikit-learn's formula), the chosen one being the smallest of those. New models come from
+evaluated neighbours: a split halves the components whose points a local two-Gaussian EM explains
+best (moment-preserving, along the major axis); a merge joins the pairs with the smallest Runnalls
+KL bound. Cold: one Gaussian split up to ``t_lo``, then T grows by ~1.5x per step until the BIC is
+far above the best. Warm (``warm`` = the previous iteration's mixture, what ``EllipsoidFitter``
+keeps): EM from it, then steps of 1, 2, 4, ... outwards while the BIC drops. Then both bisect
+towards clearly worse evaluated neighbours, and polish: T - 1 and T + 1 from the best model, a
+split-and-merge move at T and a seeded k-means restart at T + 1, walking on while that helps. BIC
+drops smaller than ``_MIN_GAIN`` per point (EM noise at tol) do not steer the search.
+``search="exhaustive"`` fits every T with scikit-learn (the reference).
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.config import ClusterConfig
+from planner.mvee import checked_points
 
 _LOG2PI = float(np.log(2.0 * np.pi))
 _EPS10 = 10.0 * float(np.finfo(np.float64).eps)  # sklearn's floor on component mass
@@ -45,6 +47,8 @@ _GROW = 1.5  # cold search: T grows by this factor per coarse step
 _FLAT = 0.01  # refine: no bisection towards a neighbour within this BIC per point of the best
 _MIN_GAIN = 0.005  # per point: smaller BIC drops are EM noise (tol) and do not steer the search
 _WARM_TOL = 0.5  # warm start: the previous model is refitted to this fraction of tol
+_EXACT_BAND = 1e-3  # models within this BIC per point of the best get an exact float64 BIC
+_RESTART_ITERS = 20  # EM iterations for a k-means restart (a slow one would not win anyway)
 _FAR = 0.5  # cold search: stop growing once the BIC is this much per point above the best
 _SYM = np.array([0, 3, 4, 3, 1, 5, 4, 5, 2])  # feature index of each entry of x x^T
 
@@ -82,21 +86,6 @@ def t_range(n: int, config: ClusterConfig) -> tuple[int, int]:
         return 0, 0
     t_hi = min(config.t_max, max(1, n // config.min_points_per_component))
     return min(config.t_min, t_hi), t_hi
-
-
-def checked_points(name: str, points: NDArray[np.float64] | Iterable, min_rows: int = 0) -> NDArray[np.float64]:
-    """``points`` as an (N, 3) finite float64 array, else ``ValueError`` naming ``name``."""
-    try:
-        p = np.asarray(points, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name}: cannot convert to a float64 array ({exc})") from None
-    if p.ndim != 2 or p.shape[1] != 3:
-        raise ValueError(f"{name}: expected shape (N, 3), got {p.shape}")
-    if not np.all(np.isfinite(p)):
-        raise ValueError(f"{name}: {int(np.count_nonzero(~np.isfinite(p)))} non-finite value(s) (NaN or inf)")
-    if p.shape[0] < min_rows:
-        raise ValueError(f"{name}: need at least {min_rows} points, got {p.shape[0]}")
-    return p
 
 
 def log_likelihood(points_vox: NDArray[np.float64], mixture: Mixture) -> float:
@@ -168,21 +157,18 @@ def _checked_resolution(resolution: float) -> float:
 
 
 def _sklearn_fits(
-    x: NDArray[np.float64], t_values: Iterable[int], config: ClusterConfig
+    x: NDArray[np.float64], t_values: Iterable[int], cfg: ClusterConfig
 ) -> dict[int, tuple[float, Mixture]]:
     from sklearn.mixture import GaussianMixture
 
     out: dict[int, tuple[float, Mixture]] = {}
     for t in sorted(set(t_values)):
-        gm = GaussianMixture(
-            t,
-            covariance_type="full",
-            reg_covar=config.reg_covar_voxels,
-            max_iter=config.max_iter,
-            tol=config.tol,
-            random_state=config.seed,
-        ).fit(x)
-        out[t] = (float(gm.bic(x)), Mixture(gm.weights_, gm.means_, gm.covariances_))
+        kw = {"reg_covar": cfg.reg_covar_voxels, "max_iter": cfg.max_iter, "tol": cfg.tol, "random_state": cfg.seed}
+        gm = GaussianMixture(t, covariance_type="full", **kw).fit(x)
+        out[t] = (
+            float(gm.bic(x)),
+            Mixture(np.asarray(gm.weights_), np.asarray(gm.means_), np.asarray(gm.covariances_)),
+        )
     return out
 
 
@@ -238,11 +224,15 @@ class _FastSearch:
             self._warm(Mixture(warm.weights, warm.means - self.offset, warm.covariances))
         self._refine()
         self._polish()
-        t, _ = self._best()
-        mix = self.models[t][1]
+        # Search BICs come from float32 log-densities (error <~ 1e-4 per point): recompute every model near
+        # the best exactly (float64, scikit-learn's formula) and choose among those.
         evaluated = {k: v[0] for k, v in self.models.items()}
-        evaluated[t] = bic_value(self.x, mix)  # exact (float64, scikit-learn's formula); the others are float32
-        return Selection(Mixture(mix.weights, mix.means + self.offset, mix.covariances), evaluated[t], evaluated)
+        best = min(evaluated.values())
+        exact = {k: bic_value(self.x, m) for k, (b, m) in self.models.items() if b <= best + _EXACT_BAND * self.n}
+        evaluated.update(exact)
+        t = min(exact, key=lambda k: exact[k])
+        mix = self.models[t][1]
+        return Selection(Mixture(mix.weights, mix.means + self.offset, mix.covariances), exact[t], evaluated)
 
     # -- search strategies
     def _cold(self) -> None:
@@ -294,8 +284,8 @@ class _FastSearch:
             self._record(self._step(lo if mid - lo <= hi - mid else hi, mid))
 
     def _polish(self) -> None:
-        """From the best model try T - 1 (merge), T + 1 (split) and a split-and-merge at T (Ueda et al. 2000,
-        escapes local optima); then keep walking in the direction that improved while the BIC drops."""
+        """From the best model try T - 1 (merge), T + 1 (split), a split-and-merge at T (Ueda et al. 2000) and
+        a k-means restart at T + 1 (both escape local optima); then walk on in the direction that improved."""
         best_t, best_bic = self._best()
         for t_to in (best_t - 1, best_t + 1):
             if self.t_lo <= t_to <= self.t_hi:
@@ -304,6 +294,8 @@ class _FastSearch:
             mix = self.models[best_t][1]
             g = int(np.argmax(self._gains(mix)))
             self._record(self._em(_merge(_split(mix, np.array([g])), 1, forbid=(g, best_t))))
+        if best_t < self.t_hi:  # an independent basin from scikit-learn's own start: splits can mislead
+            self._record(self._em(self._kmeans(best_t + 1), max_iter=_RESTART_ITERS))
         t, bic = self._best()
         step, margin = int(np.sign(t - best_t)), 0.0  # the first step after a move needs no margin
         while step and bic < best_bic - margin and self.t_lo <= t + step <= self.t_hi:
@@ -312,6 +304,25 @@ class _FastSearch:
             t, bic = self._best()
 
     # -- helpers
+    def _kmeans(self, t: int, iters: int = 10) -> Mixture:
+        """Seeded k-means++ and Lloyd iterations, as a mixture (scikit-learn's default init for EM)."""
+        rng = np.random.default_rng(self.cfg.seed)
+        x = self.x
+        centres = [x[rng.integers(self.n)]]
+        d2 = ((x - centres[0]) ** 2).sum(axis=1)
+        for _ in range(1, t):
+            centres.append(x[rng.choice(self.n, p=d2 / d2.sum())])
+            d2 = np.minimum(d2, ((x - centres[-1]) ** 2).sum(axis=1))
+        C = np.array(centres)
+        for _ in range(iters):
+            lab = np.argmin((C * C).sum(axis=1)[:, None] - 2.0 * C @ x.T, axis=0)
+            cnt = np.bincount(lab, minlength=t)
+            sums = np.stack([np.bincount(lab, weights=x[:, k], minlength=t) for k in range(3)], axis=1)
+            C = np.where(cnt[:, None] > 0, sums / np.maximum(cnt, 1)[:, None], C)
+        R = np.zeros((t, self.n))
+        R[lab, np.arange(self.n)] = 1.0
+        return self._m_step(R)
+
     def _best(self) -> tuple[int, float]:
         t = min(self.models, key=lambda k: self.models[k][0])
         return t, self.models[t][0]
@@ -350,10 +361,10 @@ class _FastSearch:
         keep = nk >= 1.0 if np.count_nonzero(nk >= 1.0) > 0 else np.ones(len(nk), bool)  # drop dead components
         return Mixture(nk[keep] / nk[keep].sum(), mu[keep], cov[keep])
 
-    def _em(self, mix: Mixture, tol: float | None = None) -> tuple[Mixture, float]:
+    def _em(self, mix: Mixture, tol: float | None = None, max_iter: int | None = None) -> tuple[Mixture, float]:
         """EM until the mean log-likelihood changes by < tol; returns the mixture and its log-likelihood."""
         prev, tol = -np.inf, self.cfg.tol if tol is None else tol
-        for _ in range(self.cfg.max_iter):
+        for _ in range(min(self.cfg.max_iter, max_iter or self.cfg.max_iter)):
             R, ll = self._e_step(mix)
             if abs(ll / self.n - prev) < tol:
                 return mix, ll
@@ -407,7 +418,7 @@ class _FastSearch:
             cmu[dead], ccov[dead] = np.tile(mix.means, (2, 1))[dead], np.tile(mix.covariances, (2, 1, 1))[dead]
             pair = nk[:t] + nk[t:]
             cw = np.concatenate([nk[:t] / pair, nk[t:] / pair])
-        return np.bincount(lab_s, weights=ll - parent, minlength=t)
+        return np.bincount(lab_s, weights=ll - parent, minlength=t).astype(np.float64)
 
 
 def _split(mix: Mixture, idx: NDArray[np.int64]) -> Mixture:
@@ -425,7 +436,7 @@ def _split(mix: Mixture, idx: NDArray[np.int64]) -> Mixture:
 
 def _merge(mix: Mixture, count: int, forbid: tuple[int, int] | None = None) -> Mixture:
     """Merge ``count`` disjoint pairs with the smallest Runnalls bound (moment preserving), never ``forbid``."""
-    w, mu, cov = mix.weights, mix.means, mix.covariances
+    w, mu, cov = mix.weights.copy(), mix.means.copy(), mix.covariances.copy()
     t = len(w)
     ld = np.linalg.slogdet(cov)[1]
     ws = w[:, None] + w[None, :]
@@ -440,16 +451,11 @@ def _merge(mix: Mixture, count: int, forbid: tuple[int, int] | None = None) -> M
     if forbid is not None:
         cost[min(forbid), max(forbid)] = np.inf
     used: set[int] = set()
-    pairs: list[tuple[int, int]] = []
-    for flat in np.argsort(cost, axis=None):
+    for flat in np.argsort(cost, axis=None)[: t * (t - 1) // 2]:  # finite costs first
         i, j = divmod(int(flat), t)
-        if len(pairs) == count or not np.isfinite(cost[i, j]):
-            break
-        if i not in used and j not in used:
-            pairs.append((i, j))
+        if len(used) < 2 * count and np.isfinite(cost[i, j]) and i not in used and j not in used:
             used.update((i, j))
-    keep = [k for k in range(t) if k not in {j for _, j in pairs}]
-    w2, mu2, cov2 = w.copy(), mu.copy(), cov.copy()
-    for i, j in pairs:
-        w2[i], mu2[i], cov2[i] = ws[i, j], mm[i, j], C[i, j]
-    return Mixture(w2[keep], mu2[keep], cov2[keep])
+            w[i], mu[i], cov[i] = ws[i, j], mm[i, j], C[i, j]
+            w[j] = -1.0  # marks j as merged away
+    keep = w >= 0
+    return Mixture(w[keep], mu[keep], cov[keep])

@@ -9,10 +9,12 @@ MVEE of the union of the cubes (the hull of centres ⊕ the 8 corner offsets ±r
 degenerate: a single voxel gives the sphere of radius (√3/2)·res, a planar or collinear cluster an
 ellipsoid at least one voxel thick (every semi-axis >= res/2), and every voxel centre is inside.
 
-Speed. Candidate support points are the cube corners that are extreme along 56 fixed directions
-(vertices of the cubes' hull), all clusters run through one batched WA-TY solve capped at
-``mvee_max_iter`` iterations, and then the ellipsoid is scaled so that every corner of every voxel of
-the cluster is inside (exact containment; volume within a few per cent of the minimum).
+Speed. Candidate support points are the cube corners that are extreme along 64 fixed directions
+(vertices of the cubes' hull); all clusters go through one batched solve (``planner.mvee.solve``:
+``mvee_warmup`` multiplicative steps, then at most ``mvee_max_iter`` WA-TY iterations). Corners the
+candidates missed (more than 1 % outside) are added and the affected clusters solved once more from
+their weights. Finally each ellipsoid is scaled so that every corner of every voxel of its cluster is
+inside: containment is exact; the volume is within a few per cent of the minimum (benchmarks/bench_fit.py).
 
 Warm start. The fitter keeps the last chosen mixture and starts the next BIC search from it; voxel sets
 change a little between iterations, so a few EM runs near the previous T suffice (``reset()`` forgets).
@@ -28,7 +30,7 @@ from numpy.typing import ArrayLike, NDArray
 from planner import clustering
 from planner.clustering import Mixture
 from planner.config import ClusterConfig
-from planner.mvee import solve
+from planner.mvee import checked_points, solve
 from planner.types import ClusterFit, Ellipsoid, EllipsoidKind
 
 _ACTIVE_ROUNDS = 1  # re-solves with missed hull vertices added
@@ -37,7 +39,7 @@ _MISS = 1e-2  # a corner this far outside (1 + _MISS) counts as a missed hull ve
 _CORNERS = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])  # voxel units
 
 
-def _directions(k: int = 56) -> NDArray[np.float64]:
+def _directions(k: int = 56) -> NDArray[np.float64]:  # 56 + 8 = 64 directions
     """(k + 8, 3) unit directions: a Fibonacci sphere plus the 8 cube diagonals."""
     i = np.arange(k) + 0.5
     z = 1.0 - 2.0 * i / k
@@ -51,7 +53,12 @@ _DIRS = _directions()
 
 
 class EllipsoidFitter:
-    """Fits ellipsoids to the voxel centres of one kind, warm-starting each BIC search from the last one."""
+    """Fits ellipsoids to the voxel centres of one kind, warm-starting each BIC search from the last one.
+
+    config: the clustering settings; resolution: voxel edge, metres; kind: stamped on every ellipsoid.
+    mvee_tol, mvee_max_iter, mvee_warmup: the MVEE solve (see ``planner.mvee``), tuned for speed.
+    ``last_timings`` holds the seconds of the last fit: {"cluster": ..., "ellipsoids": ...}.
+    """
 
     def __init__(
         self,
@@ -88,7 +95,7 @@ class EllipsoidFitter:
 
     def fit(self, points_world: ArrayLike) -> tuple[tuple[Ellipsoid, ...], ClusterFit]:
         """Ellipsoids of the clusters of ``points_world`` (N, 3) voxel centres, and the model selection."""
-        p = clustering.checked_points("points_world", points_world)
+        p = checked_points("points_world", points_world)
         with clustering.single_thread_blas():
             return self._fit(p)
 
@@ -154,13 +161,12 @@ class EllipsoidFitter:
         res = self.resolution
         for ci, (comp, c) in enumerate(zip(comps, counts, strict=True)):
             lam, V = np.linalg.eigh(0.5 * (A[ci] + A[ci].T))
-            V = V[:, ::-1]
             if np.linalg.det(V) < 0:
                 V[:, 2] = -V[:, 2]
             out.append(
                 Ellipsoid(
                     center=centers[ci] * res,
-                    axes=res / np.sqrt(lam[::-1]),
+                    axes=res / np.sqrt(lam),  # eigh sorts lam ascending: major axis first
                     rotation=V,
                     kind=self.kind,
                     n_points=int(c),

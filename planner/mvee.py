@@ -36,18 +36,15 @@ def mvee(points: ArrayLike, tol: float = 1e-4, max_iter: int = 2000) -> tuple[ND
 
     Returns center (3,) and A (3, 3) symmetric positive definite with (x - c)^T A (x - c) <= 1 for all points.
     """
-    p = _checked("points", points)
+    p = checked_points("points", points)
     if p.shape[0] < _D + 1:
         raise ValueError(f"points: need at least {_D + 1} points, got {p.shape[0]}")
-    span = np.linalg.svd(p - p.mean(axis=0), compute_uv=False)
-    if span[-1] <= 1e-9 * max(span[0], 1e-300):
-        raise ValueError("points: affinely degenerate (all on one plane or line); the MVEE would be flat")
     candidates = p
-    if p.shape[0] > _HULL_ABOVE:
+    if p.shape[0] > _HULL_ABOVE and not _flat(p[None] - p.mean(axis=0))[0]:
         from scipy.spatial import ConvexHull
 
         candidates = p[ConvexHull(p).vertices]
-    centers, A, _ = solve([candidates], tol=tol, max_iter=max_iter)
+    centers, A, _ = solve([candidates], tol=tol, max_iter=max_iter, single=True)
     return centers[0], _scale_to_contain(p - centers[0], A[0])
 
 
@@ -58,7 +55,7 @@ def mvee_batch(
 
     Returns centers (S, 3) and A (S, 3, 3); each set's points satisfy (x - c)^T A (x - c) <= 1.
     """
-    sets = [_checked(f"point_sets[{i}]", s) for i, s in enumerate(point_sets)]
+    sets = [checked_points(f"point_sets[{i}]", s) for i, s in enumerate(point_sets)]
     centers, A, _ = solve(sets, tol=tol, max_iter=max_iter, warmup=warmup)
     return centers, A
 
@@ -69,10 +66,12 @@ def solve(
     tol: float = 1e-4,
     max_iter: int = 2000,
     warmup: int = 0,
+    single: bool = False,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], list[NDArray[np.float64]]]:
     """``mvee_batch`` on checked (N_s, 3) float64 sets, optionally from initial ``weights`` (each (N_s,) >= 0).
 
     Returns centers (S, 3), A (S, 3, 3) scaled to contain each set, and the final weights per set.
+    ``single``: errors name the one set "points" (``mvee``) instead of "point_sets[i]".
     """
     if not np.isfinite(tol) or tol <= 0:
         raise ValueError(f"tol: must be a finite number > 0, got {tol!r}")
@@ -92,6 +91,10 @@ def solve(
         P[i, len(s) :] = s[0] - mean[i]
         u0 = np.full(len(s), 1.0) if weights is None else np.maximum(weights[i], 0.0)
         u[i, : len(s)] = u0 / u0.sum()
+    flat = _flat(P)
+    if flat.any():
+        name = "points" if single else f"point_sets[{int(np.argmax(flat))}]"
+        raise ValueError(f"{name}: affinely degenerate (all on one plane or line); the MVEE would be flat")
     Q = np.concatenate([P, np.ones((S, m, 1))], axis=2)
     u = _wa_ty(Q, _multiplicative(Q, u, warmup), tol, max_iter)
     c = np.matmul(u[:, None, :], P)[:, 0]
@@ -100,6 +103,12 @@ def solve(
     reach = np.einsum("smi,smi->sm", np.matmul(d, A), d).max(axis=1)
     A /= (reach * (1.0 + 1e-12))[:, None, None]
     return c + mean, A, [u[i, : counts[i]] for i in range(S)]
+
+
+def _flat(P: NDArray) -> NDArray[np.bool_]:
+    """(S,) True where the centred sets P (S, m, 3) do not span 3-D (relative singular value < 1e-9)."""
+    sv = np.linalg.svd(P, compute_uv=False)
+    return sv[:, -1] <= 1e-9 * np.maximum(sv[:, 0], 1e-300)
 
 
 def _multiplicative(Q: NDArray, u: NDArray, steps: int) -> NDArray[np.float64]:
@@ -165,7 +174,8 @@ def _scale_to_contain(d: NDArray, A: NDArray) -> NDArray[np.float64]:
     return A / (float(np.einsum("ni,ij,nj->n", d, A, d).max()) * (1.0 + 1e-12))
 
 
-def _checked(name: str, points: ArrayLike) -> NDArray[np.float64]:
+def checked_points(name: str, points: ArrayLike, min_rows: int = 0) -> NDArray[np.float64]:
+    """``points`` as an (N, 3) finite float64 array, else ``ValueError`` naming ``name``."""
     try:
         p = np.asarray(points, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -174,4 +184,6 @@ def _checked(name: str, points: ArrayLike) -> NDArray[np.float64]:
         raise ValueError(f"{name}: expected shape (N, 3), got {p.shape}")
     if not np.all(np.isfinite(p)):
         raise ValueError(f"{name}: {int(np.count_nonzero(~np.isfinite(p)))} non-finite value(s) (NaN or inf)")
+    if p.shape[0] < min_rows:
+        raise ValueError(f"{name}: need at least {min_rows} points, got {p.shape[0]}")
     return p
