@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
+from scipy.spatial import KDTree
 
 from planner import Planner
 from planner.candidates import propose_candidates
@@ -50,6 +50,6 @@ def reachable_coverage(
         todo = np.flatnonzero(~covered)
         if len(todo) == 0:
             break
-        dist, _ = cKDTree(points).query(surface_samples[todo], k=1, distance_upper_bound=radius)
+        dist, _ = KDTree(points).query(surface_samples[todo], k=1, distance_upper_bound=radius)
         covered[todo[np.isfinite(dist)]] = True
     return float(covered.mean())

@@ -225,4 +225,3 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
     }
     (out / "profile.json").write_text(json.dumps(prof, indent=2))
     return prof
-

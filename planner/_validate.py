@@ -26,7 +26,7 @@ def checked_array(
         arr = np.array(value, dtype=dtype, copy=True)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{name}: cannot convert to {np.dtype(dtype).name} array ({exc})") from None
-    if arr.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, arr.shape)):
+    if arr.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, arr.shape, strict=True)):
         want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
         raise ValueError(f"{name}: expected shape {want}, got {arr.shape}")
     if finite and np.issubdtype(arr.dtype, np.floating) and not np.all(np.isfinite(arr)):

@@ -47,7 +47,9 @@ class VoxelConfig:
     """'projective' projects voxel centres into the depth image (fast); 'raycast' is the Amanatides-Woo reference."""
 
     def __post_init__(self) -> None:
-        _require(_finite(self.resolution) and self.resolution > 0, f"voxel.resolution: must be > 0, got {self.resolution!r}")
+        _require(
+            _finite(self.resolution) and self.resolution > 0, f"voxel.resolution: must be > 0, got {self.resolution!r}"
+        )
         _require(_finite(self.gamma) and self.gamma >= 0, f"voxel.gamma: must be >= 0, got {self.gamma!r}")
         _require(
             _finite(self.initial_diagonal_factor) and self.initial_diagonal_factor >= 1,
@@ -58,7 +60,10 @@ class VoxelConfig:
             f"voxel.max_extent: must be > resolution, got {self.max_extent!r}",
         )
         _require(_finite(self.floor_height), f"voxel.floor_height: must be a finite number, got {self.floor_height!r}")
-        _require(self.integration in ("projective", "raycast"), f"voxel.integration: 'projective' or 'raycast', got {self.integration!r}")
+        _require(
+            self.integration in ("projective", "raycast"),
+            f"voxel.integration: 'projective' or 'raycast', got {self.integration!r}",
+        )
 
 
 @dataclass(frozen=True)
@@ -83,8 +88,14 @@ class ClusterConfig:
     """random_state of every fit."""
 
     def __post_init__(self) -> None:
-        _require(isinstance(self.t_min, int) and self.t_min >= 1, f"cluster.t_min: must be an integer >= 1, got {self.t_min!r}")
-        _require(isinstance(self.t_max, int) and self.t_max >= 1, f"cluster.t_max: must be an integer >= 1, got {self.t_max!r}")
+        _require(
+            isinstance(self.t_min, int) and self.t_min >= 1,
+            f"cluster.t_min: must be an integer >= 1, got {self.t_min!r}",
+        )
+        _require(
+            isinstance(self.t_max, int) and self.t_max >= 1,
+            f"cluster.t_max: must be an integer >= 1, got {self.t_max!r}",
+        )
         _require(self.t_min <= self.t_max, f"cluster.t_min ({self.t_min}) must be <= cluster.t_max ({self.t_max})")
         _require(self.search in ("fast", "exhaustive"), f"cluster.search: 'fast' or 'exhaustive', got {self.search!r}")
         _require(self.min_points_per_component >= 1, "cluster.min_points_per_component: must be >= 1")
@@ -109,12 +120,17 @@ class CandidateConfig:
     """Highest parallel's elevation, degrees (90 is the pole, a parallel of length 0)."""
 
     def __post_init__(self) -> None:
-        _require(isinstance(self.count, int) and self.count >= 1, f"candidates.count: must be an integer >= 1, got {self.count!r}")
+        _require(
+            isinstance(self.count, int) and self.count >= 1,
+            f"candidates.count: must be an integer >= 1, got {self.count!r}",
+        )
         _require(
             isinstance(self.parallels, int) and 1 <= self.parallels <= self.count,
             f"candidates.parallels: must be an integer in [1, count], got {self.parallels!r}",
         )
-        _require(_finite(self.working_distance) and self.working_distance > 0, "candidates.working_distance: must be > 0")
+        _require(
+            _finite(self.working_distance) and self.working_distance > 0, "candidates.working_distance: must be > 0"
+        )
         _require(
             _finite(self.min_elevation_deg, self.max_elevation_deg)
             and -90 < self.min_elevation_deg <= self.max_elevation_deg < 90,
@@ -146,7 +162,10 @@ class PartitionConfig:
     """Longitude where sector 0 starts, degrees."""
 
     def __post_init__(self) -> None:
-        _require(isinstance(self.sectors, int) and self.sectors >= 1, f"partitions.sectors: must be an integer >= 1, got {self.sectors!r}")
+        _require(
+            isinstance(self.sectors, int) and self.sectors >= 1,
+            f"partitions.sectors: must be an integer >= 1, got {self.sectors!r}",
+        )
         _require(_finite(self.offset_deg), "partitions.offset_deg: must be finite")
 
 
@@ -162,8 +181,13 @@ class TerminationConfig:
     """Stop when no frontier voxel is left."""
 
     def __post_init__(self) -> None:
-        _require(isinstance(self.max_views, int) and self.max_views >= 1, f"termination.max_views: must be an integer >= 1, got {self.max_views!r}")
-        _require(_finite(self.growth_threshold) and self.growth_threshold >= 0, "termination.growth_threshold: must be >= 0")
+        _require(
+            isinstance(self.max_views, int) and self.max_views >= 1,
+            f"termination.max_views: must be an integer >= 1, got {self.max_views!r}",
+        )
+        _require(
+            _finite(self.growth_threshold) and self.growth_threshold >= 0, "termination.growth_threshold: must be >= 0"
+        )
 
 
 @dataclass(frozen=True)
@@ -186,10 +210,20 @@ class PreprocessConfig:
     """Voxel down-sampling edge length for the accumulated cloud, metres (0 disables)."""
 
     def __post_init__(self) -> None:
-        for name in ("crop_margin", "workspace_radius", "workspace_height", "plate_clearance", "outlier_std", "downsample"):
+        for name in (
+            "crop_margin",
+            "workspace_radius",
+            "workspace_height",
+            "plate_clearance",
+            "outlier_std",
+            "downsample",
+        ):
             v = getattr(self, name)
             _require(_finite(v) and v >= 0, f"preprocess.{name}: must be >= 0, got {v!r}")
-        _require(isinstance(self.outlier_neighbors, int) and self.outlier_neighbors >= 0, "preprocess.outlier_neighbors: must be >= 0")
+        _require(
+            isinstance(self.outlier_neighbors, int) and self.outlier_neighbors >= 0,
+            "preprocess.outlier_neighbors: must be >= 0",
+        )
 
 
 @dataclass(frozen=True)
@@ -276,7 +310,12 @@ def merge(base: C, data: dict[str, Any], prefix: str = "") -> C:
         else:
             if isinstance(current, bool) and not isinstance(value, bool):
                 raise ValueError(f"{prefix}{key}: expected true/false, got {value!r}")
-            if isinstance(current, int) and not isinstance(current, bool) and isinstance(value, float) and value.is_integer():
+            if (
+                isinstance(current, int)
+                and not isinstance(current, bool)
+                and isinstance(value, float)
+                and value.is_integer()
+            ):
                 value = int(value)
             if isinstance(current, float) and isinstance(value, int) and not isinstance(value, bool):
                 value = float(value)

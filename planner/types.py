@@ -90,7 +90,7 @@ class Pose:
                 [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
             ]
         )
-        return Pose(R, position)
+        return Pose(R, checked_array("position", position, (3,)))
 
     @staticmethod
     def look_at(eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> Pose:

@@ -43,7 +43,9 @@ def test_bad_frames_leave_state_unchanged(cell) -> None:
     with pytest.raises(ValueError, match="empty frame"):
         planner.integrate(empty)
     # every return far behind the object: nothing is left after cropping
-    far = DepthFrame(np.where(frame.depth > 0, np.float32(5.0), np.float32(0.0)), frame.T_world_camera, frame.intrinsics)
+    far = DepthFrame(
+        np.where(frame.depth > 0, np.float32(5.0), np.float32(0.0)), frame.T_world_camera, frame.intrinsics
+    )
     with pytest.raises(ValueError, match="no point left"):
         planner.integrate(far)
     assert np.array_equal(planner.voxel_map.classes, classes)

@@ -62,7 +62,11 @@ def at(m: VoxelMap, x: range | int, y: range | int, z: range | int) -> np.ndarra
 
 
 def wall_map(integration: str = "projective", **kw: float) -> tuple[VoxelMap, DepthFrame]:
-    m = VoxelMap(VoxelConfig(resolution=0.01, gamma=kw.pop("gamma", 0.0), integration=integration, floor=kw.pop("floor", False), **kw))  # type: ignore[arg-type]
+    m = VoxelMap(
+        VoxelConfig(
+            resolution=0.01, gamma=kw.pop("gamma", 0.0), integration=integration, floor=kw.pop("floor", False), **kw
+        )
+    )  # type: ignore[arg-type]
     frame = render(T_FRONT, K_SMALL, (BOX, WALL))
     m.integrate(frame, frame.points_world)
     return m, frame
