@@ -1,9 +1,8 @@
 """Cleaning a frame's points before registration and integration (numpy/scipy only).
 
 :func:`preprocess` crops to the bounding box B (or, before B exists, to the
-workspace cylinder above the plate), removes the plate, and drops statistical
-outliers. It does not down-sample: :func:`voxel_downsample` is for the
-accumulated cloud.
+workspace cylinder above the plate), removes the plate, down-samples and drops
+statistical outliers. :func:`voxel_downsample` also keeps the accumulated cloud thin.
 """
 
 from __future__ import annotations
@@ -24,9 +23,11 @@ def preprocess(points_world: ArrayLike, bbox: BoundingBox | None, config: Prepro
     bbox: B; points farther than ``config.crop_margin`` outside it are dropped.
     None (first frame): keep points within ``workspace_radius`` of the turntable
     axis and below ``workspace_height``.
-    Points below ``plate_clearance`` (the plate) are always dropped, then
-    statistical outliers (``outlier_neighbors``, ``outlier_std``).
-    Returns (M, 3) float64, M <= N, in input order.
+    Points below ``plate_clearance`` (the plate) are always dropped. What is left is
+    down-sampled to ``config.downsample`` voxels (centroids) *before* the statistical
+    outlier removal (``outlier_neighbors``, ``outlier_std``): the same cloud the
+    accumulated one would keep, at a fraction of the neighbour-search cost.
+    Returns (M, 3) float64, M <= N.
     """
     p = checked_array("points_world", points_world, (None, 3))
     if bbox is not None:
@@ -36,6 +37,8 @@ def preprocess(points_world: ArrayLike, bbox: BoundingBox | None, config: Prepro
         keep = (r2 <= config.workspace_radius**2) & (p[:, 2] <= config.workspace_height)
     keep &= p[:, 2] >= config.plate_clearance
     p = p[keep]
+    if config.downsample > 0:
+        p = voxel_downsample(p, config.downsample)
     if config.outlier_neighbors > 0:
         p = remove_statistical_outliers(p, config.outlier_neighbors, config.outlier_std)
     return np.array(p, dtype=np.float64)

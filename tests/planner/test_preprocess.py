@@ -9,7 +9,7 @@ from planner.config import PreprocessConfig
 from planner.preprocess import preprocess, remove_statistical_outliers, voxel_downsample
 from planner.types import BoundingBox
 
-NO_OUTLIERS = PreprocessConfig(outlier_neighbors=0)
+NO_OUTLIERS = PreprocessConfig(outlier_neighbors=0, downsample=0.0)
 
 
 def _grid(lo: float, hi: float, n: int, z: float = 0.05) -> np.ndarray:
@@ -36,7 +36,9 @@ def test_crop_to_bbox_with_margin() -> None:
 
 
 def test_workspace_cylinder_before_b_exists() -> None:
-    cfg = PreprocessConfig(outlier_neighbors=0, workspace_radius=0.3, workspace_height=0.6, plate_clearance=0.002)
+    cfg = PreprocessConfig(
+        outlier_neighbors=0, workspace_radius=0.3, workspace_height=0.6, plate_clearance=0.002, downsample=0.0
+    )
     pts = np.array(
         [
             [0.2, 0.2, 0.1],  # radius 0.283: kept
@@ -55,7 +57,7 @@ def test_statistical_outliers_are_removed_and_the_surface_is_kept() -> None:
     surface = _grid(-0.05, 0.05, 41)  # 2.5 mm grid
     stray = np.array([[0.0, 0.0, 0.2], [0.1, 0.1, 0.12], [-0.08, 0.02, 0.3]])
     pts = np.concatenate([surface, stray])
-    out = preprocess(pts, None, PreprocessConfig(outlier_neighbors=8, outlier_std=2.5))
+    out = preprocess(pts, None, PreprocessConfig(outlier_neighbors=8, outlier_std=2.5, downsample=0.0))
     assert len(out) == len(surface)
     np.testing.assert_array_equal(out, surface)
     # disabled: the strays stay
@@ -76,10 +78,14 @@ def test_remove_statistical_outliers_threshold() -> None:
         remove_statistical_outliers(pts, k=0, std=1.0)
 
 
-def test_preprocess_does_not_downsample() -> None:
+def test_preprocess_downsamples_before_outlier_removal() -> None:
     pts = _grid(-0.01, 0.01, 50)  # 0.4 mm spacing, far denser than PreprocessConfig.downsample
     cfg = PreprocessConfig(outlier_neighbors=0, downsample=0.0025)
-    assert len(preprocess(pts, None, cfg)) == len(pts)
+    out = preprocess(pts, None, cfg)
+    # the 20 mm square spans lattice cells -4..4 of 2.5 mm per axis: 9 x 9 centroids
+    assert len(out) == 81
+    assert np.allclose(np.sort(np.unique(np.round(out[:, 0], 6)))[[0, -1]], [-0.00877551, 0.01], atol=1e-6)
+    assert np.array_equal(out, voxel_downsample(pts, 0.0025))
 
 
 @pytest.mark.parametrize(
