@@ -115,7 +115,7 @@ class Planner:
         timings["register"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
-        self.voxel_map.integrate(frame, points)  # atomic: raises before changing anything
+        self.voxel_map.integrate(self._plate_as_free_space(frame), points)  # atomic: raises before changing anything
         timings["integrate"] = time.perf_counter() - t0
 
         merged = np.concatenate([self.cloud, points]) if len(self.cloud) else points
@@ -137,6 +137,24 @@ class Planner:
             T_world_camera=frame.T_world_camera,
             timings=timings,
         )
+
+    def _plate_as_free_space(self, frame: DepthFrame) -> DepthFrame:
+        """The frame as the voxel map should carve it: pixels that hit the plate count as "no return".
+
+        The plate is known geometry, not object: a ray that ends on it crossed free space all the way
+        down, and everything under the plate is below B's floor. Without this, the voxels where such
+        rays end (the layer resting on the plate) become UNKNOWN, and those next to the object's base
+        stay FRONTIER for ever: no view can ever clear them, and the planner keeps looking at them.
+        """
+        if not self.config.voxel.floor:
+            return frame
+        v, u = np.nonzero(frame.depth > 0)  # the order of frame.points_world
+        on_plate = frame.points_world[:, 2] < self.config.voxel.floor_height + self.config.preprocess.plate_clearance
+        if not np.any(on_plate):
+            return frame
+        depth = frame.depth.copy()
+        depth[v[on_plate], u[on_plate]] = 0.0
+        return DepthFrame(depth, frame.T_world_camera, frame.intrinsics)
 
     # ------------------------------------------------------------------ plan
 

@@ -9,7 +9,7 @@ from devices.builtins import make_builtin
 from devices.config import CameraConfig, CellConfig
 from devices.sim import make_sim_cell
 from planner import Planner, PlannerConfig, VoxelClass
-from planner.types import DepthFrame
+from planner.types import DepthFrame, Pose
 
 SMALL = PlannerConfig().replace(
     voxel={"resolution": 0.02},
@@ -88,3 +88,35 @@ def test_growth_threshold_stops_the_scan(cell) -> None:
     assert planner.terminated is None
     planner.integrate(frame)  # the same view again: no growth
     assert planner.terminated == "growth"
+
+
+def test_rays_ending_on_the_plate_carve_free_space(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Departure (docs/method.md): plate hits count as free space, so far less frontier is left on the plate."""
+    mug_cell = make_sim_cell(make_builtin("mug"), CameraConfig(), CellConfig(), seed=0)
+    frames = []
+    for azimuth in (np.pi, np.pi / 2, 0.0, 1.5 * np.pi):  # four views round the mug, 20 degrees up
+        eye = np.array([0.0, 0.0, 0.08]) + 0.5 * np.array(
+            [np.cos(0.35) * np.cos(azimuth), np.cos(0.35) * np.sin(azimuth), np.sin(0.35)]
+        )
+        mug_cell.move_to(Pose.look_at(eye, [0.0, 0.0, 0.08]))
+        frames.append(mug_cell.capture())
+    cfg = PlannerConfig().replace(registration={"enabled": False})
+
+    planner = Planner(cfg)
+    carved = planner._plate_as_free_space(frames[0])
+    on_plate = frames[0].points_world[:, 2] < 0.002
+    assert on_plate.sum() > 1000  # the camera sees plenty of plate round the mug
+    assert np.count_nonzero(carved.depth) == np.count_nonzero(frames[0].depth) - on_plate.sum()
+    kept = carved.depth > 0
+    assert np.array_equal(carved.depth[kept], frames[0].depth[kept])
+
+    def bottom_frontier(p: Planner) -> int:
+        for frame in frames:
+            p.integrate(frame)
+        return int(np.count_nonzero(p.voxel_map.centers(VoxelClass.FRONTIER)[:, 2] < 0.01))
+
+    ours = bottom_frontier(planner)
+    monkeypatch.setattr(Planner, "_plate_as_free_space", lambda self, f: f)
+    literal = bottom_frontier(Planner(cfg))
+    assert literal >= 20  # plate hits taken literally: a ring of frontier on the plate that no view clears
+    assert ours <= literal // 4
