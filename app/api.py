@@ -1,9 +1,11 @@
 """The REST API (the paths are a contract of issue 4; OpenAPI at /docs). Thin routes: each calls the Workbench.
 
 Heavy routes are plain ``def`` (FastAPI runs them in its thread pool). Errors are
-``{"detail": ...}`` with 404 (unknown session / candidate / model), 409 (wrong
-state, stale or used plan_id), 413 (upload too large), 422 (bad parameters,
-unreachable pose) and 503 (a device fault; the session is then in state error).
+``{"detail": ...}`` with 400 (bad Host), 401 (token), 403 (cross-origin), 404
+(unknown session / candidate / model / recording), 409 (wrong state, stale or used
+plan_id, an interrupted session not resumed yet), 413 (body too large), 422 (bad
+parameters, unreachable pose or one inside the object, bad frames from a recording)
+and 503 (a device fault or timeout; the session is then in state error, the map unchanged).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from app.errors import ConflictError, NotFoundError, TooLargeError, Unprocessabl
 from app.models import list_models, save_upload
 from app.scene import SceneController
 from app.schemas import (
+    ERROR_RESPONSES,
     ApproveRequest,
     AutoRequest,
     CameraRequest,
@@ -24,9 +27,11 @@ from app.schemas import (
     CandidateOut,
     CustomPoseOut,
     CustomPoseRequest,
+    FaultRequest,
     FocusRequest,
     ModelOut,
     PlanOut,
+    ResumeOut,
     SelectRequest,
     SessionCreate,
     SessionCreated,
@@ -39,7 +44,7 @@ from app.sessions import SessionRegistry
 from app.settings import AppSettings
 from app.workbench import Workbench, custom_json, plan_summary
 
-router = APIRouter(prefix="/api")
+router = APIRouter(prefix="/api", responses=ERROR_RESPONSES)
 
 
 def registry_of(request: Request) -> SessionRegistry:
@@ -72,15 +77,28 @@ def health() -> dict[str, str]:
 
 @router.get("/viewer", response_model=ViewerOut)
 def viewer(request: Request) -> dict[str, Any]:
-    """Where the browser finds the viser client: the host the page was loaded from, viser's actual port."""
+    """Where the browser finds the viser client: the host the page was loaded from, viser's actual port.
+
+    With a token the URL carries it too (``?token=``), but viser itself checks nothing: on an exposed
+    server it listens on 127.0.0.1 only (unless ``viser_public``), see docs/security.md.
+    """
+    from app.main import viewer_host
+    from app.settings import is_loopback
+
+    settings: AppSettings = request.app.state.settings
     server = request.app.state.viser
     if server is None:
         raise ConflictError("the 3D viewer is disabled on this server")
     port = int(server.get_port())
     host = request.url.hostname or "127.0.0.1"
+    note = None
+    if is_loopback(viewer_host(settings)) and not is_loopback(host):
+        host = "127.0.0.1"
+        note = "the 3D viewer has no authentication, so it listens on 127.0.0.1 only: reach it through an SSH tunnel"
     if ":" in host:
         host = f"[{host}]"
-    return {"url": f"{request.url.scheme}://{host}:{port}/", "port": port}
+    query = f"?token={settings.token}" if settings.token else ""
+    return {"url": f"{request.url.scheme}://{host}:{port}/{query}", "port": port, "note": note}
 
 
 @router.get("/models", response_model=list[ModelOut])
@@ -103,22 +121,68 @@ def upload_model(request: Request, file: UploadFile) -> dict[str, Any]:
 # ---------------------------------------------------------------------- sessions
 
 
+@router.get("/recordings", response_model=list[str])
+def recordings(request: Request) -> list[str]:
+    """Recording folders (PLY + pose JSON per view) in ``data_dir/recordings``, usable as a replay source."""
+    from app.session_factory import list_recordings
+
+    return list_recordings(request.app.state.settings)
+
+
 @router.post("/sessions", status_code=201, response_model=SessionCreated)
 def create_session(registry: Registry, body: Annotated[SessionCreate | None, Body()] = None) -> dict[str, str]:
-    """A new session (every field optional: the server's default model and planner config)."""
+    """A new session (every field optional: the server's default model, planner config, simulated cell)."""
     body = body or SessionCreate()
-    wb = registry.create(body.model, body.config, body.seed)
+    source = None if body.source is None else body.source.model_dump(exclude_none=True)
+    wb = registry.create(body.model, body.config, body.seed, source=source, faults=body.faults)
     return {"id": wb.id}
 
 
 @router.get("/sessions", response_model=list[SessionOut])
 def list_sessions(registry: Registry) -> list[dict[str, Any]]:
-    return [wb.status() for wb in registry.list()]
+    """Live sessions, and journaled ones of an earlier server process (state ``interrupted``)."""
+    return registry.list_status()
 
 
 @router.get("/sessions/{session_id}", response_model=SessionOut)
-def get_session(wb: Session) -> dict[str, Any]:
+def get_session(session_id: str, registry: Registry) -> dict[str, Any]:
+    return registry.status(session_id)
+
+
+@router.post("/sessions/{session_id}/resume", response_model=ResumeOut)
+def resume(session_id: str, registry: Registry) -> dict[str, Any]:
+    """Rebuild an interrupted session from its journal: the same map and the same pending plan."""
+    wb, rebuilt = registry.resume(session_id)
+    return {
+        "session": wb.status(),
+        "verified": not rebuilt.mismatches,
+        "mismatches": rebuilt.mismatches,
+        "interrupted": rebuilt.interrupted,
+    }
+
+
+@router.post("/sessions/{session_id}/retry", response_model=SessionOut)
+def retry(wb: Session) -> dict[str, Any]:
+    """In state error: re-do the failed step (the same move and capture)."""
+    wb.retry()
     return wb.status()
+
+
+@router.patch("/sessions/{session_id}/config")
+def change_config(wb: Session, body: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """Change ``termination``, ``candidates`` or ``partitions`` of a running session (journaled)."""
+    return wb.change_config(body)
+
+
+@router.post("/sessions/{session_id}/faults", status_code=202)
+def inject_fault(request: Request, wb: Session, body: FaultRequest) -> dict[str, Any]:
+    """Test-only (``fault_api``): the next action of the fault's device fails with ``kind``."""
+    if not request.app.state.settings.fault_api:
+        raise NotFoundError("fault injection is disabled on this server (fault_api)")
+    if wb.injector is None:
+        raise ConflictError(f"session {wb.id}: its devices do not inject faults")
+    wb.injector.inject(body.kind)
+    return {"queued": body.kind}
 
 
 @router.delete("/sessions/{session_id}", status_code=204)

@@ -37,6 +37,12 @@ class TooLargeError(WorkbenchError):
     status = 413
 
 
+class StorageError(WorkbenchError):
+    """The data directory cannot be written (the session could not be journaled) (503)."""
+
+    status = 503
+
+
 class DeviceFaultError(WorkbenchError):
     """A device failed while moving or capturing; the session is now in its error state (503)."""
 

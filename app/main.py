@@ -4,7 +4,11 @@
 (uvicorn, or ``with TestClient(create_app(settings)) as client``). The lifespan
 starts one viser server on ``settings.viser_port`` (viser moves to the next free
 port when it is taken; ``GET /api/viewer`` reports the real one), wires the scene
-to the session registry, and on shutdown stops auto modes and viser.
+to the session registry (which lists the journaled sessions of earlier runs), and
+on shutdown stops auto modes and viser.
+
+``create_app`` refuses (ValueError) a non-loopback host without a token. Every
+request passes app/security.py first; CORS is installed only when configured.
 """
 
 from __future__ import annotations
@@ -13,6 +17,7 @@ import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
+from typing import Any
 
 from fastapi import FastAPI, Request
 from fastapi.encoders import jsonable_encoder
@@ -21,11 +26,13 @@ from fastapi.responses import FileResponse, JSONResponse
 from fastapi.staticfiles import StaticFiles
 
 from app.api import router
+from app.docs_ui import install_docs
 from app.errors import WorkbenchError
 from app.scene import SceneController
+from app.security import SecurityMiddleware, openapi_security
 from app.serialize import SafeJSONResponse
 from app.sessions import SessionRegistry
-from app.settings import AppSettings
+from app.settings import AppSettings, check_exposure, is_loopback
 from app.workbench import Workbench
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
@@ -47,9 +54,18 @@ def _wire_scene(registry: SessionRegistry, scene: SceneController) -> None:
     registry.on_delete.append(deleted)
 
 
+def viewer_host(settings: AppSettings) -> str:
+    """Where viser listens: ``viser_host``, but 127.0.0.1 when the API is exposed (viser has no authentication)
+    unless ``viser_public`` says otherwise."""
+    if is_loopback(settings.host) or settings.viser_public:
+        return settings.viser_host
+    return "127.0.0.1"
+
+
 def create_app(settings: AppSettings | None = None) -> FastAPI:
     """The workbench app for ``settings`` (defaults: 127.0.0.1:8000, viser on 8080, model l-block)."""
     settings = settings or AppSettings()
+    check_exposure(settings)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -60,7 +76,7 @@ def create_app(settings: AppSettings | None = None) -> FastAPI:
             import viser
 
             server = viser.ViserServer(
-                host=settings.viser_host, port=settings.viser_port, verbose=settings.viser_verbose
+                host=viewer_host(settings), port=settings.viser_port, verbose=settings.viser_verbose
             )
             scene = SceneController(server)
             _wire_scene(registry, scene)
@@ -81,6 +97,8 @@ def create_app(settings: AppSettings | None = None) -> FastAPI:
         description="Supervised next-best-view scanning: plan, inspect, override, approve.",
         lifespan=lifespan,
         default_response_class=SafeJSONResponse,
+        docs_url=None,
+        redoc_url=None,
     )
     app.state.settings = settings
     app.state.registry = None
@@ -98,6 +116,26 @@ def create_app(settings: AppSettings | None = None) -> FastAPI:
 
     app.include_router(router)
     app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
+    install_docs(app)
+    app.add_middleware(SecurityMiddleware, settings=settings)
+    if settings.cors_origins:
+        from fastapi.middleware.cors import CORSMiddleware
+
+        app.add_middleware(  # outermost: answers preflights, adds headers to every answer (also 401/403)
+            CORSMiddleware,
+            allow_origins=list(settings.cors_origins),
+            allow_methods=["GET", "POST", "PUT", "PATCH", "DELETE"],
+            allow_headers=["Authorization", "Content-Type"],
+        )
+    if settings.token:
+        default_openapi = app.openapi
+
+        def openapi() -> dict[str, Any]:
+            if app.openapi_schema is None:
+                app.openapi_schema = openapi_security(default_openapi())
+            return app.openapi_schema
+
+        app.openapi = openapi  # type: ignore[method-assign]
 
     @app.get("/", include_in_schema=False)
     def index() -> FileResponse:

@@ -43,11 +43,18 @@ def _suffixes() -> tuple[str, ...]:
 
 
 def _files(directory: Path) -> list[Path]:
+    """Mesh files directly in ``directory``; a symlink counts only when it resolves inside ``directory``."""
     if not directory.is_dir():
         return []
     suffixes = _suffixes()
+    root = directory.resolve()
     return sorted(
-        p for p in directory.iterdir() if p.is_file() and not p.name.startswith(".") and p.suffix.lower() in suffixes
+        p
+        for p in directory.iterdir()
+        if p.is_file()
+        and not p.name.startswith(".")
+        and p.suffix.lower() in suffixes
+        and p.resolve().is_relative_to(root)
     )
 
 

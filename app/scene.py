@@ -336,6 +336,8 @@ class SceneController:
             position=(0.0, 0.0, -0.0051), cast_shadow=False, receive_shadow=False, visible=self._visible("turntable"),
         ))  # fmt: skip
         mesh = data.mesh
+        if len(mesh.faces) == 0:  # a replay session: no ground truth to show
+            return
         self._put("/context/mesh", scene.add_mesh_simple(
             "/context/mesh", np.asarray(mesh.vertices, dtype=np.float32), np.asarray(mesh.faces, dtype=np.uint32),
             color=COLORS["mesh"], opacity=0.6, cast_shadow=False, receive_shadow=False, visible=self._visible("mesh"),

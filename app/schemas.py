@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
 
@@ -37,10 +37,62 @@ class PoseModel(BaseModel):
         return Pose.from_wxyz(self.wxyz, self.position)
 
 
+class ErrorOut(BaseModel):
+    """Every error answer: 4xx / 5xx with one field."""
+
+    detail: str | list[dict[str, Any]] = Field(
+        description="why the request was refused: one sentence, or (422 of a malformed request) pydantic's field errors"
+    )
+
+
+ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
+    400: {"model": ErrorOut, "description": "a malformed body, a bad Content-Length, or a Host this server refuses"},
+    401: {"model": ErrorOut, "description": "missing or wrong token (servers started with a token)"},
+    403: {"model": ErrorOut, "description": "a state-changing request from another origin"},
+    404: {"model": ErrorOut, "description": "unknown session, candidate, model or recording"},
+    409: {"model": ErrorOut, "description": "wrong state, a stale or used plan_id, an interrupted session"},
+    413: {"model": ErrorOut, "description": "request body over the size limit"},
+    422: {"model": ErrorOut, "description": "bad parameters, an unreachable pose or one inside the object"},
+    503: {
+        "model": ErrorOut,
+        "description": "a device fault or timeout (the session is in state error, map unchanged), or the data "
+        "directory cannot be written",
+    },
+}
+
+
+class SourceIn(BaseModel):
+    """Where the session's frames come from: the simulated cell, or a replay of recorded / journaled frames."""
+
+    model_config = ConfigDict(extra="forbid")
+    kind: Literal["sim", "replay"] = "sim"
+    recording: str | None = Field(
+        default=None, max_length=64, description="replay: a name from GET /api/recordings (data_dir/recordings)"
+    )
+    session: str | None = Field(default=None, pattern=r"^[0-9a-f]{8}$", description="replay: a journaled session id")
+    mode: Literal["sequence", "nearest"] = Field(
+        default="sequence", description="replay: frames in order, or the frame nearest the approved pose"
+    )
+
+    @model_validator(mode="after")
+    def _one_origin(self) -> SourceIn:
+        if self.kind == "replay" and (self.recording is None) == (self.session is None):
+            raise ValueError("a replay source needs exactly one of 'recording' or 'session'")
+        if self.kind == "sim" and (self.recording is not None or self.session is not None):
+            raise ValueError("a sim source takes no 'recording' or 'session'")
+        return self
+
+
 class SessionCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
     model: str | None = Field(
         default=None, max_length=200, description="a name from GET /api/models (default: the server's)"
+    )
+    source: SourceIn | None = Field(default=None, description="default: the simulated cell")
+    faults: dict[str, Any] | None = Field(
+        default=None,
+        description='fault injection into the devices, e.g. {"schedule": [{"kind": "capture_failure", "at": 3}]} '
+        "(default: the server's [faults])",
     )
     config: dict[str, Any] = Field(
         default_factory=dict,
@@ -78,14 +130,17 @@ class CustomPoseOut(BaseModel):
 class SessionOut(BaseModel):
     id: str
     model: str
-    state: str
+    source: str = Field(description="sim, replay, or journal (an interrupted session not yet resumed)")
+    state: str = Field(description="new, capturing, ready, planning, planned, moving, auto, done, error, interrupted")
     iteration: int
     coverage: float | None
     points: int
+    voxels: dict[str, int] = Field(description="voxel counts by class: occupied, frontier, unknown, empty")
     pending_plan: PlanOut | None
     selected: int | None
     custom_pose: CustomPoseOut | None
     error: str | None
+    retry: str | None = Field(description="in state error: the failed step POST .../retry re-does")
     terminated: str | None
     auto_remaining: int
     moves: int
@@ -199,3 +254,16 @@ class ModelOut(BaseModel):
 class ViewerOut(BaseModel):
     url: str
     port: int
+    note: str | None = None
+
+
+class ResumeOut(BaseModel):
+    session: SessionOut
+    verified: bool = Field(description="every replayed step matched the journal (points, voxels, plans)")
+    mismatches: list[str]
+    interrupted: str | None = Field(description="plan_id of a decision whose capture never happened; pending again")
+
+
+class FaultRequest(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    kind: Literal["camera_timeout", "capture_failure", "nan_frame", "empty_frame", "arm_halfway", "turntable_error"]

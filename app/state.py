@@ -23,6 +23,8 @@ class State(StrEnum):
     AUTO = "auto"
     DONE = "done"
     ERROR = "error"
+    INTERRUPTED = "interrupted"
+    """Journaled by an earlier server process that stopped; POST .../resume rebuilds it (never a live state)."""
 
 
 BUSY = frozenset({State.CAPTURING, State.PLANNING, State.MOVING, State.AUTO})
@@ -45,6 +47,20 @@ class PendingPlan:
     plan_id: str
     plan: PlanResult
     created: float
+
+
+@dataclass(frozen=True, eq=False)
+class FailedStep:
+    """The step a fault interrupted, which ``retry`` re-does: move to ``pose``, capture, integrate.
+
+    action: "initial" (the first capture), "approve", "override", "step" or "auto".
+    entry: the plan whose decision this was (restored as pending by the fault), None for the first capture.
+    """
+
+    action: str
+    pose: Pose
+    decision: dict[str, Any]
+    entry: PendingPlan | None
 
 
 @dataclass(frozen=True, eq=False)

@@ -5,11 +5,14 @@ States (``Workbench.state``)::
     new ──capture──► capturing ──► ready ──plan──► planning ──► planned ──approve──► moving ──► ready
                                      ▲               (plan again: the old plan_id goes stale)       │
                                      └────────────────────────────────────────────────────────────┘
-    ready / planned ──step / auto──► auto ──► ready | planned | done       any busy state ──fault──► error
+    ready / planned ──step / auto──► auto ──► ready | planned | done
+    any busy state ──fault──► error ──retry / approve the restored plan / plan──► ...
 
 ``done`` means the planner's termination rule fired; a person may still plan
-and approve more views from there. ``error`` keeps the map and the last plan;
-planning (or the first capture) again leaves it.
+and approve more views from there. ``error`` keeps the map (a failed step never
+reaches ``Planner.integrate``) and restores the plan whose approval failed as
+pending, so approving it again, ``retry`` (re-do the failed step exactly) or a
+new plan all leave it.
 
 Locking: ``_lock`` (an RLock) guards every field and is held only briefly. A
 long action (capture, plan, move) first claims the session under the lock by
@@ -17,76 +20,32 @@ switching to a *busy* state, then runs outside the lock, then publishes its
 result under the lock. A second action meanwhile sees the busy state and gets
 409, so two approvals of one plan_id move the robot exactly once, and status
 reads never wait for the robot. Listeners (the 3D scene) are called outside the
-lock.
+lock. Every change is journaled (app/journal.py) as it happens.
 """
 
 from __future__ import annotations
 
 import contextlib
-import secrets
 import threading
-import time
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-import trimesh
-from numpy.typing import NDArray
 
-from app.errors import ConflictError, DeviceFaultError, NotFoundError, UnprocessableError
-from app.records import SessionLog
+from app.errors import ConflictError, NotFoundError, UnprocessableError
+from app.rebuild import Rebuilt
+from app.session_core import SessionCore
 from app.state import BUSY, CAN_PLAN, CustomPose, PendingPlan, SceneData, State, custom_json, plan_summary
-from devices.cell import Cell
-from devices.config import DeviceConfig
-from devices.protocols import DeviceError, UnreachableError
-from planner import Planner, PlannerConfig, Pose
+from devices.protocols import UnreachableError
+from planner import Pose
 
 __all__ = ["BUSY", "CustomPose", "PendingPlan", "SceneData", "State", "Workbench", "custom_json", "plan_summary"]
 
+MUTABLE_SECTIONS = ("termination", "candidates", "partitions")
+"""Config sections a running session may change (the planner reads them on every plan); the rest are fixed."""
 
-Listener = Callable[["Workbench", str], None]
 
-
-class Workbench:
+class Workbench(SessionCore):
     """A supervised scan of one object. Every state change of a session goes through here."""
-
-    def __init__(
-        self,
-        session_id: str,
-        model: str,
-        mesh: trimesh.Trimesh,
-        cell: Cell,
-        config: PlannerConfig,
-        devices: DeviceConfig,
-        seed: int = 0,
-        surface_samples: NDArray[np.float64] | None = None,
-    ) -> None:
-        self.id = session_id
-        self.model = model
-        self.mesh = mesh
-        self.cell = cell
-        self.config = config
-        self.devices = devices
-        self.seed = seed
-        self.planner = Planner(config)
-        self.surface_samples = surface_samples
-        self.log = SessionLog(session_id, model, config.to_dict(), seed)
-        self.listeners: list[Listener] = []
-        self._lock = threading.RLock()
-        self._state = State.NEW
-        self._error: str | None = None
-        self._pending: PendingPlan | None = None
-        self._last: PendingPlan | None = None
-        self._used: set[str] = set()
-        self._stale: set[str] = set()
-        self._selected: int | None = None
-        self._custom: CustomPose | None = None
-        self._stop = threading.Event()
-        self._auto_thread: threading.Thread | None = None
-        self._auto_remaining = 0
-        self._terminated: str | None = None  # planner facts cached under the lock, so status never reads
-        self._points = 0  # the planner while another thread integrates into it
-        self.moves = 0
 
     # ------------------------------------------------------------------ reading
 
@@ -103,17 +62,21 @@ class Workbench:
         with self._lock:
             pending = self._pending
             last = self.log.iterations[-1] if self.log.iterations else None
+            failed = self._failed
             return {
                 "id": self.id,
                 "model": self.model,
+                "source": self.source.get("kind", "sim"),
                 "state": str(self._state),
-                "iteration": self.planner.iteration,
+                "iteration": self._iteration,
                 "coverage": None if last is None else last["coverage"],
                 "points": self._points,
+                "voxels": dict(self._voxels),
                 "pending_plan": None if pending is None else plan_summary(pending),
                 "selected": self._selected,
                 "custom_pose": None if self._custom is None else custom_json(self._custom),
-                "error": self._error,
+                "error": self._error or self._journal_error,
+                "retry": None if failed is None or self._state != State.ERROR else failed.action,
                 "terminated": self._terminated,
                 "auto_remaining": self._auto_remaining if self._state == State.AUTO else 0,
                 "moves": self.moves,
@@ -156,41 +119,7 @@ class Workbench:
                 aspect=k.width / k.height,
             )
 
-    # ------------------------------------------------------------------ transitions
-
-    def _claim(self, allowed: frozenset[State], busy: State, action: str) -> State:
-        """Switch to ``busy`` if the state allows ``action``; return the state before. Caller holds the lock."""
-        if self._state not in allowed:
-            if self._state in BUSY:
-                raise ConflictError(f"session {self.id} is busy ({self._state}); {action} refused")
-            raise ConflictError(f"session {self.id}: cannot {action} in state {self._state}")
-        before = self._state
-        self._state = busy
-        return before
-
-    def _settle(self) -> State:
-        """The resting state after an action. Caller holds the lock."""
-        if self._pending is not None:
-            return State.PLANNED
-        return State.DONE if self._terminated is not None else State.READY
-
-    def _notify(self, event: str) -> None:
-        for listener in list(self.listeners):
-            try:
-                listener(self, event)
-            except Exception:  # a broken listener must not break the session
-                import logging
-
-                logging.getLogger(__name__).exception("listener failed on %s", event)
-
-    def _fail(self, message: str) -> None:
-        with self._lock:
-            self._state = State.ERROR
-            self._error = message
-            self.log.event("error", message=message)
-        self._notify("state")
-
-    # ------------------------------------------------------------------ capture
+    # ------------------------------------------------------------------ capture and retry
 
     def capture(self) -> dict[str, Any]:
         """Capture and integrate the first view at the cell's initial pose."""
@@ -200,47 +129,25 @@ class Workbench:
             self._claim(frozenset({State.NEW, State.ERROR}), State.CAPTURING, "capture")
             self._error = None
         self._notify("state")
-        record = self._take_view(self.cell.initial_pose(), {"kind": "initial"})
-        return record
+        return self._take_view(self.cell.initial_pose(), {"kind": "initial"}, None)
 
-    def _take_view(self, pose: Pose, decision: dict[str, Any]) -> dict[str, Any]:
-        """Move, capture, integrate (caller has claimed a busy state). Raises DeviceFaultError / UnprocessableError."""
-        try:
-            self.cell.move_to(pose)
-            with self._lock:
-                self.moves += 1
-            frame = self.cell.capture()
-            report = self.planner.integrate(frame)
-            cov = self._coverage()
-        except UnreachableError as exc:
-            self._fail(str(exc))
-            raise UnprocessableError(str(exc)) from None
-        except DeviceError as exc:
-            self._fail(f"device fault: {exc}")
-            raise DeviceFaultError(f"session {self.id}: device fault: {exc} (session is now in state error)") from None
-        except ValueError as exc:
-            self._fail(f"frame rejected: {exc}")
-            raise DeviceFaultError(
-                f"session {self.id}: frame rejected: {exc} (session is now in state error)"
-            ) from None
-        except Exception as exc:  # a bug, not the robot: still never leave the session stuck in a busy state
-            self._fail(f"internal error: {type(exc).__name__}: {exc}")
-            raise
+    def retry(self) -> dict[str, Any]:
+        """Re-do the step a fault interrupted (the same pose, the same decision). 409 when there is none."""
         with self._lock:
-            record = self.log.iteration(report, cov, decision)
-            self._terminated = self.planner.terminated
-            self._points = report.n_points_total
-            self._selected = None
-            self._custom = None
-            if self._state != State.AUTO:
-                self._state = self._settle()
-        self._notify("captured")
-        return record
-
-    def _coverage(self) -> float | None:
-        from nbv.metrics import coverage
-
-        return None if self.surface_samples is None else float(coverage(self.surface_samples, self.planner.cloud))
+            step = self._failed
+            if self._state != State.ERROR or step is None:
+                raise ConflictError(f"session {self.id}: nothing to retry (state {self._state})")
+            if step.entry is not None:
+                if self._pending is not step.entry:
+                    raise ConflictError(f"session {self.id}: the plan changed since the fault; approve the new plan")
+                self._used.add(step.entry.plan_id)
+                self._pending = None
+            self._claim(frozenset({State.ERROR}), State.CAPTURING if step.entry is None else State.MOVING, "retry")
+            self._error = None
+            plan_id = None if step.entry is None else step.entry.plan_id
+            self._record("retry", action=step.action, plan_id=plan_id)
+        self._notify("state")
+        return self._take_view(step.pose, step.decision, step.entry)
 
     # ------------------------------------------------------------------ plan
 
@@ -260,24 +167,6 @@ class Workbench:
         self._notify("planned")
         return entry
 
-    def _make_plan(self) -> PendingPlan:
-        try:
-            plan = self.planner.plan(reachable=self.cell.is_reachable)
-        except ValueError as exc:
-            raise ConflictError(f"session {self.id}: {exc}") from None
-        entry = PendingPlan(secrets.token_hex(8), plan, time.time())
-        with self._lock:
-            if self._pending is not None:
-                self._stale.add(self._pending.plan_id)
-            self._pending = self._last = entry
-            self._selected = plan.best_index
-            self._custom = None
-            self._error = None
-            self.log.plan(entry.plan_id, plan)
-            if self._state != State.AUTO:
-                self._state = State.PLANNED
-        return entry
-
     # ------------------------------------------------------------------ inspect and override
 
     def candidate_of(self, entry: PendingPlan, index: int) -> int:
@@ -295,10 +184,14 @@ class Workbench:
         self._notify("selection")
 
     def reachability(self, pose: Pose) -> tuple[bool, str]:
+        """Whether the cell can take a view at ``pose``: its arm's reach, and not inside or against the object."""
         try:
             self.cell.plan_motion(pose)
         except UnreachableError as exc:
             return False, str(exc)
+        inside = self._inside_reason(pose)
+        if inside is not None:
+            return False, inside
         return True, "reachable"
 
     def set_custom(self, pose: Pose) -> CustomPose:
@@ -317,7 +210,7 @@ class Workbench:
         """Move to candidate ``index`` (or to ``pose``) of the pending plan ``plan_id``, capture, integrate.
 
         409 for a stale, used or unknown plan_id or a busy session; 404 for an unknown
-        candidate; 422 for an unreachable target. In all of these nothing moves.
+        candidate; 422 for an unreachable target (or one inside the object). In all of these nothing moves.
         """
         if (index is None) == (pose is None):
             raise UnprocessableError("approve: give exactly one of 'index' or 'pose'")
@@ -332,9 +225,10 @@ class Workbench:
             ok, reason = self.reachability(target)
             if not ok:
                 raise UnprocessableError(f"approve: target pose is {reason}")
-            self._claim(frozenset({State.PLANNED}), State.MOVING, "approve")
+            self._claim(frozenset({State.PLANNED, State.ERROR}), State.MOVING, "approve")
             self._used.add(plan_id)
             self._pending = None
+            self._error = None
             kind = "approve" if pose is None and index == plan.best_index else "override"
             decision = {
                 "kind": kind,
@@ -344,9 +238,9 @@ class Workbench:
                 "pose": target.to_dict(),
                 "custom": pose is not None,
             }
-            self.log.decision(decision)
+            self._record_decision(decision)
         self._notify("state")
-        return self._take_view(target, decision)
+        return self._take_view(target, decision, entry)
 
     def _check_plan_id(self, plan_id: str) -> PendingPlan:
         if plan_id in self._used:
@@ -358,6 +252,65 @@ class Workbench:
         if self._pending is None or self._pending.plan_id != plan_id:
             raise ConflictError(f"plan_id {plan_id}: not the pending plan of session {self.id}")
         return self._pending
+
+    # ------------------------------------------------------------------ configuration
+
+    def change_config(self, changes: dict[str, Any]) -> dict[str, Any]:
+        """Change the sections the planner reads on every plan (``MUTABLE_SECTIONS``); journaled.
+
+        422 for another section or a bad value, 409 while busy. A pending plan stays approvable.
+        """
+        from app.limits import check_config
+
+        fixed = sorted(set(changes) - set(MUTABLE_SECTIONS))
+        if fixed:
+            raise UnprocessableError(
+                f"config: {', '.join(fixed)} cannot change during a session (changeable: {', '.join(MUTABLE_SECTIONS)})"
+            )
+        with self._lock:
+            if self._state in BUSY:
+                raise ConflictError(f"session {self.id} is busy ({self._state}); config change refused")
+            try:
+                config = self.config.replace(**changes)
+            except (ValueError, TypeError) as exc:
+                raise UnprocessableError(f"config: {exc}") from None
+            check_config(config)
+            self.config = self.planner.config = config
+            self.log.config = config.to_dict()
+            self._terminated = self.planner.terminated
+            self._record("config", changes=changes, config=config.to_dict())
+            if self._state in (State.READY, State.DONE):
+                self._state = self._settle()
+        self._notify("state")
+        return config.to_dict()
+
+    # ------------------------------------------------------------------ resume
+
+    def restore(self, rebuilt: Rebuilt) -> None:
+        """Take over a session rebuilt from its journal (called once, before the session is shared)."""
+        with self._lock:
+            self.planner = rebuilt.planner
+            self.config = rebuilt.config
+            self.log = rebuilt.log
+            self._pending = rebuilt.pending
+            self._last = rebuilt.last
+            self._used = set(rebuilt.used)
+            self._stale = set(rebuilt.stale)
+            self._selected = None if rebuilt.pending is None else rebuilt.pending.plan.best_index
+            self.moves = len(rebuilt.captures)
+            self._terminated = self.planner.terminated
+            self._iteration = self.planner.iteration
+            if rebuilt.captures:
+                last = rebuilt.captures[-1]
+                self._points = last.report.n_points_total
+                self._voxels = dict(last.voxels)
+                from planner import VoxelClass
+
+                self._occupied = self.planner.voxel_map.centers(VoxelClass.OCCUPIED)
+            if rebuilt.device_state is not None:
+                with contextlib.suppress(ValueError):  # a device that cannot restore just draws fresh noise
+                    self.cell.restore_device_state(rebuilt.device_state)
+            self._state = State.NEW if self.planner.iteration == 0 else self._settle()
 
     # ------------------------------------------------------------------ step and auto
 
@@ -373,7 +326,8 @@ class Workbench:
         return self._run_steps(count, "step")
 
     def start_auto(self, count: int) -> None:
-        """Run ``count`` steps in a background thread; :meth:`stop` ends it after the current action."""
+        """Run ``count`` steps in a background thread; :meth:`stop` ends it after the current action.
+        The first fault ends it too (the session is then in state error)."""
         with self._lock:
             if self.planner.iteration == 0:
                 raise ConflictError(f"session {self.id}: no frame yet; capture first")
@@ -381,6 +335,7 @@ class Workbench:
             self._stop.clear()
             self._auto_remaining = count
             self.log.event("auto_start", count=count)
+            self._record("auto_start", count=count)
             thread = threading.Thread(target=self._auto_main, args=(count,), name=f"auto-{self.id}", daemon=True)
             self._auto_thread = thread
         self._notify("state")
@@ -397,6 +352,7 @@ class Workbench:
             if running:
                 self._stop.set()
                 self.log.event("auto_stop")
+                self._record("auto_stop")
         return running
 
     def _run_steps(self, count: int, kind: str) -> list[dict[str, Any]]:
@@ -416,8 +372,8 @@ class Workbench:
                     target = entry.plan.candidates[best].T_world_camera
                     decision = {"kind": kind, "plan_id": entry.plan_id, "index": best, "best_index": best}
                     decision["pose"] = target.to_dict()
-                    self.log.decision(decision)
-                records.append(self._take_view(target, decision))
+                    self._record_decision(decision)
+                records.append(self._take_view(target, decision, entry))
                 with self._lock:
                     self._auto_remaining -= 1
         finally:
@@ -430,9 +386,13 @@ class Workbench:
         return records
 
     def close(self, timeout: float = 30.0) -> None:
-        """Stop auto mode and wait for it (on delete and at shutdown)."""
+        """Stop auto mode and wait for it (on delete and at shutdown); release hanging devices; close the journal."""
         self._stop.set()
+        if self.injector is not None:
+            self.injector.release()
         thread = self._auto_thread
         if thread is not None and thread is not threading.current_thread():
             thread.join(timeout)
         self.listeners.clear()
+        if self.journal is not None:
+            self.journal.close()

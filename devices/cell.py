@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -186,6 +187,26 @@ class Cell:
         """
         frame = self.camera.capture()
         return frame.with_pose(self._perturb(self.pose))
+
+    def device_state(self) -> dict[str, Any]:
+        """What a resumed session needs to continue exactly: the pose-noise RNG state and the camera's
+        ``device_state()`` (its noise RNG, or a replay camera's position), JSON-ready."""
+        state: dict[str, Any] = {"pose_noise": self._rng.bit_generator.state}
+        camera_state = getattr(self.camera, "device_state", None)
+        if callable(camera_state):
+            state["camera"] = camera_state()
+        return state
+
+    def restore_device_state(self, state: dict[str, Any]) -> None:
+        """Undo :meth:`device_state`: the next capture draws the noise it would have drawn. ValueError if malformed."""
+        try:
+            if "pose_noise" in state:
+                self._rng.bit_generator.state = state["pose_noise"]
+            restore = getattr(self.camera, "restore_device_state", None)
+            if "camera" in state and callable(restore):
+                restore(state["camera"])
+        except (TypeError, KeyError, ValueError) as exc:
+            raise ValueError(f"device state: cannot restore ({exc})") from None
 
     def _perturb(self, pose: Pose) -> Pose:
         if self.pose_noise_translation == 0 and self.pose_noise_rotation == 0:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import trimesh
@@ -107,6 +108,13 @@ class SimulatedCamera:
     def _cut(self, depth: NDArray[np.float32]) -> NDArray[np.float32]:
         in_range = np.isfinite(depth) & (depth >= self.config.min_depth) & (depth <= self.config.max_depth)
         return np.where(in_range, depth, np.float32(0.0)).astype(np.float32)
+
+    def device_state(self) -> dict[str, Any]:
+        """The depth-noise RNG state (JSON-ready), for a resumed session to continue exactly."""
+        return {"depth_noise": self._rng.bit_generator.state}
+
+    def restore_device_state(self, state: dict[str, Any]) -> None:
+        self._rng.bit_generator.state = state["depth_noise"]
 
     def capture(self) -> DepthFrame:
         """Render from ``pose_source()``, add the configured depth noise; ``T_world_camera`` is the true pose."""

@@ -6,9 +6,12 @@ Used by ``nbv.cli`` as ``serve.add_arguments(parser)`` and ``serve.run(args) -> 
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
-from app.settings import AppSettings, load_settings
+from app.settings import AppSettings, check_exposure, load_settings
+
+TOKEN_ENV = "NBV_TOKEN"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -23,14 +26,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--model", default=None, help="default object of a new session (default l-block)")
     parser.add_argument("--models-dir", type=Path, default=None, help="directory of mesh files offered as models")
-    parser.add_argument("--data-dir", type=Path, default=None, help="where uploads and session data go (./nbv-data)")
+    parser.add_argument(
+        "--data-dir", type=Path, default=None, help="where uploads, session journals and recordings go (./nbv-data)"
+    )
+    parser.add_argument(
+        "--token",
+        default=None,
+        help=f"API token, required to bind a non-loopback host (default: ${TOKEN_ENV}); see docs/security.md",
+    )
+    parser.add_argument(
+        "--cors-origin", action="append", default=None, metavar="ORIGIN", help="allow this origin (CORS); repeatable"
+    )
+    parser.add_argument(
+        "--viser-public",
+        action="store_true",
+        default=None,
+        help="with a token on an exposed host, bind the 3D viewer there too (it has no authentication)",
+    )
     parser.add_argument("--config", type=Path, default=None, help="a TOML file with [server], [planner], [devices]")
     parser.add_argument("--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"])
 
 
 def settings_from_args(args: argparse.Namespace) -> AppSettings:
-    """AppSettings from ``--config`` and the flags (flags win). ValueError on bad values."""
-    return load_settings(
+    """AppSettings from ``--config`` and the flags (flags win; the token also from $NBV_TOKEN).
+    ValueError on bad values, and for a non-loopback host without a token."""
+    settings = load_settings(
         args.config,
         model=args.model,
         host=args.host,
@@ -38,7 +58,12 @@ def settings_from_args(args: argparse.Namespace) -> AppSettings:
         viser_port=args.viser_port,
         models_dir=args.models_dir,
         data_dir=args.data_dir,
+        token=getattr(args, "token", None) or os.environ.get(TOKEN_ENV) or None,
+        cors_origins=tuple(args.cors_origin) if getattr(args, "cors_origin", None) else None,
+        viser_public=getattr(args, "viser_public", None),
     )
+    check_exposure(settings)
+    return settings
 
 
 def run(args: argparse.Namespace) -> int:
@@ -49,7 +74,8 @@ def run(args: argparse.Namespace) -> int:
 
     settings = settings_from_args(args)
     app = create_app(settings)
-    print(f"nbv workbench: http://{settings.host}:{settings.port}/  (3D viewer near port {settings.viser_port})")
+    query = "?token=..." if settings.token else ""
+    print(f"nbv workbench: http://{settings.host}:{settings.port}/{query}  (3D viewer near port {settings.viser_port})")
     uvicorn.run(app, host=settings.host, port=settings.port, log_level=args.log_level)
     return 0
 

@@ -14,8 +14,17 @@ const S = {
 
 // ------------------------------------------------------------------ helpers
 
+// A server started with a token is opened as http://host:port/?token=...: every API call carries it.
+const TOKEN = new URLSearchParams(location.search).get("token");
+
+function withToken(url) {
+  if (!TOKEN) return url;
+  return url + (url.includes("?") ? "&" : "?") + "token=" + encodeURIComponent(TOKEN);
+}
+
 async function api(method, path, body) {
   const init = { method, headers: {} };
+  if (TOKEN) init.headers["Authorization"] = "Bearer " + TOKEN;
   if (body instanceof FormData) init.body = body;
   else if (body !== undefined) {
     init.headers["Content-Type"] = "application/json";
@@ -118,9 +127,9 @@ async function showSession(id) {
   S.selectedShown = undefined;
   S.metricsKey = null;
   $("session-select").value = id || "";
-  if (id) await api("PUT", "/api/scene", { session: id });
-  $("export-ply").href = id ? `/api/sessions/${id}/cloud.ply` : "#";
-  $("export-json").href = id ? `/api/sessions/${id}/export` : "#";
+  if (id) await api("PUT", "/api/scene", { session: id }).catch(() => null); // no 3D view, or not resumed yet
+  $("export-ply").href = id ? withToken(`/api/sessions/${id}/cloud.ply`) : "#";
+  $("export-json").href = id ? withToken(`/api/sessions/${id}/export`) : "#";
   await refresh();
 }
 
@@ -136,6 +145,10 @@ function updateButtons() {
   $("approve").disabled = busy || !st || state !== "planned" || st.selected === null;
   $("auto").disabled = busy || !st || it === 0 || !["ready", "planned", "done"].includes(state);
   $("stop").hidden = state !== "auto";
+  $("resume").hidden = state !== "interrupted";
+  $("resume").disabled = S.inFlight;
+  $("retry").hidden = !(state === "error" && st && st.retry);
+  $("retry").disabled = S.inFlight;
   const custom = st && st.custom_pose;
   $("approve-custom").disabled = busy || !custom || !custom.reachable || state !== "planned";
   $("create").disabled = S.inFlight;
@@ -205,7 +218,7 @@ async function loadInspector(selected) {
       `<td>${e.rank}</td><td>${num(e.weight, 3)}</td><td>${num(e.pixels, 0)}</td><td>${num(e.weighted, 0)}</td>`;
     tbody.appendChild(tr);
   }
-  img.src = `/api/sessions/${S.session}/candidates/${selected}/projection.png?plan=${S.planId}`;
+  img.src = withToken(`/api/sessions/${S.session}/candidates/${selected}/projection.png?plan=${S.planId}`);
   img.hidden = false;
 }
 
@@ -281,7 +294,7 @@ async function refresh() {
     await loadInspector(st.selected);
   }
   const key = `${st.iteration}/${planId}`;
-  if (key !== S.metricsKey && !["capturing", "planning", "moving"].includes(st.state)) {
+  if (key !== S.metricsKey && !["capturing", "planning", "moving", "interrupted"].includes(st.state)) {
     S.metricsKey = key;
     await loadMetrics();
   }
@@ -327,6 +340,13 @@ function wire() {
   }));
   $("auto").addEventListener("click", () => action("starting auto mode", () => api("POST", `/api/sessions/${S.session}/auto`, { count: Number($("auto-count").value) })));
   $("stop").addEventListener("click", () => api("POST", `/api/sessions/${S.session}/stop`).catch((e) => showError(e.message)));
+  $("resume").addEventListener("click", () => action("rebuilding the session from its journal", async () => {
+    const r = await api("POST", `/api/sessions/${S.session}/resume`);
+    if (!r.verified) showError("resumed with differences: " + r.mismatches.join("; "));
+    await loadSessions();
+    await showSession(S.session);
+  }));
+  $("retry").addEventListener("click", () => action("retrying the failed step", () => api("POST", `/api/sessions/${S.session}/retry`)));
   $("gizmo").addEventListener("change", (e) => api("PUT", "/api/scene/layers", { gizmo: e.target.checked }).catch((err) => showError(err.message)));
 }
 
@@ -342,6 +362,7 @@ async function init() {
     const v = await api("GET", "/api/viewer");
     $("viewer").src = v.url;
     S.viewerSet = true;
+    if (v.note) showError(v.note);
   } catch (e) {
     showError("3D viewer unavailable: " + e.message);
   }

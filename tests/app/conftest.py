@@ -8,39 +8,11 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from apphelpers import BASE_URL, CUBE_OBJ, SMALL, Live, free_port, running_server
 from fastapi.testclient import TestClient
 
 from app.main import create_app
 from app.settings import AppSettings
-
-SMALL: dict[str, Any] = {
-    "voxel": {"resolution": 0.02},
-    "candidates": {"count": 60, "parallels": 4},
-    "cluster": {"t_min": 2, "t_max": 6},
-}
-"""A coarse map and few candidates: a capture + plan takes well under a second."""
-
-CUBE_OBJ = """v 0 0 0
-v 1 0 0
-v 1 1 0
-v 0 1 0
-v 0 0 1
-v 1 0 1
-v 1 1 1
-v 0 1 1
-f 1 3 2
-f 1 4 3
-f 5 6 7
-f 5 7 8
-f 1 2 6
-f 1 6 5
-f 2 3 7
-f 2 7 6
-f 3 4 8
-f 3 8 7
-f 4 1 5
-f 4 5 8
-"""
 
 
 @pytest.fixture
@@ -59,7 +31,7 @@ def settings(tmp_path: Path, models_dir: Path) -> AppSettings:
 
 @pytest.fixture
 def client(settings: AppSettings) -> Iterator[TestClient]:
-    with TestClient(create_app(settings)) as c:
+    with TestClient(create_app(settings), base_url=BASE_URL) as c:
         yield c
 
 
@@ -100,3 +72,10 @@ def small_config() -> dict[str, Any]:
 @pytest.fixture
 def cube_obj() -> str:
     return CUBE_OBJ
+
+
+@pytest.fixture
+def live_server(settings: AppSettings) -> Iterator[Live]:
+    """A real uvicorn server (URL, app) on a free 127.0.0.1 port, with the test's settings."""
+    with running_server(settings.replace(port=free_port())) as live:
+        yield live

@@ -155,7 +155,7 @@ def test_uploads(tmp_path, models_dir, cube_obj) -> None:
     settings = AppSettings(
         viser_port=0, scene=False, models_dir=models_dir, data_dir=tmp_path / "d", max_upload_bytes=2000
     )
-    with TestClient(create_app(settings)) as client:
+    with TestClient(create_app(settings), base_url="http://127.0.0.1") as client:
         r = client.post("/api/models", files={"file": ("my cube!.obj", cube_obj.encode(), "text/plain")})
         assert r.status_code == 201, r.text
         name = r.json()["name"]

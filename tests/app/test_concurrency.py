@@ -6,6 +6,7 @@ import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 
+import httpx
 from fastapi.testclient import TestClient
 
 from app.errors import ConflictError
@@ -29,6 +30,50 @@ def test_two_clients_approving_one_plan_move_once(client: TestClient, planned_se
     st = client.get(f"/api/sessions/{sid}").json()
     assert (st["iteration"], st["moves"]) == (2, 2)
     assert len(client.get(f"/api/sessions/{sid}/export").json()["decisions"]) == 1
+
+
+def test_two_real_clients_racing_over_tcp_move_once(live_server, small_config) -> None:
+    """Two HTTP clients on their own connections to a real server approve one plan_id at the same instant.
+
+    A barrier inside the workbench proves both requests are in ``approve`` at the same time (a server that
+    handled them one after the other would break it and fail the request); then exactly one moves."""
+    clients = [httpx.Client(base_url=live_server.url, timeout=60) for _ in range(2)]
+    try:
+        api = clients[0]
+        sid = api.post("/api/sessions", json={"config": small_config}).json()["id"]
+        api.post(f"/api/sessions/{sid}/capture")
+        wb = live_server.registry.get(sid)
+        real_approve = wb.approve
+        inside = threading.Barrier(2, timeout=20)
+
+        def racing_approve(*args, **kwargs):
+            inside.wait()  # both requests have reached the workbench: now they race for the lock
+            return real_approve(*args, **kwargs)
+
+        wb.approve = racing_approve
+        for round_ in range(3):
+            plan = api.post(f"/api/sessions/{sid}/plan").json()
+            moves = wb.cell.arm.moves
+            body = {"plan_id": plan["plan_id"], "index": plan["best"]["index"]}
+            start = threading.Barrier(2)
+
+            def approve(c: httpx.Client, body=body, start=start) -> httpx.Response:
+                start.wait()
+                return c.post(f"/api/sessions/{sid}/approve", json=body)
+
+            with ThreadPoolExecutor(2) as pool:
+                responses = list(pool.map(approve, clients))
+            assert sorted(r.status_code for r in responses) == [200, 409], [r.text for r in responses]
+            loser = next(r for r in responses if r.status_code == 409).json()["detail"]
+            assert "busy" in loser or "already used" in loser
+            assert wb.cell.arm.moves == moves + 1
+            st = api.get(f"/api/sessions/{sid}").json()
+            assert (st["iteration"], st["moves"]) == (round_ + 2, round_ + 2)
+        decisions = api.get(f"/api/sessions/{sid}/export").json()["decisions"]
+        assert len(decisions) == 3 and len({d["plan_id"] for d in decisions}) == 3
+    finally:
+        for c in clients:
+            c.close()
 
 
 def test_many_threads_approving_one_plan_move_once(client: TestClient, planned_session) -> None:

@@ -15,7 +15,7 @@ from app.settings import AppSettings
 
 @pytest.fixture
 def scene_client(settings: AppSettings) -> Iterator[TestClient]:
-    with TestClient(create_app(settings.replace(scene=True))) as c:
+    with TestClient(create_app(settings.replace(scene=True)), base_url="http://127.0.0.1") as c:
         yield c
 
 
@@ -23,7 +23,7 @@ def test_viewer_url_reports_the_real_port(scene_client: TestClient) -> None:
     server = scene_client.app.state.viser  # type: ignore[attr-defined]
     v = scene_client.get("/api/viewer").json()
     assert v["port"] == server.get_port() > 0
-    assert v["url"] == f"http://testserver:{v['port']}/"
+    assert v["url"] == f"http://127.0.0.1:{v['port']}/"
 
 
 def test_viewer_is_409_without_a_scene(client: TestClient) -> None:
@@ -125,7 +125,7 @@ def test_a_busy_viser_port_moves_the_viewer(settings: AppSettings) -> None:
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         port = busy.getsockname()[1]
-        with TestClient(create_app(settings.replace(scene=True, viser_port=port))) as c:
+        with TestClient(create_app(settings.replace(scene=True, viser_port=port)), base_url="http://127.0.0.1") as c:
             v = c.get("/api/viewer").json()
             assert v["port"] != port and v["url"].endswith(f":{v['port']}/")
 
@@ -135,7 +135,7 @@ def test_default_model_may_be_a_file_path(settings: AppSettings, models_dir) -> 
 
     path = str(models_dir / "cube.obj")
     devices = dataclasses.replace(settings.devices, model=path)
-    with TestClient(create_app(settings.replace(devices=devices))) as c:
+    with TestClient(create_app(settings.replace(devices=devices)), base_url="http://127.0.0.1") as c:
         assert path in [m["name"] for m in c.get("/api/models").json()]
         sid = c.post("/api/sessions", json={}).json()["id"]
         assert c.get(f"/api/sessions/{sid}").json()["model"] == path

@@ -86,3 +86,40 @@ def test_gmm_instance_is_the_two_sigma_ellipsoid() -> None:
     R = Pose.from_wxyz(wxyz, pos).rotation
     assert np.allclose((R * axes**2) @ R.T, 4.0 * cov)  # the 2-sigma ellipsoid of the covariance
     assert gmm_instance(Ellipsoid(np.zeros(3), np.ones(3), np.eye(3), "frontier")) is None
+
+
+def test_reliability_and_security_settings_from_toml(tmp_path: Path) -> None:
+    path = tmp_path / "wb.toml"
+    path.write_text(
+        '[server]\ntoken = "a-long-enough-token"\ncors_origins = ["https://lab.example/"]\n'
+        "capture_timeout = 2.5\nmove_timeout = 0\nfault_api = true\n"
+        '[faults]\ncapture_failure = 0.1\nschedule = [{ kind = "arm_halfway", at = 3 }]\n'
+    )
+    s = load_settings(path)
+    assert (s.token, s.cors_origins, s.capture_timeout, s.move_timeout, s.fault_api) == (
+        "a-long-enough-token",
+        ("https://lab.example",),
+        2.5,
+        0,
+        True,
+    )
+    assert s.faults.capture_failure == 0.1 and s.faults.schedule[0].kind == "arm_halfway"
+    assert s.faults.schedule[0].at == 3
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("[server]\ncapture_timeout = -1\n", "server.capture_timeout"),
+        ('[server]\ncors_origins = "https://x"\n', "server.cors_origins"),
+        ('[server]\ntoken = "short"\n', "server.token"),
+        ("[server]\nmax_body_bytes = 0\n", "server.max_body_bytes"),
+        ("[faults]\narm_halfway = 3\n", "faults.arm_halfway"),
+        ("[faults]\nschedule = [{ kind = 'x', at = 1 }]\n", "faults.schedule.kind"),
+    ],
+)
+def test_bad_reliability_settings_name_the_problem(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=message):
+        load_settings(path)

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 from playwright.sync_api import Page, expect
 
+from devices.protocols import CaptureError
 from planner import Pose
 
 if TYPE_CHECKING:
@@ -135,3 +136,80 @@ def test_supervised_loop_in_the_browser(live_server: LiveServer, browser_page: P
     page.screenshot(path=str(shot))
     assert shot.stat().st_size > 10_000
     print(f"e2e loop took {time.perf_counter() - t_start:.1f} s; screenshot {shot}")
+
+
+def test_api_docs_render_offline(live_server: LiveServer, browser_page: Page, output_dir: Path) -> None:
+    """Swagger UI renders the API with every request outside this server blocked (as on a machine offline)."""
+    page = browser_page
+    outside: list[str] = []
+
+    def only_local(route, request) -> None:
+        if request.url.startswith(live_server.url):
+            route.continue_()
+        else:
+            outside.append(request.url)
+            route.abort()
+
+    page.route("**/*", only_local)
+    page.goto(f"{live_server.url}/docs")
+    ops = page.locator(".opblock")
+    expect(ops.first).to_be_visible(timeout=30_000)
+    assert ops.count() >= 25
+    expect(page.locator(".swagger-ui .title").first).to_contain_text("NBV workbench")
+    assert outside == []
+    page.screenshot(path=str(output_dir / "api-docs.png"))
+
+
+def test_the_page_carries_the_token(tmp_path: Path, browser_page: Page) -> None:
+    """A server with a token: the page opened with ``?token=`` sends it on every call; opened without it, the
+    API refuses it. (The viewer link's token is checked in tests/app/test_security.py; no 3D scene here.)"""
+    from app.settings import AppSettings
+    from tests.e2e.conftest import free_port, running_server
+
+    token = "browser-test-token-123"
+    settings = AppSettings(port=free_port(), data_dir=tmp_path / "data", models_dir=tmp_path, token=token, scene=False)
+    page = browser_page
+    with running_server(settings) as server:
+        page.goto(f"{server.url}/")
+        expect(page.locator("#health")).to_have_text("server unreachable", timeout=30_000)
+        page.goto(f"{server.url}/?token={token}")
+        expect(page.locator("#health")).to_have_text("server ok", timeout=30_000)
+        expect(page.locator("#model option")).not_to_have_count(0)
+        page.get_by_test_id("create").click()
+        expect(page.get_by_test_id("state")).to_have_text("new", timeout=30_000)
+        assert len(server.app.state.registry.list()) == 1
+
+
+def test_resume_and_retry_from_the_page(tmp_path: Path, browser_page: Page) -> None:
+    """A session journaled by an earlier server shows as interrupted with a Resume button; after a fault, Retry."""
+    from app.settings import AppSettings
+    from tests.e2e.conftest import free_port, running_server
+
+    small = {
+        "voxel": {"resolution": 0.02},
+        "candidates": {"count": 60, "parallels": 4},
+        "cluster": {"t_min": 2, "t_max": 6},
+    }
+    settings = AppSettings(data_dir=tmp_path / "data", models_dir=tmp_path, scene=False)
+    faults = {"schedule": [{"kind": "capture_failure", "at": 2}]}
+    with running_server(settings.replace(port=free_port())) as first:
+        api = httpx.Client(base_url=first.url, timeout=60)
+        sid = api.post("/api/sessions", json={"config": small, "faults": faults}).json()["id"]
+        api.post(f"/api/sessions/{sid}/capture")
+        api.post(f"/api/sessions/{sid}/plan")
+    page = browser_page
+    with running_server(settings.replace(port=free_port())) as second:
+        page.goto(f"{second.url}/")
+        expect(page.get_by_test_id("state")).to_have_text("interrupted", timeout=30_000)
+        expect(page.get_by_test_id("plan")).to_be_disabled()
+        page.get_by_test_id("resume").click()
+        expect(page.get_by_test_id("state")).to_have_text("planned", timeout=30_000)
+        expect(page.get_by_test_id("resume")).to_be_hidden()
+        second.app.state.registry.get(sid).cell.camera.fail_next = CaptureError("lens cap on")
+        page.get_by_test_id("approve").click()
+        expect(page.get_by_test_id("state")).to_have_text("error", timeout=30_000)
+        expect(page.locator("#error")).to_contain_text("lens cap on")
+        page.get_by_test_id("retry").click()
+        expect(page.get_by_test_id("iteration")).to_have_text("2", timeout=30_000)
+        expect(page.get_by_test_id("state")).to_have_text("ready")
+        expect(page.get_by_test_id("retry")).to_be_hidden()

@@ -1,0 +1,48 @@
+"""Calling a device with a deadline, so a camera that never answers cannot hang a session (or the server).
+
+A Python thread cannot be killed: the call runs in a daemon thread, and when the
+deadline passes the caller gets :class:`DeviceTimeoutError` while that thread is
+left to finish (or hang) on its own. A real driver should also enforce its own
+timeout; this is the workbench's backstop.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+from devices.protocols import DeviceError
+
+T = TypeVar("T")
+
+
+class DeviceTimeoutError(DeviceError):
+    """A device did not answer within its deadline."""
+
+
+def call_with_timeout(fn: Callable[[], T], timeout: float | None, what: str) -> T:
+    """``fn()``, or DeviceTimeoutError when it has not returned after ``timeout`` seconds (None or <= 0: no limit).
+
+    Exceptions of ``fn`` are re-raised in the caller.
+    """
+    if timeout is None or timeout <= 0:
+        return fn()
+    box: dict[str, Any] = {}
+    done = threading.Event()
+
+    def run() -> None:
+        try:
+            box["value"] = fn()
+        except BaseException as exc:  # handed to the caller
+            box["error"] = exc
+        finally:
+            done.set()
+
+    thread = threading.Thread(target=run, name=f"device-{what}", daemon=True)
+    thread.start()
+    if not done.wait(timeout):
+        raise DeviceTimeoutError(f"{what}: no answer within {timeout:g} s (timeout)")
+    if "error" in box:
+        raise box["error"]
+    return box["value"]

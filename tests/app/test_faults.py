@@ -1,0 +1,157 @@
+"""Device faults: after any of them the session is in state error with the reason, the map is unchanged, the plan
+that failed is pending again, and retrying (or approving it again) works. A hanging camera does not hang the server."""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any
+
+import numpy as np
+import pytest
+from apphelpers import BASE_URL, SMALL, registry_of
+from fastapi.testclient import TestClient
+
+from app.main import create_app
+from app.settings import AppSettings
+from devices.faults import FaultConfig
+
+EXPECTED = {
+    "camera_timeout": "timeout",
+    "capture_failure": "capture failed",
+    "nan_frame": "non-finite",
+    "empty_frame": "empty frame",
+    "arm_halfway": "halfway",
+    "turntable_error": "turntable",
+}
+
+
+@pytest.fixture
+def fault_client(settings: AppSettings):
+    with TestClient(create_app(settings.replace(capture_timeout=0.5, fault_api=True)), base_url=BASE_URL) as c:
+        yield c
+
+
+def planned_with_faults(client: TestClient, faults: dict[str, Any]) -> tuple[str, dict[str, Any]]:
+    r = client.post("/api/sessions", json={"model": "l-block", "config": SMALL, "faults": faults})
+    assert r.status_code == 201, r.text
+    sid = r.json()["id"]
+    assert client.post(f"/api/sessions/{sid}/capture").status_code == 200
+    plan = client.post(f"/api/sessions/{sid}/plan").json()
+    return sid, plan
+
+
+def snapshot(client: TestClient, sid: str) -> tuple[dict[str, Any], bytes]:
+    st = client.get(f"/api/sessions/{sid}").json()
+    return {k: st[k] for k in ("iteration", "points", "voxels", "coverage")}, client.get(
+        f"/api/sessions/{sid}/cloud.ply"
+    ).content
+
+
+@pytest.mark.parametrize(
+    ("kind", "recover"),
+    [(k, "retry") for k in EXPECTED] + [("capture_failure", "approve"), ("arm_halfway", "approve")],
+)
+def test_a_fault_leaves_a_known_state_and_recovery_works(fault_client: TestClient, kind: str, recover: str) -> None:
+    client = fault_client
+    sid, plan = planned_with_faults(client, {"schedule": [{"kind": kind, "at": 2}]})
+    wb = registry_of(client).get(sid)
+    map_before, cloud_before = snapshot(client, sid)
+    angle_before = wb.cell.angle
+    body = {"plan_id": plan["plan_id"], "index": plan["best"]["index"]}
+
+    t0 = time.perf_counter()
+    r = client.post(f"/api/sessions/{sid}/approve", json=body)
+    assert time.perf_counter() - t0 < 10
+    assert r.status_code == 503, r.text
+    assert EXPECTED[kind] in r.json()["detail"] and "map is unchanged" in r.json()["detail"]
+
+    st = client.get(f"/api/sessions/{sid}").json()
+    assert st["state"] == "error" and EXPECTED[kind] in st["error"] and st["retry"] == "approve"
+    assert snapshot(client, sid) == (map_before, cloud_before)  # the map and the cloud are untouched
+    assert st["pending_plan"]["plan_id"] == plan["plan_id"]  # the last good plan is pending again
+    cands = client.get(f"/api/sessions/{sid}/candidates")
+    assert cands.status_code == 200 and len(cands.json()) == SMALL["candidates"]["count"]
+    if kind == "arm_halfway":  # the plate turned, the arm stopped short of the target
+        motion = wb.cell.plan_motion(wb.pending.plan.candidates[body["index"]].T_world_camera)
+        assert wb.cell.angle != angle_before and abs(wb.cell.angle - motion.angle) < 1e-9
+        assert abs(wb.cell.arm.pose.translation - motion.T_base_camera.translation).max() > 1e-3
+    if kind == "turntable_error":
+        assert wb.cell.angle == angle_before
+
+    if recover == "retry":
+        r = client.post(f"/api/sessions/{sid}/retry")
+    else:
+        r = client.post(f"/api/sessions/{sid}/approve", json=body)
+    assert r.status_code == 200, r.text
+    st = r.json()
+    assert (st["state"], st["iteration"], st["error"], st["retry"]) == ("ready", 2, None, None)
+    assert st["points"] > map_before["points"]
+    view = client.get(f"/api/sessions/{sid}/export").json()["iterations"][-1]
+    assert view["plan_id"] == plan["plan_id"]
+    assert np.allclose(view["pose"]["position"], plan["best"]["pose"]["position"], atol=1e-9)
+    assert client.post(f"/api/sessions/{sid}/retry").status_code == 409  # nothing left to retry
+
+
+def test_a_hanging_camera_does_not_hang_the_server(fault_client: TestClient) -> None:
+    client = fault_client
+    sid, plan = planned_with_faults(client, {"schedule": [{"kind": "camera_timeout", "at": 2}]})
+    body = {"plan_id": plan["plan_id"], "index": plan["best"]["index"]}
+    result: dict[str, Any] = {}
+    thread = threading.Thread(target=lambda: result.update(r=client.post(f"/api/sessions/{sid}/approve", json=body)))
+    thread.start()
+    seen = set()
+    while thread.is_alive():  # meanwhile the server answers at once
+        t0 = time.perf_counter()
+        seen.add(client.get(f"/api/sessions/{sid}").json()["state"])
+        assert client.get("/api/health").status_code == 200
+        assert time.perf_counter() - t0 < 0.5
+    thread.join()
+    assert "moving" in seen
+    assert result["r"].status_code == 503 and "no answer within 0.5 s" in result["r"].json()["detail"]
+
+
+def test_a_failed_first_capture_can_be_retried(fault_client: TestClient) -> None:
+    client = fault_client
+    r = client.post("/api/sessions", json={"config": SMALL, "faults": {"schedule": [{"kind": "nan_frame", "at": 1}]}})
+    sid = r.json()["id"]
+    r = client.post(f"/api/sessions/{sid}/capture")
+    assert r.status_code == 503 and "non-finite" in r.json()["detail"]
+    st = client.get(f"/api/sessions/{sid}").json()
+    assert (st["state"], st["iteration"], st["points"], st["retry"]) == ("error", 0, 0, "initial")
+    assert client.post(f"/api/sessions/{sid}/plan").status_code == 409  # still no frame
+    st = client.post(f"/api/sessions/{sid}/retry").json()
+    assert (st["state"], st["iteration"]) == ("ready", 1)
+
+
+def test_the_test_only_route_injects_a_fault_now(fault_client: TestClient, client: TestClient) -> None:
+    sid, plan = planned_with_faults(fault_client, {})
+    r = fault_client.post(f"/api/sessions/{sid}/faults", json={"kind": "turntable_error"})
+    assert r.status_code == 202
+    body = {"plan_id": plan["plan_id"], "index": plan["best"]["index"]}
+    r = fault_client.post(f"/api/sessions/{sid}/approve", json=body)
+    assert r.status_code == 503 and "turntable" in r.json()["detail"]
+    assert fault_client.post(f"/api/sessions/{sid}/faults", json={"kind": "gremlins"}).status_code == 422
+    # the route does not exist for a server without fault_api
+    sid2 = client.post("/api/sessions", json={"config": SMALL}).json()["id"]
+    r = client.post(f"/api/sessions/{sid2}/faults", json={"kind": "turntable_error"})
+    assert r.status_code == 404 and "disabled" in r.json()["detail"]
+
+
+def test_server_settings_inject_faults_into_every_session(settings: AppSettings) -> None:
+    s = settings.replace(faults=FaultConfig(turntable_error=1.0))
+    with TestClient(create_app(s), base_url=BASE_URL) as client:
+        sid = client.post("/api/sessions", json={"config": SMALL}).json()["id"]
+        r = client.post(f"/api/sessions/{sid}/capture")
+        assert r.status_code == 503 and "turntable" in r.json()["detail"]
+        assert client.post(f"/api/sessions/{sid}/retry").status_code == 503  # every rotation fails
+        # a session's own faults replace the server's
+        sid = client.post("/api/sessions", json={"config": SMALL, "faults": {}}).json()["id"]
+        assert client.post(f"/api/sessions/{sid}/capture").status_code == 200
+
+
+def test_bad_fault_settings_are_422(client: TestClient) -> None:
+    for faults in ({"capture_failure": 2}, {"schedule": [{"kind": "x", "at": 1}]}, {"nope": 1}):
+        r = client.post("/api/sessions", json={"config": SMALL, "faults": faults})
+        assert r.status_code == 422 and "faults" in r.json()["detail"]
+    assert client.get("/api/sessions").json() == []

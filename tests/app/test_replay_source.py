@@ -1,0 +1,95 @@
+"""Recorded views from another rig (PLY + pose JSON per view) enter the workbench as a replay source."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+from apphelpers import SMALL
+from fastapi.testclient import TestClient
+
+from app.settings import AppSettings
+from devices.builtins import make_builtin
+from devices.ply import write_ply
+from devices.sim import make_sim_cell
+from planner import Pose
+
+
+def record(settings: AppSettings, name: str, azimuths: list[float]) -> list[int]:
+    """A recording folder rendered by the simulated cell, points in the camera frame; returns points per view."""
+    folder = settings.data_dir / "recordings" / name
+    folder.mkdir(parents=True)
+    cell = make_sim_cell(make_builtin("two-boxes", 0.2))
+    k = cell.intrinsics
+    (folder / "intrinsics.json").write_text(
+        json.dumps(dict(width=k.width, height=k.height, fx=k.fx, fy=k.fy, cx=k.cx, cy=k.cy))
+    )
+    counts = []
+    for i, a in enumerate(azimuths):
+        pose = Pose.look_at([0.5 * np.cos(a), 0.5 * np.sin(a), 0.3], [0.0, 0.0, 0.08])
+        cell.move_to(pose)
+        frame = cell.capture()
+        write_ply(folder / f"view_{i:03d}.ply", frame.points_camera)
+        meta = {"T_world_camera": frame.T_world_camera.to_dict(), "points_frame": "camera"}
+        (folder / f"view_{i:03d}.json").write_text(json.dumps(meta))
+        counts.append(len(frame.points_camera))
+    return counts
+
+
+def test_a_recording_is_scanned_view_by_view(client: TestClient, settings: AppSettings) -> None:
+    record(settings, "rig-a", [3.0, 1.0, -1.2])
+    assert client.get("/api/recordings").json() == ["rig-a"]
+    body = {"config": SMALL, "source": {"kind": "replay", "recording": "rig-a"}}
+    sid = client.post("/api/sessions", json=body).json()["id"]
+    st = client.post(f"/api/sessions/{sid}/capture").json()
+    assert (st["model"], st["source"], st["iteration"], st["coverage"]) == ("replay:rig-a", "replay", 1, None)
+    assert st["points"] > 1000 and st["voxels"]["occupied"] > 20
+    plan = client.post(f"/api/sessions/{sid}/plan").json()
+    assert plan["best"] is not None and plan["n_eligible"] > 0
+    st = client.post(f"/api/sessions/{sid}/approve", json={"plan_id": plan["plan_id"], "index": plan["best"]["index"]})
+    assert st.status_code == 200 and st.json()["iteration"] == 2
+    views = client.get(f"/api/sessions/{sid}/export").json()["iterations"]
+    recorded = Pose.from_dict(
+        json.loads((settings.data_dir / "recordings/rig-a/view_001.json").read_text())["T_world_camera"]
+    )
+    assert np.allclose(views[1]["pose"]["position"], recorded.translation, atol=0.03)  # the recorded view (ICP-refined)
+    assert client.post(f"/api/sessions/{sid}/step").json()["iteration"] == 3
+    r = client.post(f"/api/sessions/{sid}/step")
+    assert r.status_code == 503 and "all 3 recorded frames" in r.json()["detail"]
+    assert client.get(f"/api/sessions/{sid}").json()["iteration"] == 3  # the map is kept
+
+
+def test_nearest_mode_plays_the_view_nearest_the_approved_pose(client: TestClient, settings: AppSettings) -> None:
+    azimuths = list(np.linspace(-np.pi, np.pi, 12, endpoint=False))
+    record(settings, "ring", azimuths)
+    body = {"config": SMALL, "source": {"kind": "replay", "recording": "ring", "mode": "nearest"}}
+    sid = client.post("/api/sessions", json=body).json()["id"]
+    client.post(f"/api/sessions/{sid}/capture")
+    plan = client.post(f"/api/sessions/{sid}/plan").json()
+    target = np.array(plan["best"]["pose"]["position"])
+    client.post(f"/api/sessions/{sid}/approve", json={"plan_id": plan["plan_id"], "index": plan["best"]["index"]})
+    got = np.array(client.get(f"/api/sessions/{sid}/export").json()["iterations"][1]["pose"]["position"])
+    ring = np.array([[0.5 * np.cos(a), 0.5 * np.sin(a), 0.3] for a in azimuths])
+    nearest = ring[np.argmin(np.linalg.norm(ring - target, axis=1))]
+    assert np.linalg.norm(got - nearest) < 0.03
+
+
+def test_a_resumed_replay_session_continues_with_the_next_recorded_view(settings: AppSettings) -> None:
+    from apphelpers import BASE_URL
+
+    from app.main import create_app
+
+    record(settings, "rig-b", [3.0, 1.0, -1.2])
+    body = {"config": SMALL, "source": {"kind": "replay", "recording": "rig-b"}}
+    with TestClient(create_app(settings), base_url=BASE_URL) as a:
+        sid = a.post("/api/sessions", json=body).json()["id"]
+        a.post(f"/api/sessions/{sid}/capture")
+        before = a.post(f"/api/sessions/{sid}/step").json()
+    with TestClient(create_app(settings), base_url=BASE_URL) as b:
+        r = b.post(f"/api/sessions/{sid}/resume").json()
+        assert r["verified"] and r["session"]["points"] == before["points"]
+        st = b.post(f"/api/sessions/{sid}/step").json()
+        assert st["iteration"] == 3  # the third recorded view, not the first again
+
+        r = b.post(f"/api/sessions/{sid}/step")
+        assert r.status_code == 503 and "all 3 recorded frames" in r.json()["detail"]
