@@ -3,17 +3,14 @@
 from __future__ import annotations
 
 import socket
-import threading
-import time
-from collections.abc import Iterator
-from contextlib import contextmanager
-from dataclasses import dataclass
 from typing import Any
 
 from fastapi.testclient import TestClient
 
-from app.main import create_app
-from app.settings import AppSettings
+from tests.servers import LiveServer as Live
+from tests.servers import running_server
+
+__all__ = ["BASE_URL", "CUBE_OBJ", "SMALL", "Live", "free_port", "registry_of", "running_server"]
 
 BASE_URL = "http://127.0.0.1"
 """The Host the API answers to when bound to loopback (app/security.py refuses others)."""
@@ -55,37 +52,6 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-@dataclass
-class Live:
-    url: str
-    app: Any
-
-    @property
-    def registry(self) -> Any:
-        return self.app.state.registry
-
-
-@contextmanager
-def running_server(settings: AppSettings) -> Iterator[Live]:
-    """uvicorn serving ``create_app(settings)`` on 127.0.0.1:settings.port in a thread."""
-    import uvicorn
-
-    app = create_app(settings)
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=settings.port, log_level="warning"))
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    deadline = time.time() + 30
-    while not server.started:
-        if time.time() > deadline or not thread.is_alive():
-            raise RuntimeError("uvicorn did not start")
-        time.sleep(0.02)
-    try:
-        yield Live(f"http://127.0.0.1:{settings.port}", app)
-    finally:
-        server.should_exit = True
-        thread.join(30)
 
 
 def registry_of(client: TestClient) -> Any:

@@ -5,19 +5,13 @@ from __future__ import annotations
 
 import shutil
 import socket
-import threading
-import time
 from collections.abc import Iterator
-from contextlib import contextmanager
-from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-import uvicorn
-from fastapi import FastAPI
 
-from app.main import create_app
 from app.settings import AppSettings
+from tests.servers import LiveServer, running_server
 
 CHROMIUM_ARGS = [
     "--headless",
@@ -43,31 +37,6 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-@dataclass
-class LiveServer:
-    url: str
-    app: FastAPI
-
-
-@contextmanager
-def running_server(settings: AppSettings) -> Iterator[LiveServer]:
-    """uvicorn serving ``create_app(settings)`` on 127.0.0.1:settings.port in a thread of this process."""
-    app = create_app(settings)
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=settings.port, log_level="warning"))
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    deadline = time.time() + 30
-    while not server.started:
-        if time.time() > deadline or not thread.is_alive():
-            raise RuntimeError("uvicorn did not start")
-        time.sleep(0.05)
-    try:
-        yield LiveServer(f"http://127.0.0.1:{settings.port}", app)
-    finally:
-        server.should_exit = True
-        thread.join(30)
 
 
 OUTPUT_DIR = Path(__file__).resolve().parents[2] / "test-output" / "e2e"
