@@ -24,7 +24,7 @@ KL bound. Cold: one Gaussian split up to ``t_lo``, then T grows by ~1.5x per ste
 far above the best. Warm (``warm`` = the previous iteration's mixture, what ``EllipsoidFitter``
 keeps): EM from it, then steps of 1, 2, 4, ... outwards while the BIC drops. Then both bisect
 towards clearly worse evaluated neighbours, and polish: T - 1 and T + 1 from the best model, a
-split-and-merge move at T and a seeded k-means restart at T + 1, walking on while that helps. BIC
+split-and-merge move at T and seeded k-means restarts (several at T - 1 and T for small sets, one at T + 1 otherwise), walking on while that helps. BIC
 drops smaller than ``_MIN_GAIN`` per point (EM noise at tol) do not steer the search.
 ``search="exhaustive"`` fits every T with scikit-learn (the reference).
 """
@@ -48,7 +48,9 @@ _FLAT = 0.01  # refine: no bisection towards a neighbour within this BIC per poi
 _MIN_GAIN = 0.005  # per point: smaller BIC drops are EM noise (tol) and do not steer the search
 _WARM_TOL = 0.5  # warm start: the previous model is refitted to this fraction of tol
 _EXACT_BAND = 1e-3  # models within this BIC per point of the best get an exact float64 BIC
-_RESTART_ITERS = 20  # EM iterations for a k-means restart (a slow one would not win anyway)
+_RESTART_ITERS = 100  # EM iterations for a k-means restart (a slow one would not win anyway)
+_RESTARTS = 3  # k-means restarts (seeds) per T in the polish of a small set
+_SMALL_WORK = 8_000  # n * T at most for a small set (the dragon's first view: 264 voxels, T = 5)
 _FAR = 0.5  # cold search: stop growing once the BIC is this much per point above the best
 _SYM = np.array([0, 3, 4, 3, 1, 5, 4, 5, 2])  # feature index of each entry of x x^T
 
@@ -285,7 +287,7 @@ class _FastSearch:
 
     def _polish(self) -> None:
         """From the best model try T - 1 (merge), T + 1 (split), a split-and-merge at T (Ueda et al. 2000) and
-        a k-means restart at T + 1 (both escape local optima); then walk on in the direction that improved."""
+        k-means restarts (they escape local optima); then walk on in the direction that improved."""
         best_t, best_bic = self._best()
         for t_to in (best_t - 1, best_t + 1):
             if self.t_lo <= t_to <= self.t_hi:
@@ -294,8 +296,16 @@ class _FastSearch:
             mix = self.models[best_t][1]
             g = int(np.argmax(self._gains(mix)))
             self._record(self._em(_merge(_split(mix, np.array([g])), 1, forbid=(g, best_t))))
-        if best_t < self.t_hi:  # an independent basin from scikit-learn's own start: splits can mislead
-            self._record(self._em(self._kmeans(best_t + 1), max_iter=_RESTART_ITERS))
+        # independent basins from scikit-learn's own start (k-means): splits and merges can all mislead.
+        # Small sets get several full restarts round T (cheap, and one bad basin costs many BIC units per
+        # voxel there); large ones one quick restart at T + 1.
+        if self.n * best_t <= _SMALL_WORK:
+            for t_k in (best_t - 1, best_t):
+                if self.t_lo <= t_k <= self.t_hi:
+                    for restart in range(_RESTARTS):
+                        self._record(self._em(self._kmeans(t_k, restart=restart)))
+        elif best_t < self.t_hi:
+            self._record(self._em(self._kmeans(best_t + 1, iters=10, greedy=False), max_iter=_RESTART_ITERS))
         t, bic = self._best()
         step, margin = int(np.sign(t - best_t)), 0.0  # the first step after a move needs no margin
         while step and bic < best_bic - margin and self.t_lo <= t + step <= self.t_hi:
@@ -304,18 +314,28 @@ class _FastSearch:
             t, bic = self._best()
 
     # -- helpers
-    def _kmeans(self, t: int, iters: int = 10) -> Mixture:
-        """Seeded k-means++ and Lloyd iterations, as a mixture (scikit-learn's default init for EM)."""
-        rng = np.random.default_rng(self.cfg.seed)
+    def _kmeans(self, t: int, iters: int = 100, restart: int = 0, greedy: bool = True) -> Mixture:
+        """Seeded k-means++ and Lloyd iterations (to convergence, at most ``iters``), as a mixture:
+        scikit-learn's default initialisation of EM (greedy: ``2 + ln t`` candidate centres per pick,
+        the best one kept)."""
+        rng = np.random.default_rng((self.cfg.seed, restart))
         x = self.x
+        trials = 2 + int(np.log(t)) if greedy else 1
         centres = [x[rng.integers(self.n)]]
         d2 = ((x - centres[0]) ** 2).sum(axis=1)
         for _ in range(1, t):
-            centres.append(x[rng.choice(self.n, p=d2 / d2.sum())])
-            d2 = np.minimum(d2, ((x - centres[-1]) ** 2).sum(axis=1))
+            picks = rng.choice(self.n, size=trials, p=d2 / d2.sum())
+            cand = np.minimum(d2[None, :], ((x[None, :, :] - x[picks][:, None, :]) ** 2).sum(axis=2))
+            best = int(np.argmin(cand.sum(axis=1)))
+            centres.append(x[picks[best]])
+            d2 = cand[best]
         C = np.array(centres)
+        lab = np.full(self.n, -1)
         for _ in range(iters):
-            lab = np.argmin((C * C).sum(axis=1)[:, None] - 2.0 * C @ x.T, axis=0)
+            new = np.argmin((C * C).sum(axis=1)[:, None] - 2.0 * C @ x.T, axis=0)
+            if np.array_equal(new, lab):
+                break
+            lab = new
             cnt = np.bincount(lab, minlength=t)
             sums = np.stack([np.bincount(lab, weights=x[:, k], minlength=t) for k in range(3)], axis=1)
             C = np.where(cnt[:, None] > 0, sums / np.maximum(cnt, 1)[:, None], C)
