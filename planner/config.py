@@ -160,6 +160,9 @@ class PartitionConfig:
     """beta, number of longitude sectors (paper: 4)."""
     offset_deg: float = 0.0
     """Longitude where sector 0 starts, degrees."""
+    revisit_deg: float = 0.0
+    """Candidates within this angle (seen from B's centre) of a view already taken are not proposed again,
+    degrees; never less than half the candidate spacing (0: just that)."""
 
     def __post_init__(self) -> None:
         _require(
@@ -167,6 +170,10 @@ class PartitionConfig:
             f"partitions.sectors: must be an integer >= 1, got {self.sectors!r}",
         )
         _require(_finite(self.offset_deg), "partitions.offset_deg: must be finite")
+        _require(
+            _finite(self.revisit_deg) and 0 <= self.revisit_deg < 180,
+            f"partitions.revisit_deg: must be in [0, 180), got {self.revisit_deg!r}",
+        )
 
 
 @dataclass(frozen=True)

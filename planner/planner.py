@@ -12,6 +12,7 @@ The planner never talks to a device. ``integrate`` either succeeds or raises
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -178,7 +179,8 @@ class Planner:
         scanned = {sector_of(azimuth_of(view.translation, center), cfg.partitions) for view in self.views}
         allowed = eligible_sectors(scanned, cfg.partitions.sectors)
         eligible = np.array([c.sector in allowed for c in candidates], dtype=bool)
-        eligible &= not_taken(candidates, self.views, default_tolerance(candidates, center), center=center)
+        tolerance = max(default_tolerance(candidates, center), math.radians(cfg.partitions.revisit_deg))
+        eligible &= not_taken(candidates, self.views, tolerance, center=center)
         if reachable is not None:
             eligible &= np.array([bool(reachable(c.T_world_camera)) for c in candidates], dtype=bool)
         timings["select"] = time.perf_counter() - t0

@@ -120,3 +120,29 @@ def test_rays_ending_on_the_plate_carve_free_space(monkeypatch: pytest.MonkeyPat
     literal = bottom_frontier(Planner(cfg))
     assert literal >= 20  # plate hits taken literally: a ring of frontier on the plate that no view clears
     assert ours <= literal // 4
+
+
+def test_revisit_radius_makes_candidates_near_taken_views_ineligible(cell) -> None:
+    frame = first_frame(cell)
+    plans = {}
+    for deg in (0.0, 20.0):
+        planner = Planner(SMALL.replace(partitions={"revisit_deg": deg}))
+        planner.integrate(frame)
+        plan = planner.plan()
+        center = plan.hemisphere_center
+        taken = frame.T_world_camera.translation - center
+        taken /= np.linalg.norm(taken)
+        angles = np.array(
+            [
+                np.arccos(np.clip(np.dot(taken, (c.position - center) / np.linalg.norm(c.position - center)), -1, 1))
+                for c in plan.candidates
+            ]
+        )
+        plans[deg] = (plan, angles)
+    wide, angles = plans[20.0]
+    near = angles < np.radians(20.0)
+    assert near.sum() >= 3
+    assert not any(s.eligible for s, n in zip(wide.scores, near, strict=True) if n)
+    narrow, _ = plans[0.0]
+    # the default only removes the view itself: more candidates near it stay eligible
+    assert sum(s.eligible for s in narrow.scores) > sum(s.eligible for s in wide.scores)
