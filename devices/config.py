@@ -9,20 +9,11 @@ TOML files and the REST API use the same names, e.g. ``[camera] depth_noise_std 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Literal
 
+from planner._validate import finite, require
 from planner.types import Intrinsics
-
-
-def _require(cond: bool, msg: str) -> None:
-    if not cond:
-        raise ValueError(msg)
-
-
-def _finite(*values: object) -> bool:
-    return all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in values)
 
 
 @dataclass(frozen=True)
@@ -55,26 +46,26 @@ class CameraConfig:
     def __post_init__(self) -> None:
         for name in ("width", "height"):
             v = getattr(self, name)
-            _require(
+            require(
                 isinstance(v, int) and not isinstance(v, bool) and v >= 1,
                 f"camera.{name}: must be an integer >= 1, got {v!r}",
             )
         for name in ("fx", "fy"):
             v = getattr(self, name)
-            _require(_finite(v) and v > 0, f"camera.{name}: must be > 0, got {v!r}")
+            require(finite(v) and v > 0, f"camera.{name}: must be > 0, got {v!r}")
         for name in ("cx", "cy"):
             v = getattr(self, name)
-            _require(_finite(v), f"camera.{name}: must be a finite number, got {v!r}")
-        _require(
-            _finite(self.min_depth) and self.min_depth >= 0, f"camera.min_depth: must be >= 0, got {self.min_depth!r}"
+            require(finite(v), f"camera.{name}: must be a finite number, got {v!r}")
+        require(
+            finite(self.min_depth) and self.min_depth >= 0, f"camera.min_depth: must be >= 0, got {self.min_depth!r}"
         )
-        _require(
-            _finite(self.max_depth) and self.max_depth > self.min_depth,
+        require(
+            finite(self.max_depth) and self.max_depth > self.min_depth,
             f"camera.max_depth: must be > min_depth ({self.min_depth!r}), got {self.max_depth!r}",
         )
         for name in ("depth_noise_std", "pose_noise_translation", "pose_noise_rotation_deg"):
             v = getattr(self, name)
-            _require(_finite(v) and v >= 0, f"camera.{name}: must be >= 0, got {v!r}")
+            require(finite(v) and v >= 0, f"camera.{name}: must be >= 0, got {v!r}")
 
     @property
     def intrinsics(self) -> Intrinsics:
@@ -112,32 +103,32 @@ class CellConfig:
             base = tuple(float(v) for v in self.arm_base)
         except (TypeError, ValueError):
             raise ValueError(f"cell.arm_base: must be 3 numbers, got {self.arm_base!r}") from None
-        _require(len(base) == 3 and _finite(*base), f"cell.arm_base: must be 3 finite numbers, got {self.arm_base!r}")
+        require(len(base) == 3 and finite(*base), f"cell.arm_base: must be 3 finite numbers, got {self.arm_base!r}")
         object.__setattr__(self, "arm_base", base)
-        _require(
-            _finite(self.arm_min_reach) and self.arm_min_reach >= 0,
+        require(
+            finite(self.arm_min_reach) and self.arm_min_reach >= 0,
             f"cell.arm_min_reach: must be >= 0, got {self.arm_min_reach!r}",
         )
-        _require(
-            _finite(self.arm_reach) and self.arm_reach > self.arm_min_reach,
+        require(
+            finite(self.arm_reach) and self.arm_reach > self.arm_min_reach,
             f"cell.arm_reach: must be > arm_min_reach ({self.arm_min_reach!r}), got {self.arm_reach!r}",
         )
-        _require(
-            _finite(self.min_height) and self.min_height >= 0, f"cell.min_height: must be >= 0, got {self.min_height!r}"
+        require(
+            finite(self.min_height) and self.min_height >= 0, f"cell.min_height: must be >= 0, got {self.min_height!r}"
         )
         for name in ("plate_radius", "plate_thickness", "initial_distance"):
             v = getattr(self, name)
-            _require(_finite(v) and v > 0, f"cell.{name}: must be > 0, got {v!r}")
-        _require(
-            _finite(self.initial_elevation_deg) and -90 < self.initial_elevation_deg <= 90,
+            require(finite(v) and v > 0, f"cell.{name}: must be > 0, got {v!r}")
+        require(
+            finite(self.initial_elevation_deg) and -90 < self.initial_elevation_deg <= 90,
             f"cell.initial_elevation_deg: must be in (-90, 90], got {self.initial_elevation_deg!r}",
         )
-        _require(
-            _finite(self.initial_azimuth_deg),
+        require(
+            finite(self.initial_azimuth_deg),
             f"cell.initial_azimuth_deg: must be finite, got {self.initial_azimuth_deg!r}",
         )
-        _require(
-            _finite(self.initial_target_height),
+        require(
+            finite(self.initial_target_height),
             f"cell.initial_target_height: must be finite, got {self.initial_target_height!r}",
         )
 
@@ -158,15 +149,15 @@ class DeviceConfig:
     """Seeds the depth noise and the pose noise."""
 
     def __post_init__(self) -> None:
-        _require(isinstance(self.camera, CameraConfig), "devices.camera: must be a CameraConfig")
-        _require(isinstance(self.cell, CellConfig), "devices.cell: must be a CellConfig")
-        _require(
+        require(isinstance(self.camera, CameraConfig), "devices.camera: must be a CameraConfig")
+        require(isinstance(self.cell, CellConfig), "devices.cell: must be a CellConfig")
+        require(
             isinstance(self.model, str) and self.model.strip() != "",
             f"devices.model: must be a name or path, got {self.model!r}",
         )
-        _require(_finite(self.size) and self.size > 0, f"devices.size: must be > 0, got {self.size!r}")
-        _require(self.up in ("y", "z"), f"devices.up: 'y' or 'z', got {self.up!r}")
-        _require(
+        require(finite(self.size) and self.size > 0, f"devices.size: must be > 0, got {self.size!r}")
+        require(self.up in ("y", "z"), f"devices.up: 'y' or 'z', got {self.up!r}")
+        require(
             isinstance(self.seed, int) and not isinstance(self.seed, bool) and self.seed >= 0,
             f"devices.seed: must be an integer >= 0, got {self.seed!r}",
         )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -41,3 +42,14 @@ def check_positive(name: str, value: float, *, allow_zero: bool = False) -> None
     if not np.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
         op = ">= 0" if allow_zero else "> 0"
         raise ValueError(f"{name}: must be a finite number {op}, got {value!r}")
+
+
+def require(cond: bool, msg: str) -> None:
+    """Raise ``ValueError(msg)`` unless ``cond``: the one-line check of the config dataclasses."""
+    if not cond:
+        raise ValueError(msg)
+
+
+def finite(*values: object) -> bool:
+    """Whether every value is a real number (not a bool) and finite."""
+    return all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in values)

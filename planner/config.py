@@ -10,20 +10,12 @@ TOML files, the CLI and the REST API use the same names, e.g.
 from __future__ import annotations
 
 import dataclasses
-import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, TypeVar
 
-
-def _require(cond: bool, msg: str) -> None:
-    if not cond:
-        raise ValueError(msg)
-
-
-def _finite(*values: float) -> bool:
-    return all(isinstance(v, int | float) and math.isfinite(v) for v in values)
+from planner._validate import finite, require
 
 
 @dataclass(frozen=True)
@@ -47,20 +39,20 @@ class VoxelConfig:
     """'projective' projects voxel centres into the depth image (fast); 'raycast' is the Amanatides-Woo reference."""
 
     def __post_init__(self) -> None:
-        _require(
-            _finite(self.resolution) and self.resolution > 0, f"voxel.resolution: must be > 0, got {self.resolution!r}"
+        require(
+            finite(self.resolution) and self.resolution > 0, f"voxel.resolution: must be > 0, got {self.resolution!r}"
         )
-        _require(_finite(self.gamma) and self.gamma >= 0, f"voxel.gamma: must be >= 0, got {self.gamma!r}")
-        _require(
-            _finite(self.initial_diagonal_factor) and self.initial_diagonal_factor >= 1,
+        require(finite(self.gamma) and self.gamma >= 0, f"voxel.gamma: must be >= 0, got {self.gamma!r}")
+        require(
+            finite(self.initial_diagonal_factor) and self.initial_diagonal_factor >= 1,
             f"voxel.initial_diagonal_factor: must be >= 1, got {self.initial_diagonal_factor!r}",
         )
-        _require(
-            _finite(self.max_extent) and self.max_extent > self.resolution,
+        require(
+            finite(self.max_extent) and self.max_extent > self.resolution,
             f"voxel.max_extent: must be > resolution, got {self.max_extent!r}",
         )
-        _require(_finite(self.floor_height), f"voxel.floor_height: must be a finite number, got {self.floor_height!r}")
-        _require(
+        require(finite(self.floor_height), f"voxel.floor_height: must be a finite number, got {self.floor_height!r}")
+        require(
             self.integration in ("projective", "raycast"),
             f"voxel.integration: 'projective' or 'raycast', got {self.integration!r}",
         )
@@ -88,20 +80,20 @@ class ClusterConfig:
     """random_state of every fit."""
 
     def __post_init__(self) -> None:
-        _require(
+        require(
             isinstance(self.t_min, int) and self.t_min >= 1,
             f"cluster.t_min: must be an integer >= 1, got {self.t_min!r}",
         )
-        _require(
+        require(
             isinstance(self.t_max, int) and self.t_max >= 1,
             f"cluster.t_max: must be an integer >= 1, got {self.t_max!r}",
         )
-        _require(self.t_min <= self.t_max, f"cluster.t_min ({self.t_min}) must be <= cluster.t_max ({self.t_max})")
-        _require(self.search in ("fast", "exhaustive"), f"cluster.search: 'fast' or 'exhaustive', got {self.search!r}")
-        _require(self.min_points_per_component >= 1, "cluster.min_points_per_component: must be >= 1")
-        _require(self.max_iter >= 1, "cluster.max_iter: must be >= 1")
-        _require(_finite(self.tol) and self.tol > 0, "cluster.tol: must be > 0")
-        _require(_finite(self.reg_covar_voxels) and self.reg_covar_voxels > 0, "cluster.reg_covar_voxels: must be > 0")
+        require(self.t_min <= self.t_max, f"cluster.t_min ({self.t_min}) must be <= cluster.t_max ({self.t_max})")
+        require(self.search in ("fast", "exhaustive"), f"cluster.search: 'fast' or 'exhaustive', got {self.search!r}")
+        require(self.min_points_per_component >= 1, "cluster.min_points_per_component: must be >= 1")
+        require(self.max_iter >= 1, "cluster.max_iter: must be >= 1")
+        require(finite(self.tol) and self.tol > 0, "cluster.tol: must be > 0")
+        require(finite(self.reg_covar_voxels) and self.reg_covar_voxels > 0, "cluster.reg_covar_voxels: must be > 0")
 
 
 @dataclass(frozen=True)
@@ -120,19 +112,17 @@ class CandidateConfig:
     """Highest parallel's elevation, degrees (90 is the pole, a parallel of length 0)."""
 
     def __post_init__(self) -> None:
-        _require(
+        require(
             isinstance(self.count, int) and self.count >= 1,
             f"candidates.count: must be an integer >= 1, got {self.count!r}",
         )
-        _require(
+        require(
             isinstance(self.parallels, int) and 1 <= self.parallels <= self.count,
             f"candidates.parallels: must be an integer in [1, count], got {self.parallels!r}",
         )
-        _require(
-            _finite(self.working_distance) and self.working_distance > 0, "candidates.working_distance: must be > 0"
-        )
-        _require(
-            _finite(self.min_elevation_deg, self.max_elevation_deg)
+        require(finite(self.working_distance) and self.working_distance > 0, "candidates.working_distance: must be > 0")
+        require(
+            finite(self.min_elevation_deg, self.max_elevation_deg)
             and -90 < self.min_elevation_deg <= self.max_elevation_deg < 90,
             "candidates: need -90 < min_elevation_deg <= max_elevation_deg < 90",
         )
@@ -148,8 +138,8 @@ class ScoringConfig:
     """How L is counted: exact clipped-ellipse area, or rasterising pixel centres (reference)."""
 
     def __post_init__(self) -> None:
-        _require(_finite(self.rank_base) and 0 < self.rank_base <= 1, "scoring.rank_base: must be in (0, 1]")
-        _require(self.area in ("analytic", "raster"), f"scoring.area: 'analytic' or 'raster', got {self.area!r}")
+        require(finite(self.rank_base) and 0 < self.rank_base <= 1, "scoring.rank_base: must be in (0, 1]")
+        require(self.area in ("analytic", "raster"), f"scoring.area: 'analytic' or 'raster', got {self.area!r}")
 
 
 @dataclass(frozen=True)
@@ -165,13 +155,13 @@ class PartitionConfig:
     degrees; never less than half the candidate spacing (0: just that)."""
 
     def __post_init__(self) -> None:
-        _require(
+        require(
             isinstance(self.sectors, int) and self.sectors >= 1,
             f"partitions.sectors: must be an integer >= 1, got {self.sectors!r}",
         )
-        _require(_finite(self.offset_deg), "partitions.offset_deg: must be finite")
-        _require(
-            _finite(self.revisit_deg) and 0 <= self.revisit_deg < 180,
+        require(finite(self.offset_deg), "partitions.offset_deg: must be finite")
+        require(
+            finite(self.revisit_deg) and 0 <= self.revisit_deg < 180,
             f"partitions.revisit_deg: must be in [0, 180), got {self.revisit_deg!r}",
         )
 
@@ -188,12 +178,12 @@ class TerminationConfig:
     """Stop when no frontier voxel is left."""
 
     def __post_init__(self) -> None:
-        _require(
+        require(
             isinstance(self.max_views, int) and self.max_views >= 1,
             f"termination.max_views: must be an integer >= 1, got {self.max_views!r}",
         )
-        _require(
-            _finite(self.growth_threshold) and self.growth_threshold >= 0, "termination.growth_threshold: must be >= 0"
+        require(
+            finite(self.growth_threshold) and self.growth_threshold >= 0, "termination.growth_threshold: must be >= 0"
         )
 
 
@@ -226,8 +216,8 @@ class PreprocessConfig:
             "downsample",
         ):
             v = getattr(self, name)
-            _require(_finite(v) and v >= 0, f"preprocess.{name}: must be >= 0, got {v!r}")
-        _require(
+            require(finite(v) and v >= 0, f"preprocess.{name}: must be >= 0, got {v!r}")
+        require(
             isinstance(self.outlier_neighbors, int) and self.outlier_neighbors >= 0,
             "preprocess.outlier_neighbors: must be >= 0",
         )
@@ -253,9 +243,9 @@ class RegistrationConfig:
     def __post_init__(self) -> None:
         for name in ("max_correspondence", "max_rmse", "max_correction"):
             v = getattr(self, name)
-            _require(_finite(v) and v > 0, f"registration.{name}: must be > 0, got {v!r}")
-        _require(0 <= self.min_fitness <= 1, "registration.min_fitness: must be in [0, 1]")
-        _require(self.max_iterations >= 1, "registration.max_iterations: must be >= 1")
+            require(finite(v) and v > 0, f"registration.{name}: must be > 0, got {v!r}")
+        require(0 <= self.min_fitness <= 1, "registration.min_fitness: must be in [0, 1]")
+        require(self.max_iterations >= 1, "registration.max_iterations: must be >= 1")
 
 
 @dataclass(frozen=True)
