@@ -166,3 +166,24 @@ def test_bad_input_names_the_problem(surface: np.ndarray) -> None:
         bic_sweep(surface[:, :2], [2], cfg, RES)
     with pytest.raises(ValueError, match="resolution"):
         bic_sweep(surface, [2], cfg, 0.0)
+
+
+def test_covariances_are_full_not_spherical() -> None:
+    """The authors' code fits spherical Gaussians; the paper's ellipsoids need full covariances."""
+    from planner.ellipsoids import EllipsoidFitter
+
+    rng = np.random.default_rng(4)
+    c, s = np.cos(np.pi / 4), np.sin(np.pi / 4)
+    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    local = rng.normal(size=(3000, 3)) * np.array([0.06, 0.01, 0.01])
+    voxels = np.unique(np.floor((local @ R.T) / 0.01) * 0.01 + 0.005, axis=0)
+    (ellipsoid,), fit = EllipsoidFitter(ClusterConfig(t_min=1, t_max=1), 0.01, "occupied").fit(voxels)
+    assert fit.t_chosen == 1
+    cov = ellipsoid.gmm_covariance
+    assert cov is not None
+    evals, evecs = np.linalg.eigh(cov)
+    assert evals[-1] / evals[0] > 10.0  # elongated, not a sphere
+    assert abs(abs(evecs[:, -1] @ np.array([c, s, 0.0])) - 1.0) < 0.02  # along the tilted axis
+    assert cov[0, 1] > 0.3 * np.sqrt(cov[0, 0] * cov[1, 1])  # a real off-diagonal term
+    long_axis = ellipsoid.rotation[:, np.argmax(ellipsoid.axes)]
+    assert abs(abs(long_axis @ np.array([c, s, 0.0])) - 1.0) < 0.05
