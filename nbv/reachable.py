@@ -15,7 +15,7 @@ from scipy.spatial import KDTree
 
 from planner import Planner
 from planner.candidates import propose_candidates
-from planner.preprocess import preprocess, voxel_downsample
+from planner.preprocess import preprocess
 from planner.types import DepthFrame
 
 
@@ -42,9 +42,7 @@ def reachable_coverage(
             continue
         depth = cell.camera.render(cand.T_world_camera)
         frame = DepthFrame(depth, cand.T_world_camera, cell.camera.intrinsics)
-        points = preprocess(frame.points_world, None, clean)
-        if clean.downsample > 0:  # the same down-sampling as the planner's accumulated cloud
-            points = voxel_downsample(points, clean.downsample)
+        points = preprocess(frame.points_world, None, clean)  # down-sampled like the planner's cloud
         if len(points) == 0:
             continue
         todo = np.flatnonzero(~covered)
