@@ -99,24 +99,11 @@ class Pose:
         Image +y points along world ``-up`` as far as possible; when the view
         direction is parallel to ``up`` the image +y is world +x.
         """
-        eye_w = checked_array("eye", eye, (3,))
-        target_w = checked_array("target", target, (3,))
-        up_w = checked_array("up", up, (3,))
-        z = target_w - eye_w
-        dist = np.linalg.norm(z)
-        if dist < 1e-12:
-            raise ValueError("look_at: eye and target coincide")
-        z = z / dist
-        x = np.cross(z, up_w)
-        if np.linalg.norm(x) < 1e-9:
-            x = np.cross(z, np.array([-1.0, 0.0, 0.0]))
-        x = x / np.linalg.norm(x)
-        y = np.cross(z, x)
-        return Pose(np.column_stack([x, y, z]), eye_w)
+        return Pose.look_at_many(checked_array("eye", eye, (3,))[None], target, up)[0]
 
     @staticmethod
     def look_at_many(eyes: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> list[Pose]:
-        """``look_at`` for many eyes (C, 3) and one target (3,), vectorised."""
+        """``look_at`` for many eyes (C, 3) and one target (3,), vectorised (the one implementation)."""
         eyes_w = checked_array("eyes", eyes, (None, 3))
         target_w = checked_array("target", target, (3,))
         up_w = checked_array("up", up, (3,))
