@@ -35,7 +35,7 @@ def reachable_coverage(
         return 0.0
     cfg = planner.config
     candidates, _, _ = propose_candidates(bbox, cfg.candidates, cfg.partitions)
-    clean = replace(cfg.preprocess, outlier_neighbors=0)
+    clean = replace(cfg.preprocess, outlier_min_neighbors=0)
     covered = np.zeros(len(surface_samples), dtype=bool)
     for cand in candidates:
         if not cell.is_reachable(cand.T_world_camera):

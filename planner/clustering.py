@@ -228,9 +228,12 @@ class _FastSearch:
         self._polish()
         # Search BICs come from float32 log-densities (error <~ 1e-4 per point): recompute every model near
         # the best exactly (float64, scikit-learn's formula) and choose among those.
-        evaluated = {k: v[0] for k, v in self.models.items()}
+        # EM can lose components (a step may land below t_lo): such models guide the search but are never
+        # chosen or reported while some model with T in [t_lo, t_hi] exists.
+        models = {k: v for k, v in self.models.items() if self.t_lo <= k <= self.t_hi} or self.models
+        evaluated = {k: v[0] for k, v in models.items()}
         best = min(evaluated.values())
-        exact = {k: bic_value(self.x, m) for k, (b, m) in self.models.items() if b <= best + _EXACT_BAND * self.n}
+        exact = {k: bic_value(self.x, m) for k, (b, m) in models.items() if b <= best + _EXACT_BAND * self.n}
         evaluated.update(exact)
         t = min(exact, key=lambda k: exact[k])
         mix = self.models[t][1]

@@ -23,9 +23,17 @@ from numpy.typing import NDArray
 from planner.candidates import propose_candidates
 from planner.config import PlannerConfig
 from planner.evaluators import EvaluationContext, ViewEvaluator, make_evaluator
-from planner.partitions import azimuth_of, default_tolerance, eligible_sectors, not_taken, sector_edges, sector_of
+from planner.partitions import (
+    azimuth_of,
+    default_tolerance,
+    eligible_sectors,
+    not_taken,
+    sector_edges,
+    sector_of,
+    stalled_sector,
+)
 from planner.partitions import select_best as select_best_view
-from planner.preprocess import preprocess, voxel_downsample
+from planner.preprocess import preprocess_frame, voxel_downsample
 from planner.registration import RegistrationResult, register
 from planner.types import DepthFrame, Intrinsics, PlanResult, Pose, VoxelClass
 from planner.voxel_map import VoxelMap
@@ -58,6 +66,7 @@ class Planner:
         self.views: list[Pose] = []
         self.cloud: NDArray[np.float64] = np.zeros((0, 3))
         self.point_counts: list[int] = []
+        self.occupied_counts: list[int] = []
         self.intrinsics: Intrinsics | None = None
         self.last_plan: PlanResult | None = None
         self._rng = np.random.default_rng(self.config.cluster.seed)
@@ -101,7 +110,7 @@ class Planner:
         timings: dict[str, float] = {}
 
         t0 = time.perf_counter()
-        points = preprocess(frame.points_world, self.voxel_map.bbox, self.config.preprocess)
+        points, dense = preprocess_frame(frame.points_world, self.voxel_map.bbox, self.config.preprocess)
         timings["preprocess"] = time.perf_counter() - t0
         if len(points) == 0:
             raise ValueError("empty frame: no point left on the object after cropping and plate removal")
@@ -113,10 +122,12 @@ class Planner:
             if registration.accepted:
                 frame = frame.with_pose(registration.correction @ frame.T_world_camera)
                 points = registration.correction.apply(points)
+                dense = registration.correction.apply(dense)
         timings["register"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
-        self.voxel_map.integrate(self._plate_as_free_space(frame), points)  # atomic: raises before changing anything
+        # every point of the kept cells marks OCCUPIED (a voxel the surface only clips may hold no centroid)
+        self.voxel_map.integrate(self._plate_as_free_space(frame), dense)  # atomic: raises before changing anything
         timings["integrate"] = time.perf_counter() - t0
 
         merged = np.concatenate([self.cloud, points]) if len(self.cloud) else points
@@ -127,6 +138,7 @@ class Planner:
             prev = self.point_counts[-1]
             growth = (len(self.cloud) - prev) / prev if prev > 0 else None
         self.point_counts.append(len(self.cloud))
+        self.occupied_counts.append(self.voxel_map.count(VoxelClass.OCCUPIED))
         self.views.append(frame.T_world_camera)
         self.intrinsics = frame.intrinsics
         return IntegrationReport(
@@ -178,6 +190,10 @@ class Planner:
         t0 = time.perf_counter()
         scanned = {sector_of(azimuth_of(view.translation, center), cfg.partitions) for view in self.views}
         allowed = eligible_sectors(scanned, cfg.partitions.sectors)
+        last = sector_of(azimuth_of(self.views[-1].translation, center), cfg.partitions)
+        leave = stalled_sector(scanned, cfg.partitions.sectors, last, self.occupied_counts, cfg.partitions.stall_growth)
+        if leave is not None:
+            allowed = allowed - {leave}
         eligible = np.array([c.sector in allowed for c in candidates], dtype=bool)
         tolerance = max(default_tolerance(candidates, center), math.radians(cfg.partitions.revisit_deg))
         eligible &= not_taken(candidates, self.views, tolerance, center=center)

@@ -2,10 +2,26 @@
 
 :func:`preprocess` crops to the bounding box B (or, before B exists, to the
 workspace cylinder above the plate), removes the plate, down-samples and drops
-statistical outliers. :func:`voxel_downsample` also keeps the accumulated cloud thin.
+isolated points (radius outlier removal). :func:`voxel_downsample` also keeps the
+accumulated cloud thin.
+
+Why a radius filter and not statistical outlier removal (mean k-NN distance
+above mean + s * std): the statistical rule always removes the tail of the
+distribution, outliers or not. On noise-free simulated frames it dropped 1.5-3.7 %
+of the points, every one on the true surface (<= 0.64 mm from the mesh): the
+edges of the visible surface and thin parts, which have fewer close neighbours.
+The voxels those points would have made OCCUPIED stayed UNKNOWN next to free
+space, a frontier that no later view can clear (a view of it drops the same
+points again), and the planner kept returning to it: armadillo coverage after 10
+views 0.967 with it, 0.983 without. The radius rule removes only points with
+fewer than ``outlier_min_neighbors`` others within ``outlier_radius``: specks,
+not surface. (Flying pixels at depth edges form dense veils that neither rule
+removes; the simulated camera does not produce them.)
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -16,7 +32,24 @@ from planner.config import PreprocessConfig
 from planner.types import BoundingBox
 
 
+class Preprocessed(NamedTuple):
+    """One frame's object points, cleaned.
+
+    points: (M, 3) float64, down-sampled (centroids) and filtered: registered and accumulated.
+    dense: (K, 3) float64, K >= M, every cropped point of a down-sampling cell that survived the filter:
+    what the voxel map marks OCCUPIED, so a voxel the surface only clips still gets its points.
+    """
+
+    points: NDArray[np.float64]
+    dense: NDArray[np.float64]
+
+
 def preprocess(points_world: ArrayLike, bbox: BoundingBox | None, config: PreprocessConfig) -> NDArray[np.float64]:
+    """``preprocess_frame(...).points``: the down-sampled, filtered points of one frame."""
+    return preprocess_frame(points_world, bbox, config).points
+
+
+def preprocess_frame(points_world: ArrayLike, bbox: BoundingBox | None, config: PreprocessConfig) -> Preprocessed:
     """The points of one frame that belong to the object.
 
     points_world: (N, 3) float64, finite (else ValueError).
@@ -24,10 +57,10 @@ def preprocess(points_world: ArrayLike, bbox: BoundingBox | None, config: Prepro
     None (first frame): keep points within ``workspace_radius`` of the turntable
     axis and below ``workspace_height``.
     Points below ``plate_clearance`` (the plate) are always dropped. What is left is
-    down-sampled to ``config.downsample`` voxels (centroids) *before* the statistical
-    outlier removal (``outlier_neighbors``, ``outlier_std``): the same cloud the
-    accumulated one would keep, at a fraction of the neighbour-search cost.
-    Returns (M, 3) float64, M <= N.
+    down-sampled to ``config.downsample`` cells (centroids) *before* the radius
+    outlier removal (``outlier_radius``, ``outlier_min_neighbors``): the same cloud the
+    accumulated one would keep, at a fraction of the neighbour-search cost. A cell's
+    points are all kept in ``dense`` or all dropped, with its centroid.
     """
     p = checked_array("points_world", points_world, (None, 3))
     if bbox is not None:
@@ -36,32 +69,37 @@ def preprocess(points_world: ArrayLike, bbox: BoundingBox | None, config: Prepro
         r2 = p[:, 0] ** 2 + p[:, 1] ** 2
         keep = (r2 <= config.workspace_radius**2) & (p[:, 2] <= config.workspace_height)
     keep &= p[:, 2] >= config.plate_clearance
-    p = p[keep]
-    if config.downsample > 0:
-        p = voxel_downsample(p, config.downsample)
-    if config.outlier_neighbors > 0:
-        p = remove_statistical_outliers(p, config.outlier_neighbors, config.outlier_std)
-    return np.array(p, dtype=np.float64)
+    dense = np.array(p[keep], dtype=np.float64)
+    if config.downsample > 0 and len(dense):
+        points, cell = _downsample(dense, config.downsample)
+    else:
+        points, cell = dense, np.arange(len(dense))
+    if config.outlier_min_neighbors > 0 and len(points):
+        kept = radius_inliers(points, config.outlier_radius, config.outlier_min_neighbors)
+        points, dense = points[kept], dense[kept[cell]]
+    return Preprocessed(np.array(points, dtype=np.float64), dense)
 
 
-def remove_statistical_outliers(points: ArrayLike, k: int, std: float) -> NDArray[np.float64]:
-    """Drop points whose mean distance to their ``k`` nearest neighbours exceeds mean + ``std`` * std-dev.
+def remove_radius_outliers(points: ArrayLike, radius: float, min_neighbors: int) -> NDArray[np.float64]:
+    """Drop points with fewer than ``min_neighbors`` other points within ``radius`` (inclusive).
 
-    points: (N, 3) float64. The mean and std-dev are over all points' mean
-    neighbour distances. With N <= k there are too few neighbours to judge:
-    the points are returned unchanged. Returns (M, 3) float64 in input order.
+    points: (N, 3) float64. radius: metres, >= 0. min_neighbors: integer >= 1.
+    Returns (M, 3) float64, the kept points in input order.
     """
     p = checked_array("points", points, (None, 3))
-    if not isinstance(k, int | np.integer) or isinstance(k, bool) or k < 1:
-        raise ValueError(f"k: must be an integer >= 1, got {k!r}")
-    if not (np.isfinite(std) and std >= 0):
-        raise ValueError(f"std: must be >= 0, got {std!r}")
-    if len(p) <= k:
-        return np.array(p, dtype=np.float64)
-    dist, _ = KDTree(p).query(p, k=int(k) + 1)  # the first neighbour is the point itself
-    mean_dist = dist[:, 1:].mean(axis=1)
-    threshold = mean_dist.mean() + std * mean_dist.std()
-    return np.array(p[mean_dist <= threshold], dtype=np.float64)
+    if not isinstance(min_neighbors, int | np.integer) or isinstance(min_neighbors, bool) or min_neighbors < 1:
+        raise ValueError(f"min_neighbors: must be an integer >= 1, got {min_neighbors!r}")
+    if not (np.isfinite(radius) and radius >= 0):
+        raise ValueError(f"radius: must be >= 0, got {radius!r}")
+    return np.array(p[radius_inliers(p, radius, min_neighbors)], dtype=np.float64)
+
+
+def radius_inliers(points: NDArray[np.float64], radius: float, min_neighbors: int) -> NDArray[np.bool_]:
+    """(N,) bool: True where a point of ``points`` (N, 3) has >= ``min_neighbors`` others within ``radius``."""
+    if len(points) == 0:
+        return np.zeros(0, dtype=bool)
+    counts = KDTree(points).query_ball_point(points, r=float(radius), return_length=True)  # includes the point
+    return np.asarray(counts) - 1 >= int(min_neighbors)
 
 
 def voxel_downsample(points: ArrayLike, size: float) -> NDArray[np.float64]:
@@ -76,6 +114,11 @@ def voxel_downsample(points: ArrayLike, size: float) -> NDArray[np.float64]:
         raise ValueError(f"size: must be >= 0, got {size!r}")
     if size == 0 or len(p) == 0:
         return np.array(p, dtype=np.float64)
+    return _downsample(p, size)[0]
+
+
+def _downsample(p: NDArray[np.float64], size: float) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """(centroids (K, 3), cell (N,) int64: the centroid index of each point) of ``voxel_downsample``."""
     keys = np.floor(p / size).astype(np.int64)
     keys -= keys.min(axis=0)
     dims = keys.max(axis=0) + 1
@@ -88,4 +131,4 @@ def voxel_downsample(points: ArrayLike, size: float) -> NDArray[np.float64]:
     sums = np.zeros((len(counts), 3))
     for axis in range(3):
         sums[:, axis] = np.bincount(inverse, weights=p[:, axis], minlength=len(counts))
-    return sums / counts[:, None]
+    return sums / counts[:, None], inverse.astype(np.int64)

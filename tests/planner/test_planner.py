@@ -100,7 +100,8 @@ def test_rays_ending_on_the_plate_carve_free_space(monkeypatch: pytest.MonkeyPat
         )
         mug_cell.move_to(Pose.look_at(eye, [0.0, 0.0, 0.08]))
         frames.append(mug_cell.capture())
-    cfg = PlannerConfig().replace(registration={"enabled": False})
+    # frontier_max_looks would also retire that ring after two looks: pin the plate rule on its own
+    cfg = PlannerConfig().replace(registration={"enabled": False}, voxel={"frontier_max_looks": 0})
 
     planner = Planner(cfg)
     carved = planner._plate_as_free_space(frames[0])
@@ -146,3 +147,32 @@ def test_revisit_radius_makes_candidates_near_taken_views_ineligible(cell) -> No
     narrow, _ = plans[0.0]
     # the default only removes the view itself: more candidates near it stay eligible
     assert sum(s.eligible for s in narrow.scores) > sum(s.eligible for s in wide.scores)
+
+
+def test_a_stalled_view_makes_its_sector_ineligible(cell) -> None:
+    """The departure of ``PartitionConfig.stall_growth``: once every sector is scanned, a view that adds
+    (almost) no OCCUPIED voxels sends the next view to another sector; with 0 every sector stays eligible."""
+    frames = []
+    for azimuth in (0.25, 0.75, 1.25, 1.75):  # one view in the middle of each sector, 30 degrees up
+        eye = 0.45 * np.array(
+            [np.cos(0.5) * np.cos(azimuth * np.pi), np.cos(0.5) * np.sin(azimuth * np.pi), np.sin(0.5)]
+        )
+        cell.move_to(Pose.look_at(eye + np.array([0.0, 0.0, 0.04]), [0.0, 0.0, 0.04]))
+        frames.append(cell.capture())
+    results = {}
+    for stall in (0.001, 0.0):
+        planner = Planner(SMALL.replace(termination={"max_views": 10}, partitions={"stall_growth": stall}))
+        for frame in frames:
+            planner.integrate(frame)
+        assert planner.occupied_counts[-1] > 1.001 * planner.occupied_counts[-2]  # the 4th view added surface
+        growing = planner.plan()
+        planner.integrate(frames[-1])  # the same view again: no new surface
+        assert planner.occupied_counts[-1] == planner.occupied_counts[-2]
+        results[stall] = (growing, planner.plan())
+    growing, stalled = results[0.001]
+    assert growing.scanned_sectors == frozenset(range(4))
+    assert growing.eligible_sectors == frozenset(range(4))  # the 4th view added surface: every sector
+    assert stalled.eligible_sectors == frozenset({0, 1, 2})  # sector 3 (the stalled view's) is left
+    assert stalled.best_index is not None and stalled.candidates[stalled.best_index].sector != 3
+    assert all(not s.eligible for s, c in zip(stalled.scores, stalled.candidates, strict=True) if c.sector == 3)
+    assert results[0.0][1].eligible_sectors == frozenset(range(4))

@@ -1,4 +1,4 @@
-"""preprocess: crop to B or the workspace, plate removal, statistical outliers; voxel_downsample."""
+"""preprocess: crop to B or the workspace, plate removal, radius outliers; voxel_downsample."""
 
 from __future__ import annotations
 
@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from planner.config import PreprocessConfig
-from planner.preprocess import preprocess, remove_statistical_outliers, voxel_downsample
+from planner.preprocess import preprocess, remove_radius_outliers, voxel_downsample
 from planner.types import BoundingBox
 
-NO_OUTLIERS = PreprocessConfig(outlier_neighbors=0, downsample=0.0)
+NO_OUTLIERS = PreprocessConfig(outlier_min_neighbors=0, downsample=0.0)
 
 
 def _grid(lo: float, hi: float, n: int, z: float = 0.05) -> np.ndarray:
@@ -37,7 +37,7 @@ def test_crop_to_bbox_with_margin() -> None:
 
 def test_workspace_cylinder_before_b_exists() -> None:
     cfg = PreprocessConfig(
-        outlier_neighbors=0, workspace_radius=0.3, workspace_height=0.6, plate_clearance=0.002, downsample=0.0
+        outlier_min_neighbors=0, workspace_radius=0.3, workspace_height=0.6, plate_clearance=0.002, downsample=0.0
     )
     pts = np.array(
         [
@@ -53,34 +53,57 @@ def test_workspace_cylinder_before_b_exists() -> None:
     np.testing.assert_array_equal(preprocess(pts, None, cfg), pts[[0, 2, 5]])
 
 
-def test_statistical_outliers_are_removed_and_the_surface_is_kept() -> None:
+def test_isolated_points_are_removed_and_the_surface_is_kept() -> None:
     surface = _grid(-0.05, 0.05, 41)  # 2.5 mm grid
-    stray = np.array([[0.0, 0.0, 0.2], [0.1, 0.1, 0.12], [-0.08, 0.02, 0.3]])
+    stray = np.array(
+        [[0.0, 0.0, 0.2], [0.1, 0.1, 0.12], [-0.08, 0.02, 0.3], [-0.08, 0.021, 0.3]]
+    )  # the last two: a pair
     pts = np.concatenate([surface, stray])
-    out = preprocess(pts, None, PreprocessConfig(outlier_neighbors=8, outlier_std=2.5, downsample=0.0))
-    assert len(out) == len(surface)
+    out = preprocess(pts, None, PreprocessConfig(outlier_radius=0.0075, outlier_min_neighbors=2, downsample=0.0))
     np.testing.assert_array_equal(out, surface)
     # disabled: the strays stay
     assert len(preprocess(pts, None, NO_OUTLIERS)) == len(pts)
 
 
-def test_remove_statistical_outliers_threshold() -> None:
-    # 10 points on a line 1 apart, one point 5 away: mean 1-NN distances are 1 (x9), 1 (end), 5.
+def test_surface_edges_and_thin_parts_are_kept() -> None:
+    """The reason for the radius rule: on a clean sampled surface nothing is an outlier.
+
+    A square, a 2.5 mm-wide strip (one row of points) and a lone thin wire: the default
+    filter keeps every point. Statistical removal (mean 16-NN distance > mean + 2.5 std)
+    drops the wire and the square's corners: surface the voxel map would then miss.
+    """
+    square = _grid(-0.05, 0.05, 41)
+    wire = np.column_stack([np.full(30, 0.1), np.linspace(-0.03, 0.0425, 30), np.full(30, 0.05)])
+    pts = np.concatenate([square, wire])
+    out = preprocess(pts, None, PreprocessConfig(downsample=0.0))
+    np.testing.assert_array_equal(out, pts)
+    # what the statistical rule would have done, for the record
+    from scipy.spatial import KDTree
+
+    dist, _ = KDTree(pts).query(pts, k=17)
+    mean = dist[:, 1:].mean(axis=1)
+    assert np.count_nonzero(mean > mean.mean() + 2.5 * mean.std()) > 0
+
+
+def test_remove_radius_outliers_counts_others_within_the_radius() -> None:
+    # points on a line 1 apart; a point 5 away from everything
     line = np.column_stack([np.arange(10.0), np.zeros(10), np.zeros(10)])
     pts = np.concatenate([line, [[9.0, 5.0, 0.0]]])
-    out = remove_statistical_outliers(pts, k=1, std=1.0)
-    np.testing.assert_array_equal(out, line)
-    # with std large enough, nothing goes
-    assert len(remove_statistical_outliers(pts, k=1, std=10.0)) == 11
-    # too few points to judge: unchanged
-    assert len(remove_statistical_outliers(pts[:3], k=5, std=1.0)) == 3
-    with pytest.raises(ValueError, match="k: must be an integer >= 1"):
-        remove_statistical_outliers(pts, k=0, std=1.0)
+    np.testing.assert_array_equal(remove_radius_outliers(pts, radius=1.0, min_neighbors=1), line)
+    # two neighbours within 1: the two ends of the line have only one
+    np.testing.assert_array_equal(remove_radius_outliers(pts, radius=1.0, min_neighbors=2), line[1:-1])
+    # radius inclusive, large enough: nothing goes
+    assert len(remove_radius_outliers(pts, radius=5.0, min_neighbors=1)) == 11
+    assert len(remove_radius_outliers(np.zeros((0, 3)), radius=1.0, min_neighbors=1)) == 0
+    with pytest.raises(ValueError, match="min_neighbors: must be an integer >= 1"):
+        remove_radius_outliers(pts, radius=1.0, min_neighbors=0)
+    with pytest.raises(ValueError, match="radius: must be >= 0"):
+        remove_radius_outliers(pts, radius=float("nan"), min_neighbors=1)
 
 
 def test_preprocess_downsamples_before_outlier_removal() -> None:
     pts = _grid(-0.01, 0.01, 50)  # 0.4 mm spacing, far denser than PreprocessConfig.downsample
-    cfg = PreprocessConfig(outlier_neighbors=0, downsample=0.0025)
+    cfg = PreprocessConfig(outlier_min_neighbors=0, downsample=0.0025)
     out = preprocess(pts, None, cfg)
     # the 20 mm square spans lattice cells -4..4 of 2.5 mm per axis: 9 x 9 centroids
     assert len(out) == 81
