@@ -188,10 +188,12 @@ class Planner:
         timings["candidates"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
-        scanned = {sector_of(azimuth_of(view.translation, center), cfg.partitions) for view in self.views}
+        view_sectors = [sector_of(azimuth_of(view.translation, center), cfg.partitions) for view in self.views]
+        scanned = set(view_sectors)
         allowed = eligible_sectors(scanned, cfg.partitions.sectors)
-        last = sector_of(azimuth_of(self.views[-1].translation, center), cfg.partitions)
-        leave = stalled_sector(scanned, cfg.partitions.sectors, last, self.occupied_counts, cfg.partitions.stall_growth)
+        leave = stalled_sector(
+            scanned, cfg.partitions.sectors, view_sectors[-1], self.occupied_counts, cfg.partitions.stall_growth
+        )
         if leave is not None:
             allowed = allowed - {leave}
         eligible = np.array([c.sector in allowed for c in candidates], dtype=bool)

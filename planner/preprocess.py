@@ -69,7 +69,7 @@ def preprocess_frame(points_world: ArrayLike, bbox: BoundingBox | None, config: 
         r2 = p[:, 0] ** 2 + p[:, 1] ** 2
         keep = (r2 <= config.workspace_radius**2) & (p[:, 2] <= config.workspace_height)
     keep &= p[:, 2] >= config.plate_clearance
-    dense = np.array(p[keep], dtype=np.float64)
+    dense = p[keep]  # float64, a new (writable) array
     if config.downsample > 0 and len(dense):
         points, cell = _downsample(dense, config.downsample)
     else:
