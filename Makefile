@@ -8,7 +8,7 @@ HOST    ?= 127.0.0.1
 PORT    ?= 8000
 PYTEST_ARGS ?=
 
-.PHONY: run test lint bench install system-deps clean
+.PHONY: run test lint bench bench-agreement install system-deps clean
 
 $(BIN)/python:
 	@command -v $(PY) >/dev/null 2>&1 || PY=python3; $${PY:-$(PY)} -m venv $(VENV) || python3 -m venv $(VENV)
@@ -49,6 +49,9 @@ lint: $(TSTAMP)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/profile_models.py --models ../shared/models --out out/bench --fidelity
+
+bench-agreement: $(STAMP)
+	$(BIN)/python benchmarks/search_agreement.py --models ../shared/models --out out/agreement
 
 clean:
 	rm -rf $(VENV) out test-output

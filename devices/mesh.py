@@ -130,3 +130,19 @@ def sample_surface(mesh: trimesh.Trimesh, n: int = 10000, seed: int = 0) -> NDAr
         raise ValueError("mesh: empty mesh (no faces)")
     sampled = trimesh.sample.sample_surface(mesh, int(n), seed=np.random.default_rng(seed))
     return np.asarray(sampled[0], dtype=np.float64)
+
+
+def turned_about_plate_axis(mesh: trimesh.Trimesh, yaw_deg: float) -> trimesh.Trimesh:
+    """A copy of a placed ``mesh`` turned ``yaw_deg`` degrees (counter-clockwise seen from above) about z.
+
+    The turntable axis is z through the plate centre, so the object stays on the plate
+    top and keeps its height; only the side that faces a given direction changes.
+    Raises MeshError for a non-finite angle.
+    """
+    if not np.isfinite(yaw_deg):
+        raise MeshError(f"yaw: must be finite, got {yaw_deg!r}")
+    a = np.radians(yaw_deg)
+    c, s = np.cos(a), np.sin(a)
+    R_world_object = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    vertices = np.asarray(mesh.vertices, dtype=np.float64) @ R_world_object.T
+    return trimesh.Trimesh(vertices, np.asarray(mesh.faces).copy(), process=False)

@@ -38,6 +38,9 @@ def add_scan_options(p: argparse.ArgumentParser, *, model_required: bool = True)
     p.add_argument("--growth-threshold", type=float, default=None, help="stop when point growth < this (0: off)")
     p.add_argument("--size", type=float, default=0.2, help="largest extent of the object, m (default 0.2)")
     p.add_argument("--up", choices=["y", "z"], default="y", help="the mesh file's up axis (default y)")
+    p.add_argument(
+        "--yaw", type=float, default=0.0, help="turn the object about the turntable axis before scanning, degrees"
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
     p.add_argument("--depth-noise", type=float, default=0.0, help="std of Gaussian depth noise, m (default 0)")
     p.add_argument("--pose-noise", type=float, default=0.0, help="std of reported-pose translation noise, m")

@@ -40,6 +40,7 @@ def simulate(
     planner_name: str = "projection",
     size: float = 0.2,
     up: str = "y",
+    yaw_deg: float = 0.0,
     seed: int = 0,
     depth_noise: float = 0.0,
     pose_noise: float = 0.0,
@@ -47,10 +48,14 @@ def simulate(
     keep_plans: bool = False,
     console: Console | None = None,
 ) -> SimScan:
-    """Load ``model``, build the simulated cell, run Algorithm 1, measure coverage."""
+    """Load ``model``, build the simulated cell, run Algorithm 1, measure coverage.
+
+    ``yaw_deg`` turns the placed object about the turntable axis (z through the plate
+    centre) before the scan: the same object, set down another way round.
+    """
     from devices.builtins import resolve_model
     from devices.config import CameraConfig, CellConfig
-    from devices.mesh import sample_surface
+    from devices.mesh import sample_surface, turned_about_plate_axis
     from devices.sim import make_sim_cell
     from nbv.reachable import reachable_coverage
 
@@ -58,7 +63,11 @@ def simulate(
         raise ValueError(f"--size: must be > 0, got {size}")
     if depth_noise < 0 or pose_noise < 0:
         raise ValueError("--depth-noise and --pose-noise must be >= 0")
+    if not math.isfinite(yaw_deg):
+        raise ValueError(f"--yaw: must be finite, got {yaw_deg}")
     name, mesh = resolve_model(model, up=up, size=size)  # type: ignore[arg-type]
+    if yaw_deg % 360.0 != 0.0:
+        mesh = turned_about_plate_axis(mesh, yaw_deg)
     camera = CameraConfig(depth_noise_std=depth_noise, pose_noise_translation=pose_noise)
     cell = make_sim_cell(mesh, camera, CellConfig(), seed=seed)
     samples = sample_surface(mesh, 10_000, seed=seed)
@@ -184,6 +193,7 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
         planner_name=args.planner,
         size=args.size,
         up=args.up,
+        yaw_deg=args.yaw,
         seed=args.seed,
         depth_noise=args.depth_noise,
         pose_noise=args.pose_noise,

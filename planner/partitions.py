@@ -16,8 +16,10 @@ every sector has been scanned, a view that added almost no surface (fewer new
 OCCUPIED voxels than ``stall_growth`` of the map) makes its own sector ineligible
 for the next view (docs/method.md, "Tried, kept as opt-in").
 
-Also here: ``not_taken`` (never propose a view direction twice) and
-``select_best`` (argmax of F over the eligible candidates).
+Also here: ``not_taken`` (candidates within an angle of a view already taken are
+not proposed; ``Planner`` uses ``PartitionConfig.revisit_deg``, 30 degrees, a
+departure measured in docs/method.md) and ``select_best`` (argmax of F over the
+eligible candidates).
 """
 
 from __future__ import annotations

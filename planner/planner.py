@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -35,7 +35,7 @@ from planner.partitions import (
 from planner.partitions import select_best as select_best_view
 from planner.preprocess import preprocess_frame, voxel_downsample
 from planner.registration import RegistrationResult, register
-from planner.types import DepthFrame, Intrinsics, PlanResult, Pose, VoxelClass
+from planner.types import Candidate, DepthFrame, Intrinsics, PlanResult, Pose, VoxelClass
 from planner.voxel_map import VoxelMap
 
 
@@ -171,6 +171,22 @@ class Planner:
 
     # ------------------------------------------------------------------ plan
 
+    def _not_revisited(
+        self, candidates: Sequence[Candidate], center: NDArray[np.float64], allowed: NDArray[np.bool_]
+    ) -> NDArray[np.bool_]:
+        """(C,) bool: candidates outside ``partitions.revisit_deg`` of every view taken.
+
+        The radius is never below half the candidate spacing (the view itself). If the
+        wider radius would leave none of the ``allowed`` (C,) candidates, only the half
+        spacing applies, so a long scan keeps going rather than running out of views.
+        """
+        spacing = default_tolerance(candidates, center)
+        wide = max(spacing, math.radians(self.config.partitions.revisit_deg))
+        fresh = not_taken(candidates, self.views, wide, center=center)
+        if wide > spacing and not np.any(fresh & allowed):
+            fresh = not_taken(candidates, self.views, spacing, center=center)
+        return fresh
+
     def plan(self, reachable: Callable[[Pose], bool] | None = None) -> PlanResult:
         """Score every candidate and pick the next best view.
 
@@ -197,10 +213,9 @@ class Planner:
         if leave is not None:
             allowed = allowed - {leave}
         eligible = np.array([c.sector in allowed for c in candidates], dtype=bool)
-        tolerance = max(default_tolerance(candidates, center), math.radians(cfg.partitions.revisit_deg))
-        eligible &= not_taken(candidates, self.views, tolerance, center=center)
         if reachable is not None:
             eligible &= np.array([bool(reachable(c.T_world_camera)) for c in candidates], dtype=bool)
+        eligible &= self._not_revisited(candidates, center, eligible)
         timings["select"] = time.perf_counter() - t0
 
         evaluation = self.evaluator.evaluate(

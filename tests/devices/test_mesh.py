@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from devices.mesh import MeshError, load_mesh, place_on_plate, sample_surface
+from devices.mesh import MeshError, load_mesh, place_on_plate, sample_surface, turned_about_plate_axis
 
 MODELS = Path(__file__).resolve().parents[3] / "shared" / "models"
 STANFORD = ["bunny.obj", "armadillo.obj", "dragon.ply", "buddha.obj"]
@@ -93,6 +93,20 @@ def test_place_on_plate_copies() -> None:
     placed = place_on_plate(box, up="z", size=1.0)
     np.testing.assert_array_equal(box.vertices, before)
     np.testing.assert_allclose(placed.bounds, [[-0.25, -0.125, 0.0], [0.25, 0.125, 1.0]])
+
+
+def test_turned_about_plate_axis_rotates_counter_clockwise_about_z_and_copies() -> None:
+    placed = place_on_plate(trimesh.creation.box(extents=(2.0, 1.0, 4.0)), up="z", size=1.0)
+    before = placed.vertices.copy()
+    turned = turned_about_plate_axis(placed, 90.0)
+    np.testing.assert_array_equal(placed.vertices, before)
+    # +x goes to +y: the box's long side now lies along y; heights are kept.
+    np.testing.assert_allclose(turned.bounds, [[-0.125, -0.25, 0.0], [0.125, 0.25, 1.0]], atol=1e-12)
+    np.testing.assert_allclose(turned.vertices[:, 0], -before[:, 1], atol=1e-12)
+    np.testing.assert_allclose(turned.vertices[:, 1], before[:, 0], atol=1e-12)
+    np.testing.assert_array_equal(turned.faces, placed.faces)
+    with pytest.raises(MeshError, match="yaw: must be finite"):
+        turned_about_plate_axis(placed, float("nan"))
 
 
 def _write(path: Path, content: bytes | str) -> Path:

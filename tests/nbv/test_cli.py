@@ -57,6 +57,7 @@ def write(path: Path, text: str) -> Path:
         (["--t-min", "9", "--t-max", "5"], "cluster.t_min (9) must be <= cluster.t_max (5)"),
         (["--candidates", "0"], "candidates.count"),
         (["--size", "0"], "--size"),
+        (["--yaw", "nan"], "--yaw"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(args: list[str], message: str, tmp_path: Path) -> None:
@@ -100,3 +101,16 @@ def test_scan_is_reproducible(tmp_path: Path) -> None:
     poses = [[it["pose"]["position"] for it in d["iterations"]] for d in docs]
     assert np.allclose(poses[0], poses[1])
     assert [it["points"] for it in docs[0]["iterations"]] == [it["points"] for it in docs[1]["iterations"]]
+
+
+def test_yaw_turns_the_object_so_the_first_view_sees_another_side(tmp_path: Path) -> None:
+    """The first view is fixed in the cell; turning an asymmetric object changes what it sees."""
+    points = []
+    for yaw in ("0", "90", "360"):
+        out = tmp_path / yaw
+        args = ["scan", "--model", "l-block", "--views", "1", *SMALL, "--no-reachable", "--yaw", yaw, "--out", str(out)]
+        assert main(args) == 0
+        doc = json.loads((out / "metrics.json").read_text())
+        points.append(doc["iterations"][0]["points"])
+    assert points[0] == points[2]
+    assert points[0] != points[1]

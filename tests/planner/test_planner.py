@@ -145,8 +145,25 @@ def test_revisit_radius_makes_candidates_near_taken_views_ineligible(cell) -> No
     assert near.sum() >= 3
     assert not any(s.eligible for s, n in zip(wide.scores, near, strict=True) if n)
     narrow, _ = plans[0.0]
-    # the default only removes the view itself: more candidates near it stay eligible
+    # 0 (the paper's rule) only removes the view itself: more candidates near it stay eligible
     assert sum(s.eligible for s in narrow.scores) > sum(s.eligible for s in wide.scores)
+
+
+def test_default_revisit_radius_is_30_degrees() -> None:
+    """The departure of docs/method.md: views within 30 degrees of a taken one are not proposed."""
+    assert PlannerConfig().partitions.revisit_deg == 30.0
+
+
+def test_revisit_radius_that_would_leave_nothing_falls_back_to_the_view_itself(cell) -> None:
+    frame = first_frame(cell)
+    eligible = {}
+    for deg in (0.0, 179.0):
+        planner = Planner(SMALL.replace(partitions={"revisit_deg": deg}))
+        planner.integrate(frame)
+        eligible[deg] = [s.eligible for s in planner.plan().scores]
+    # 179 degrees from the first view covers the whole hemisphere: only the half spacing applies
+    assert any(eligible[0.0])
+    assert eligible[179.0] == eligible[0.0]
 
 
 def test_a_stalled_view_makes_its_sector_ineligible(cell) -> None:
