@@ -51,6 +51,8 @@ class RunTask:
     config: PlannerConfig
     size: float = 0.2
     up: str = "y"
+    yaw_deg: float = 0.0
+    """The object's turn about the turntable axis, degrees (``--yaw``)."""
     depth_noise: float = 0.0
     pose_noise: float = 0.0
     reachable: bool = False
@@ -127,6 +129,7 @@ def _execute(task: RunTask, t0: float) -> RunOutcome:
         planner_name=task.planner,
         size=task.size,
         up=task.up,
+        yaw_deg=task.yaw_deg,
         seed=task.seed,
         depth_noise=task.depth_noise,
         pose_noise=task.pose_noise,
@@ -290,6 +293,7 @@ def make_tasks(args: argparse.Namespace) -> list[RunTask]:
                         config,
                         size=args.size,
                         up=args.up,
+                        yaw_deg=args.yaw,
                         depth_noise=args.depth_noise,
                         pose_noise=args.pose_noise,
                         reachable=not args.no_reachable and name == ceiling,

@@ -206,3 +206,19 @@ def test_bad_input_is_one_line_before_any_work(
     err = capsys.readouterr().err.strip()
     assert err.startswith("nbv: error: ") and message in err and "\n" not in err
     assert not out.exists()
+
+
+def test_yaw_reaches_every_run(tmp_path: Path) -> None:
+    from nbv.bench import make_tasks
+    from nbv.cli import build_parser
+
+    args = build_parser().parse_args(["bench", "--models", "l-block", "--planners", "projection,random", "--yaw", "90"])
+    tasks = make_tasks(args)
+    assert len(tasks) == 2 and all(t.yaw_deg == 90.0 for t in tasks)
+    config = PlannerConfig().replace(termination={"max_views": 1}, voxel={"resolution": 0.02}, candidates={"count": 40})
+    points = {}
+    for yaw in (0.0, 90.0):
+        outcomes: list[RunOutcome] = []
+        run_tasks([RunTask("l-block", "l", "random", 0, config, yaw_deg=yaw)], 1, outcomes.append)
+        points[yaw] = outcomes[0].rows[0]["points"]
+    assert points[0.0] != points[90.0]  # the first view sees another side of the turned object
