@@ -115,7 +115,7 @@ function paramConfig() {
   return {
     voxel: { resolution: v("p-resolution"), gamma: v("p-gamma") },
     candidates: { count: v("p-count"), parallels: v("p-parallels"), working_distance: v("p-dc") },
-    partitions: { sectors: v("p-sectors") },
+    partitions: { sectors: v("p-sectors"), revisit_deg: v("p-revisit") },
     cluster: { t_min: v("p-tmin"), t_max: v("p-tmax") },
     termination: { max_views: v("p-views") },
   };

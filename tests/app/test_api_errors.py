@@ -111,6 +111,7 @@ def test_unreachable_override_is_422_and_moves_nothing(client: TestClient, plann
         {"config": {"nonsense": {}}},
         {"config": {"cluster": {"t_min": 9, "t_max": 3}}},
         {"config": {"candidates": {"count": "many"}}},
+        {"config": {"partitions": {"revisit_deg": 180}}},
         {"seed": -1},
         {"model": "no-such-object"},
         {"model": "../../etc/passwd"},

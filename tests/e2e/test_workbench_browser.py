@@ -26,7 +26,14 @@ if TYPE_CHECKING:
 
 pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 
-SMALL_PARAMS = {"p-resolution": "0.02", "p-count": "60", "p-parallels": "4", "p-tmin": "2", "p-tmax": "6"}
+SMALL_PARAMS = {
+    "p-resolution": "0.02",
+    "p-count": "60",
+    "p-parallels": "4",
+    "p-tmin": "2",
+    "p-tmax": "6",
+    "p-revisit": "20",
+}
 
 
 def wait_for(fn, timeout: float = 30.0, interval: float = 0.1) -> Any:
@@ -76,6 +83,8 @@ def test_supervised_loop_in_the_browser(live_server: LiveServer, browser_page: P
     expect(page.locator("#state")).to_have_text("new", timeout=20_000)
     sid = page.locator("#session-select").input_value()
     assert api.get(f"/api/sessions/{sid}").json()["model"] == "l-block"
+    config = api.get(f"/api/sessions/{sid}/export").json()["config"]
+    assert config["partitions"]["revisit_deg"] == 20 and config["voxel"]["resolution"] == 0.02
     page.click("#capture")
     expect(page.locator("#state")).to_have_text("ready", timeout=30_000)
     expect(page.locator("#iteration")).to_have_text("1")
