@@ -53,3 +53,8 @@ def require(cond: bool, msg: str) -> None:
 def finite(*values: object) -> bool:
     """Whether every value is a real number (not a bool) and finite."""
     return all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in values)
+
+
+def integer(value: object) -> bool:
+    """Whether ``value`` is an int and not a bool (``True`` is an int to Python, not a count)."""
+    return isinstance(value, int) and not isinstance(value, bool)

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, TypeVar
 
-from planner._validate import finite, require
+from planner._validate import finite, integer, require
 
 
 @dataclass(frozen=True)
@@ -57,9 +57,7 @@ class VoxelConfig:
         )
         require(finite(self.floor_height), f"voxel.floor_height: must be a finite number, got {self.floor_height!r}")
         require(
-            isinstance(self.frontier_max_looks, int)
-            and not isinstance(self.frontier_max_looks, bool)
-            and 0 <= self.frontier_max_looks <= 255,
+            integer(self.frontier_max_looks) and 0 <= self.frontier_max_looks <= 255,
             f"voxel.frontier_max_looks: must be an integer in [0, 255], got {self.frontier_max_looks!r}",
         )
         require(
@@ -91,17 +89,24 @@ class ClusterConfig:
 
     def __post_init__(self) -> None:
         require(
-            isinstance(self.t_min, int) and self.t_min >= 1,
+            integer(self.t_min) and self.t_min >= 1,
             f"cluster.t_min: must be an integer >= 1, got {self.t_min!r}",
         )
         require(
-            isinstance(self.t_max, int) and self.t_max >= 1,
+            integer(self.t_max) and self.t_max >= 1,
             f"cluster.t_max: must be an integer >= 1, got {self.t_max!r}",
         )
         require(self.t_min <= self.t_max, f"cluster.t_min ({self.t_min}) must be <= cluster.t_max ({self.t_max})")
         require(self.search in ("fast", "exhaustive"), f"cluster.search: 'fast' or 'exhaustive', got {self.search!r}")
-        require(self.min_points_per_component >= 1, "cluster.min_points_per_component: must be >= 1")
-        require(self.max_iter >= 1, "cluster.max_iter: must be >= 1")
+        require(
+            integer(self.min_points_per_component) and self.min_points_per_component >= 1,
+            f"cluster.min_points_per_component: must be an integer >= 1, got {self.min_points_per_component!r}",
+        )
+        require(
+            integer(self.max_iter) and self.max_iter >= 1,
+            f"cluster.max_iter: must be an integer >= 1, got {self.max_iter!r}",
+        )
+        require(integer(self.seed) and self.seed >= 0, f"cluster.seed: must be an integer >= 0, got {self.seed!r}")
         require(finite(self.tol) and self.tol > 0, "cluster.tol: must be > 0")
         require(finite(self.reg_covar_voxels) and self.reg_covar_voxels > 0, "cluster.reg_covar_voxels: must be > 0")
 
@@ -123,11 +128,11 @@ class CandidateConfig:
 
     def __post_init__(self) -> None:
         require(
-            isinstance(self.count, int) and self.count >= 1,
+            integer(self.count) and self.count >= 1,
             f"candidates.count: must be an integer >= 1, got {self.count!r}",
         )
         require(
-            isinstance(self.parallels, int) and 1 <= self.parallels <= self.count,
+            integer(self.parallels) and 1 <= self.parallels <= self.count,
             f"candidates.parallels: must be an integer in [1, count], got {self.parallels!r}",
         )
         require(finite(self.working_distance) and self.working_distance > 0, "candidates.working_distance: must be > 0")
@@ -176,7 +181,7 @@ class PartitionConfig:
             f"partitions.stall_growth: must be in [0, 1), got {self.stall_growth!r}",
         )
         require(
-            isinstance(self.sectors, int) and self.sectors >= 1,
+            integer(self.sectors) and self.sectors >= 1,
             f"partitions.sectors: must be an integer >= 1, got {self.sectors!r}",
         )
         require(finite(self.offset_deg), "partitions.offset_deg: must be finite")
@@ -199,7 +204,7 @@ class TerminationConfig:
 
     def __post_init__(self) -> None:
         require(
-            isinstance(self.max_views, int) and self.max_views >= 1,
+            integer(self.max_views) and self.max_views >= 1,
             f"termination.max_views: must be an integer >= 1, got {self.max_views!r}",
         )
         require(
@@ -239,9 +244,7 @@ class PreprocessConfig:
             v = getattr(self, name)
             require(finite(v) and v >= 0, f"preprocess.{name}: must be >= 0, got {v!r}")
         require(
-            isinstance(self.outlier_min_neighbors, int)
-            and not isinstance(self.outlier_min_neighbors, bool)
-            and self.outlier_min_neighbors >= 0,
+            integer(self.outlier_min_neighbors) and self.outlier_min_neighbors >= 0,
             "preprocess.outlier_min_neighbors: must be an integer >= 0",
         )
 
@@ -268,7 +271,10 @@ class RegistrationConfig:
             v = getattr(self, name)
             require(finite(v) and v > 0, f"registration.{name}: must be > 0, got {v!r}")
         require(0 <= self.min_fitness <= 1, "registration.min_fitness: must be in [0, 1]")
-        require(self.max_iterations >= 1, "registration.max_iterations: must be >= 1")
+        require(
+            integer(self.max_iterations) and self.max_iterations >= 1,
+            f"registration.max_iterations: must be an integer >= 1, got {self.max_iterations!r}",
+        )
 
 
 @dataclass(frozen=True)
@@ -330,6 +336,8 @@ def merge(base: C, data: dict[str, Any], prefix: str = "") -> C:
         else:
             if isinstance(current, bool) and not isinstance(value, bool):
                 raise ValueError(f"{prefix}{key}: expected true/false, got {value!r}")
+            if isinstance(current, int | float) and not isinstance(current, bool) and isinstance(value, bool):
+                raise ValueError(f"{prefix}{key}: expected a number, got {value!r}")
             if (
                 isinstance(current, int)
                 and not isinstance(current, bool)

@@ -35,6 +35,12 @@ def test_nested_override_and_round_trip(tmp_path) -> None:
         ({"nope": {}}, "nope: unknown setting"),
         ({"candidates": {"count": "many"}}, "candidates.count: expected a number"),
         ({"scoring": {"area": "guess"}}, "scoring.area"),
+        ({"partitions": {"sectors": True}}, "partitions.sectors: expected a number, got True"),
+        ({"cluster": {"max_iter": 2.5}}, "cluster.max_iter: must be an integer >= 1, got 2.5"),
+        ({"cluster": {"min_points_per_component": 0}}, "cluster.min_points_per_component: must be an integer >= 1"),
+        ({"cluster": {"seed": -1}}, "cluster.seed: must be an integer >= 0"),
+        ({"registration": {"max_iterations": 0.5}}, "registration.max_iterations: must be an integer >= 1"),
+        ({"partitions": {"revisit_deg": 180}}, r"partitions.revisit_deg: must be in \[0, 180\)"),
     ],
 )
 def test_invalid_settings_name_the_field(data: dict, message: str) -> None:
@@ -47,3 +53,20 @@ def test_bad_toml_is_a_value_error(tmp_path) -> None:
     path.write_text("[voxel\nresolution = ")
     with pytest.raises(ValueError, match="invalid TOML"):
         PlannerConfig.from_toml(path)
+
+
+@pytest.mark.parametrize(
+    ("section", "field"),
+    [("partitions", "sectors"), ("candidates", "count"), ("cluster", "t_max"), ("termination", "max_views")],
+)
+def test_a_bool_is_not_a_count_even_when_built_directly(section: str, field: str) -> None:
+    from dataclasses import replace
+
+    part = getattr(PlannerConfig(), section)
+    with pytest.raises(ValueError, match=f"{section}.{field}: must be an integer"):
+        replace(part, **{field: True})
+
+
+def test_whole_floats_still_set_integer_fields() -> None:
+    cfg = PlannerConfig.from_dict({"cluster": {"max_iter": 50.0, "seed": 3.0}})
+    assert cfg.cluster.max_iter == 50 and isinstance(cfg.cluster.max_iter, int) and cfg.cluster.seed == 3
