@@ -7,7 +7,8 @@ Read top-down against the paper:
 - ``preprocess``  crop, plate removal, outliers, down-sampling
 - ``registration``  point-to-plane ICP with an acceptance gate
 - ``raycast``, ``voxel_map``, ``frontier``, ``bbox``   §III-C voxel structure and B's growth
-- ``clustering``, ``mvee``, ``ellipsoids``             §III-D GMM + BIC, minimum-volume ellipsoids
+- ``mixture``, ``bic_search``, ``clustering``         §III-D GMM, BIC and the choice of T
+- ``mvee``, ``ellipsoids``                             §III-D minimum-volume ellipsoids per cluster
 - ``candidates``                                       §III-B hemisphere of candidate views
 - ``projection``, ``scoring``                          §III-E dual quadric -> conic, rank weights, F
 - ``partitions``                                       §III-F global longitude partitions

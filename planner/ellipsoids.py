@@ -28,8 +28,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from planner import clustering
-from planner.clustering import Mixture
 from planner.config import ClusterConfig
+from planner.mixture import Mixture, assign
 from planner.mvee import checked_points, solve
 from planner.types import ClusterFit, Ellipsoid, EllipsoidKind
 
@@ -108,7 +108,7 @@ class EllipsoidFitter:
         x = p / self.resolution
         sel = clustering.select_mixture(x, self.config, self._mixture)
         self._mixture = sel.mixture
-        labels = clustering.assign(x, sel.mixture)
+        labels = assign(x, sel.mixture)
         t1 = time.perf_counter()
         ellipsoids = self._ellipsoids(x, labels, sel.mixture)
         t2 = time.perf_counter()

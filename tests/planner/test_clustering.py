@@ -10,16 +10,9 @@ import trimesh
 from sklearn.mixture import GaussianMixture
 from sklearn.mixture._gaussian_mixture import _compute_precision_cholesky
 
-from planner.clustering import (
-    Mixture,
-    bic_gap,
-    bic_sweep,
-    bic_value,
-    n_parameters,
-    select_mixture,
-    t_range,
-)
+from planner.clustering import bic_gap, bic_sweep, select_mixture, t_range
 from planner.config import ClusterConfig
+from planner.mixture import Mixture, bic_value, n_parameters
 
 RES = 0.01
 

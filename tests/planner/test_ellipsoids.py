@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from planner.clustering import assign
 from planner.config import ClusterConfig
 from planner.ellipsoids import EllipsoidFitter
+from planner.mixture import assign
 from planner.types import Ellipsoid
 
 RES = 0.01
