@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import open3d as o3d
 import pytest
@@ -180,15 +178,3 @@ def test_simulated_devices_satisfy_the_protocols() -> None:
 def test_plate_mesh_geometry() -> None:
     plate = plate_mesh(0.2, 0.02)
     np.testing.assert_allclose(plate.bounds, [[-0.2, -0.2, -0.02], [0.2, 0.2, 0.0]], atol=1e-12)
-
-
-def test_render_time() -> None:
-    cam = SimulatedCamera(make_builtin("mug"))
-    pose = Pose.look_at((-0.45, 0.0, 0.35), (0.0, 0.0, 0.08))
-    cam.render(pose)
-    times = []
-    for _ in range(5):
-        t0 = time.perf_counter()
-        cam.render(pose)
-        times.append(time.perf_counter() - t0)
-    assert float(np.median(times)) < 0.1  # ~15-25 ms on two cores; generous for a loaded CI machine

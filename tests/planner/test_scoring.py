@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -126,18 +125,17 @@ def test_raster_mode_agrees_with_analytic() -> None:
     assert slow[0].pixels[0] == raster_pixels(e, c.T_world_camera, K)
 
 
-def test_full_size_scene_is_fast() -> None:
+def test_full_size_scene_scores_every_view() -> None:
+    """400 candidates x 108 ellipsoids (its speed: benchmarks/bench_score.py)."""
     ells, _ = scene()
     ells = ells * 9  # 108 ellipsoids
     bbox = BoundingBox(np.array([-0.1, -0.1, 0.0]), np.array([0.1, 0.1, 0.2]))
     cands, _, _ = propose_candidates(bbox, CandidateConfig(), PartitionConfig())
     mask = np.ones(len(cands), dtype=bool)
-    score_views(ells, cands, K, ScoringConfig(), mask)
-    t0 = time.perf_counter()
     scores = score_views(ells, cands, K, ScoringConfig(), mask)
-    elapsed = time.perf_counter() - t0
     assert len(scores) == 400 and all(len(s.pixels) == 108 for s in scores)
-    assert elapsed < 0.25  # ~15 ms on a laptop; generous for a loaded CI machine
+    # nine copies of each ellipsoid: equal pixel counts, one distinct rank each
+    assert all(len(set(s.ranks.tolist())) == len(s.ranks) for s in scores)
 
 
 def test_empty_inputs() -> None:

@@ -8,8 +8,6 @@ surfaces off the 0.01 m lattice planes. "Lattice index" n means the voxel [n, n+
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -358,16 +356,15 @@ def test_projective_agrees_with_raycast(name: str, boxes: tuple, spheres: tuple,
     assert agree >= min_agree, f"{name}: {agree:.4f}"
 
 
-def test_fine_grid_agrees_and_projective_is_fast() -> None:
-    """0.005 m voxels, about 80^3 of them; agreement improves (a smaller share of voxels straddles an edge)."""
+def test_fine_grid_agrees() -> None:
+    """0.005 m voxels, about 80^3 of them; agreement improves (a smaller share of voxels straddles an edge).
+
+    The speed of projective integration is measured in benchmarks/bench_voxel_map.py."""
     k = Intrinsics(320, 240, 300.0, 300.0, 159.5, 119.5)
     frame = render(Pose.look_at([0.5, 0.14, 0.3], [0.003, 0.002, 0.125]), k, spheres=(((0.003, 0.002, 0.125), 0.125),))
     agree, _, m = _compare(frame, 0.005, check_map=False)
     assert m.classes.size >= 80**3
     assert agree >= 0.985
-    t0 = time.perf_counter()
-    observe_projective(frame, m.origin, 0.005, m.shape)
-    assert time.perf_counter() - t0 < 0.25  # measured ~10 ms; generous for loaded CI machines
 
 
 def test_floor_keeps_bounding_box_above_the_plate() -> None:
