@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import dataclasses
 import ipaddress
-import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,6 +34,7 @@ from typing import Any
 
 from devices.config import DeviceConfig
 from devices.faults import FaultConfig
+from planner._validate import finite, integer
 from planner.config import PlannerConfig, merge
 
 MIN_TOKEN_LENGTH = 12
@@ -105,11 +105,11 @@ class AppSettings:
                 raise ValueError(f"server.{name}: must be an integer in [0, 65535], got {value!r}")
         for name in ("max_upload_bytes", "max_body_bytes"):
             value = getattr(self, name)
-            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+            if not integer(value) or value < 1:
                 raise ValueError(f"server.{name}: must be a positive integer, got {value!r}")
         for name in ("capture_timeout", "move_timeout"):
             value = getattr(self, name)
-            if not (isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)):
+            if not finite(value):
                 raise ValueError(f"server.{name}: must be a number of seconds (0: no limit), got {value!r}")
             if value < 0:
                 raise ValueError(f"server.{name}: must be >= 0 (0: no limit), got {value!r}")

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
-from planner._validate import finite, require
+from planner._validate import finite, integer, require
 from planner.types import Intrinsics
 
 
@@ -47,7 +47,7 @@ class CameraConfig:
         for name in ("width", "height"):
             v = getattr(self, name)
             require(
-                isinstance(v, int) and not isinstance(v, bool) and v >= 1,
+                integer(v) and v >= 1,
                 f"camera.{name}: must be an integer >= 1, got {v!r}",
             )
         for name in ("fx", "fy"):
@@ -158,6 +158,6 @@ class DeviceConfig:
         require(finite(self.size) and self.size > 0, f"devices.size: must be > 0, got {self.size!r}")
         require(self.up in ("y", "z"), f"devices.up: 'y' or 'z', got {self.up!r}")
         require(
-            isinstance(self.seed, int) and not isinstance(self.seed, bool) and self.seed >= 0,
+            integer(self.seed) and self.seed >= 0,
             f"devices.seed: must be an integer >= 0, got {self.seed!r}",
         )

@@ -26,7 +26,6 @@ covers "the turntable rotated but the arm failed".
 
 from __future__ import annotations
 
-import math
 import threading
 from dataclasses import dataclass, field
 from typing import Any, Literal, get_args
@@ -36,6 +35,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from devices.cell import Cell
 from devices.protocols import Arm, Camera, CaptureError, DeviceError, Turntable
+from planner._validate import finite, integer
 from planner.types import DepthFrame, Intrinsics, Pose
 
 FaultKind = Literal["camera_timeout", "capture_failure", "nan_frame", "empty_frame", "arm_halfway", "turntable_error"]
@@ -60,7 +60,7 @@ class ScheduledFault:
     def __post_init__(self) -> None:
         if self.kind not in FAULT_KINDS:
             raise ValueError(f"faults.schedule.kind: one of {', '.join(FAULT_KINDS)}, got {self.kind!r}")
-        if not isinstance(self.at, int) or isinstance(self.at, bool) or self.at < 1:
+        if not integer(self.at) or self.at < 1:
             raise ValueError(f"faults.schedule.at: an integer >= 1 (the n-th action of the device), got {self.at!r}")
 
 
@@ -90,12 +90,12 @@ class FaultConfig:
     def __post_init__(self) -> None:
         for kind in FAULT_KINDS:
             p = getattr(self, kind)
-            if not (isinstance(p, int | float) and not isinstance(p, bool) and 0.0 <= p <= 1.0):
+            if not (finite(p) and 0.0 <= p <= 1.0):
                 raise ValueError(f"faults.{kind}: a probability in [0, 1], got {p!r}")
-        if not isinstance(self.seed, int) or isinstance(self.seed, bool) or not 0 <= self.seed < 2**32:
+        if not integer(self.seed) or not 0 <= self.seed < 2**32:
             raise ValueError(f"faults.seed: an integer in [0, 2^32), got {self.seed!r}")
         h = self.hang_seconds
-        if not (isinstance(h, int | float) and not isinstance(h, bool) and math.isfinite(h) and 0 < h <= 86400):
+        if not (finite(h) and 0 < h <= 86400):
             raise ValueError(f"faults.hang_seconds: in (0, 86400], got {h!r}")
         object.__setattr__(self, "schedule", tuple(self.schedule))
 
