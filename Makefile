@@ -39,12 +39,12 @@ run: system-deps $(STAMP)
 	$(BIN)/nbv serve --host $(HOST) --port $(PORT)
 
 test: system-deps $(TSTAMP)
-	$(BIN)/ruff check planner devices app nbv tests
+	$(BIN)/ruff check planner devices workbench app nbv tests
 	$(BIN)/python -m pytest -q $(PYTEST_ARGS)
 
 lint: $(TSTAMP)
-	$(BIN)/ruff check planner devices app nbv tests
-	$(BIN)/ruff format --check planner devices app nbv tests
+	$(BIN)/ruff check planner devices workbench app nbv tests
+	$(BIN)/ruff format --check planner devices workbench app nbv tests
 	$(BIN)/pyright
 
 bench: $(STAMP)

@@ -258,7 +258,7 @@ class SessionCore:
         raise DeviceFaultError(f"session {self.id}: {message}. The map is unchanged; state error: {hint}") from None
 
     def _coverage(self) -> float | None:
-        from nbv.metrics import coverage
+        from workbench.metrics import coverage
 
         return None if self.surface_samples is None else float(coverage(self.surface_samples, self.planner.cloud))
 

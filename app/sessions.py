@@ -260,7 +260,7 @@ class SessionRegistry:
         return wb, rebuilt
 
     def _rebuild(self, dormant: DormantSession) -> tuple[Workbench, Rebuilt]:
-        from nbv.metrics import coverage
+        from workbench.metrics import coverage
 
         try:
             journal = read_journal(dormant.directory)

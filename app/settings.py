@@ -34,8 +34,8 @@ from typing import Any
 
 from devices.config import DeviceConfig
 from devices.faults import FaultConfig
-from planner._validate import finite, integer
 from planner.config import PlannerConfig, merge
+from planner.validate import finite, integer
 
 MIN_TOKEN_LENGTH = 12
 

@@ -12,26 +12,16 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
-from planner._validate import finite, integer, require
 from planner.types import Intrinsics
+from planner.validate import finite, integer, require
 
 
 @dataclass(frozen=True)
-class CameraConfig:
-    """The simulated depth camera: pinhole intrinsics, working range and noise."""
+class CameraConfig(Intrinsics):
+    """The simulated depth camera: the pinhole model of :class:`planner.types.Intrinsics` (``width``,
+    ``height``, ``fx``, ``fy``, ``cx``, ``cy``, with its defaults: 640 x 480, f = 610 px, about a 55 degree
+    horizontal field of view, pixel centres at integer coordinates) plus a working range and noise."""
 
-    width: int = 640
-    """Image width, pixels."""
-    height: int = 480
-    """Image height, pixels."""
-    fx: float = 610.0
-    """Focal length along x, pixels (about a 55 degree horizontal field of view at 640 px)."""
-    fy: float = 610.0
-    """Focal length along y, pixels."""
-    cx: float = 319.5
-    """Principal point x, pixels (pixel centres are at integer coordinates)."""
-    cy: float = 239.5
-    """Principal point y, pixels."""
     min_depth: float = 0.1
     """Returns nearer than this (planar z-depth) are dropped (depth 0), metres."""
     max_depth: float = 1.5
@@ -44,18 +34,16 @@ class CameraConfig:
     """Std of the error of the reported camera orientation, per rotation-vector component, degrees."""
 
     def __post_init__(self) -> None:
-        for name in ("width", "height"):
+        for name in ("width", "height"):  # Intrinsics takes any whole number; a config refuses bools and strings
             v = getattr(self, name)
-            require(
-                integer(v) and v >= 1,
-                f"camera.{name}: must be an integer >= 1, got {v!r}",
-            )
-        for name in ("fx", "fy"):
-            v = getattr(self, name)
-            require(finite(v) and v > 0, f"camera.{name}: must be > 0, got {v!r}")
-        for name in ("cx", "cy"):
+            require(integer(v) and v >= 1, f"camera.{name}: must be an integer >= 1, got {v!r}")
+        for name in ("fx", "fy", "cx", "cy"):
             v = getattr(self, name)
             require(finite(v), f"camera.{name}: must be a finite number, got {v!r}")
+        try:
+            super().__post_init__()
+        except ValueError as exc:
+            raise ValueError(f"camera.{exc}") from None
         require(
             finite(self.min_depth) and self.min_depth >= 0, f"camera.min_depth: must be >= 0, got {self.min_depth!r}"
         )
@@ -69,7 +57,7 @@ class CameraConfig:
 
     @property
     def intrinsics(self) -> Intrinsics:
-        """The pinhole model of this camera's images."""
+        """The pinhole model alone (a plain :class:`Intrinsics`, as every frame of this camera carries)."""
         return Intrinsics(self.width, self.height, self.fx, self.fy, self.cx, self.cy)
 
 

@@ -35,8 +35,8 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from devices.cell import Cell
 from devices.protocols import Arm, Camera, CaptureError, DeviceError, Turntable
-from planner._validate import finite, integer
 from planner.types import DepthFrame, Intrinsics, Pose
+from planner.validate import finite, integer
 
 FaultKind = Literal["camera_timeout", "capture_failure", "nan_frame", "empty_frame", "arm_halfway", "turntable_error"]
 FAULT_KINDS: tuple[str, ...] = get_args(FaultKind)

@@ -13,6 +13,10 @@ from __future__ import annotations
 
 from typing import Protocol, runtime_checkable
 
+import numpy as np
+from numpy.typing import NDArray
+
+from devices.trajectory import JointTrajectory
 from planner.types import DepthFrame, Intrinsics, Pose
 
 
@@ -79,3 +83,28 @@ class Turntable(Protocol):
         ...
 
     def rotate_to(self, angle: float) -> None: ...
+
+
+@runtime_checkable
+class JointArm(Protocol):
+    """A robot arm as hardware sees it: it executes joint trajectories and reports its joints.
+
+    Inverse kinematics, collision checks and motion planning happen on our side (``devices/``), so
+    every arm, simulated or real, gets the same checks; a driver only executes what it is sent.
+    ``execute`` blocks until the trajectory's end (or raises :class:`DeviceError` with the
+    controller's reason, the arm then stopped where it was); ``stop`` halts a running motion at once
+    (callable from another thread) and is harmless when nothing moves.
+    """
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """The joints, in the order of every configuration vector."""
+        ...
+
+    def joint_positions(self) -> NDArray[np.float64]:
+        """(n,) the current configuration, radians."""
+        ...
+
+    def execute(self, trajectory: JointTrajectory) -> None: ...
+
+    def stop(self) -> None: ...

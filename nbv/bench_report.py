@@ -1,6 +1,6 @@
 """The outputs of ``nbv bench``: results.csv, runs.json, summary.md, coverage.png and time.png.
 
-Everything here works on the finished runs (:class:`nbv.bench.RunOutcome`) of one bench.
+Everything here works on the finished runs (:class:`nbv.runs.RunOutcome`) of one bench.
 Timing columns, per iteration:
 
 - ``plan_seconds``: frame in -> next view out (integration, candidates, clustering, ellipsoids,
@@ -21,10 +21,9 @@ import statistics
 from collections import defaultdict
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-if TYPE_CHECKING:
-    from nbv.bench import RunOutcome
+from nbv.runs import RunOutcome
 
 COLUMNS = (
     "model",

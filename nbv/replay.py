@@ -75,8 +75,8 @@ def _coverage_fn(journal: Any, models_dir: Path | None) -> Any:
     from app.models import load_model
     from app.settings import AppSettings, default_models_dir
     from devices.mesh import sample_surface
-    from nbv.metrics import coverage
     from planner.config import from_dict
+    from workbench.metrics import coverage
 
     header = journal.header
     if header.get("source", {}).get("kind", "sim") != "sim":

@@ -15,7 +15,7 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from nbv.cli import planner_config_from_args
+from nbv.options import planner_config_from_args
 from nbv.scan import STAGES, IterationRecord, ScanResult, run_scan
 from planner import Planner, PlannerConfig, PlanResult
 

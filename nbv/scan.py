@@ -14,9 +14,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from nbv.metrics import coverage
 from planner import Planner, PlanResult, Pose, VoxelClass
 from planner.planner import IntegrationReport
+from workbench.metrics import coverage
 
 STAGES = ("preprocess", "register", "integrate", "cluster", "ellipsoids", "candidates", "score", "select")
 PLAN_STAGES = ("integrate", "cluster", "ellipsoids", "candidates", "score", "select")

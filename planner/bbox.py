@@ -18,8 +18,8 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from planner._validate import checked_array
 from planner.types import BoundingBox
+from planner.validate import checked_array
 
 LatticeRange = tuple[NDArray[np.int64], NDArray[np.int64]]
 

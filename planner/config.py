@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, TypeVar
 
-from planner._validate import finite, integer, require
+from planner.validate import finite, integer, require
 
 
 @dataclass(frozen=True)

@@ -27,9 +27,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import KDTree
 
-from planner._validate import checked_array
 from planner.config import PreprocessConfig
 from planner.types import BoundingBox
+from planner.validate import checked_array
 
 
 class Preprocessed(NamedTuple):

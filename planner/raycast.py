@@ -26,8 +26,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from planner._validate import checked_array
 from planner.types import DepthFrame, VoxelClass
+from planner.validate import checked_array
 
 EMPTY_EPS = 1e-6
 """Metres of slack in favour of EMPTY when a voxel's exit depth equals the hit depth

@@ -31,9 +31,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from planner._validate import checked_array
 from planner.config import RegistrationConfig
 from planner.types import Pose
+from planner.validate import checked_array
 
 SOURCE_VOXEL_FRACTION = 0.5
 """ICP uses the source down-sampled to voxels of this fraction of ``max_correspondence`` (centroid per voxel)."""

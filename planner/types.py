@@ -20,7 +20,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from planner._validate import check_positive, checked_array
+from planner.validate import check_positive, checked_array
 
 EllipsoidKind = Literal["occupied", "frontier"]
 

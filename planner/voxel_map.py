@@ -40,11 +40,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from planner import bbox as bb
-from planner._validate import checked_array
 from planner.config import VoxelConfig
 from planner.frontier import relabel_frontier
 from planner.raycast import EMPTY_EPS, observe_raycast
 from planner.types import BoundingBox, DepthFrame, VoxelClass, VoxelSnapshot
+from planner.validate import checked_array
 
 
 @dataclass(frozen=True)
