@@ -14,9 +14,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from planner import Planner, PlanResult, Pose, VoxelClass
+from planner import Planner, PlanResult, Pose
 from planner.planner import IntegrationReport
 from workbench.metrics import coverage
+from workbench.summaries import voxel_counts
 
 STAGES = ("preprocess", "register", "integrate", "cluster", "ellipsoids", "candidates", "score", "select")
 PLAN_STAGES = ("integrate", "cluster", "ellipsoids", "candidates", "score", "select")
@@ -62,16 +63,19 @@ class IterationRecord:
 
 def make_record(
     report: IntegrationReport,
-    plan: PlanResult,
-    planner: Planner,
+    plan: PlanResult | None,
+    voxels: dict[str, int],
     cov: float | None,
 ) -> IterationRecord:
-    """Summarise one integrate + plan into the metrics of metrics.json."""
+    """Summarise one integrate + plan (None: no plan was made after it) into the metrics of metrics.json.
+
+    voxels: the map's class counts after the integrate (:func:`workbench.summaries.voxel_counts`).
+    """
     timings = {stage: 0.0 for stage in STAGES}
-    for source in (report.timings, plan.timings):
+    for source in (report.timings, {} if plan is None else plan.timings):
         for key, value in source.items():
             timings[key] = timings.get(key, 0.0) + value
-    fits = {fit.kind: fit for fit in plan.fits}
+    fits = {} if plan is None else {fit.kind: fit for fit in plan.fits}
     reg = report.registration
     return IterationRecord(
         index=report.iteration,
@@ -80,14 +84,12 @@ def make_record(
         points=report.n_points_total,
         plan_seconds=float(sum(timings[stage] for stage in PLAN_STAGES)),
         timings=timings,
-        n_occupied=planner.voxel_map.count(VoxelClass.OCCUPIED),
-        n_frontier=planner.voxel_map.count(VoxelClass.FRONTIER),
+        n_occupied=voxels["occupied"],
+        n_frontier=voxels["frontier"],
         t_occupied=fits["occupied"].t_chosen if "occupied" in fits else 0,
         t_frontier=fits["frontier"].t_chosen if "frontier" in fits else 0,
-        registration=None
-        if reg is None
-        else {"accepted": reg.accepted, "fitness": reg.fitness, "rmse": reg.rmse, "reason": reg.reason},
-        next_view=plan.best_index,
+        registration=None if reg is None else reg.summary(),
+        next_view=None if plan is None else plan.best_index,
         bic={kind: list(fit.bic) for kind, fit in fits.items()},
     )
 
@@ -124,7 +126,7 @@ def run_scan(
         report = planner.integrate(frame)
         plan = planner.plan(reachable=cell.is_reachable)
         cov = coverage(surface_samples, planner.cloud) if surface_samples is not None else None
-        record = make_record(report, plan, planner, cov)
+        record = make_record(report, plan, voxel_counts(planner), cov)
         records.append(record)
         if keep_plans:
             plans.append(plan)

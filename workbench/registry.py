@@ -1,4 +1,4 @@
-"""The registry of sessions: live ones (a Workbench each, with its own lock) and journaled ones from an earlier
+"""The registry of sessions: live ones (a Session each, with its own lock) and journaled ones from an earlier
 server process, listed as ``interrupted`` until ``resume`` rebuilds them. The registry's lock guards only its dicts."""
 
 from __future__ import annotations
@@ -13,18 +13,20 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from app.errors import ConflictError, NotFoundError, StorageError, UnprocessableError
-from app.journal import JournalBusyError, JournalWriter, in_use, list_journals, read_journal, sessions_dir
-from app.limits import check_config
-from app.rebuild import Rebuilt, rebuild
-from app.session_factory import SURFACE_SAMPLES, build_parts, session_devices
-from app.settings import AppSettings
-from app.state import State
-from app.workbench import Workbench
 from devices.config import DeviceConfig
 from devices.faults import FaultConfig
 from planner import PlannerConfig
 from planner.config import from_dict
+from workbench.errors import Conflict, Invalid, NotFound, StorageFault
+from workbench.factory import SURFACE_SAMPLES, SessionParts, build_parts, session_devices
+from workbench.journal.rebuild import Rebuilt, rebuild
+from workbench.journal.store import JournalBusyError, JournalWriter, in_use, list_journals, read_journal, sessions_dir
+from workbench.limits import check_config
+from workbench.record import SessionRecord
+from workbench.session import Session
+from workbench.settings import WorkbenchSettings
+from workbench.states import State
+from workbench.summaries import session_status
 
 __all__ = ["SURFACE_SAMPLES", "DormantSession", "SessionRegistry"]
 log = logging.getLogger(__name__)
@@ -36,67 +38,41 @@ class DormantSession:
 
     id: str
     directory: Path
-    model: str
-    seed: int
-    iteration: int
-    coverage: float | None
-    points: int
-    voxels: dict[str, int]
+    record: SessionRecord
+    """Derived from the journal's events (no frame is read)."""
     stopped: float
 
     def status(self) -> dict[str, Any]:
-        return {
-            "id": self.id,
-            "model": self.model,
-            "source": "journal",
-            "state": str(State.INTERRUPTED),
-            "iteration": self.iteration,
-            "coverage": self.coverage,
-            "points": self.points,
-            "voxels": self.voxels,
-            "pending_plan": None,
-            "selected": None,
-            "custom_pose": None,
-            "error": f"the server stopped during this session; POST /api/sessions/{self.id}/resume to continue it",
-            "retry": None,
-            "terminated": None,
-            "auto_remaining": 0,
-            "moves": 0,
-            "seed": self.seed,
-        }
+        return session_status(
+            self.record,
+            state=State.INTERRUPTED,
+            source="journal",
+            error=f"the server stopped during this session; POST /api/sessions/{self.id}/resume to continue it",
+        )
 
 
 def _dormant(directory: Path) -> DormantSession | None:
     journal = read_journal(directory)
     if journal.deleted:
         return None
-    captures = journal.of_kind("capture")
-    last = captures[-1] if captures else {}
+    record = SessionRecord.from_header(journal.header)
+    for event in journal.events:
+        record.apply(event)
     stopped = journal.events[-1]["time"] if journal.events else journal.header["time"]
-    return DormantSession(
-        journal.session_id,
-        directory,
-        str(journal.header["model"]["name"]),
-        int(journal.header["seed"]),
-        len(captures),
-        last.get("coverage"),
-        int(last.get("points", 0)),
-        dict(last.get("voxels") or {"occupied": 0, "frontier": 0, "unknown": 0, "empty": 0}),
-        float(stopped),
-    )
+    return DormantSession(journal.session_id, directory, record, float(stopped))
 
 
 class SessionRegistry:
     """Creates, finds, resumes and deletes sessions. ``on_create`` / ``on_delete`` hooks let the scene follow."""
 
-    def __init__(self, settings: AppSettings) -> None:
+    def __init__(self, settings: WorkbenchSettings) -> None:
         self.settings = settings
         self._lock = threading.Lock()
-        self._sessions: dict[str, Workbench] = {}
+        self._sessions: dict[str, Session] = {}
         self._dormant: dict[str, DormantSession] = {}
         self._resuming: set[str] = set()
-        self.on_create: list[Callable[[Workbench], None]] = []
-        self.on_delete: list[Callable[[Workbench], None]] = []
+        self.on_create: list[Callable[[Session], None]] = []
+        self.on_delete: list[Callable[[Session], None]] = []
         if settings.journal:
             for directory in list_journals(settings.data_dir):
                 if in_use(directory):  # live in another server on the same data directory
@@ -113,7 +89,7 @@ class SessionRegistry:
 
     def planner_config(self, overrides: dict[str, Any] | None, seed: int) -> PlannerConfig:
         """The default planner config with ``overrides`` (any subset); the seed goes to ``cluster.seed``
-        unless the overrides set it. UnprocessableError for unknown names, values out of range or beyond
+        unless the overrides set it. Invalid for unknown names, values out of range or beyond
         the API's bounds (app/limits.py)."""
         overrides = dict(overrides or {})
         cluster = overrides.get("cluster") or {}
@@ -122,7 +98,7 @@ class SessionRegistry:
         try:
             config = self.settings.planner.replace(**overrides)
         except (ValueError, TypeError) as exc:
-            raise UnprocessableError(f"config: {exc}") from None
+            raise Invalid(f"config: {exc}") from None
         check_config(config)
         return config
 
@@ -141,13 +117,13 @@ class SessionRegistry:
         seed: int = 0,
         source: dict[str, Any] | None = None,
         faults: dict[str, Any] | None = None,
-    ) -> Workbench:
+    ) -> Session:
         """A new session. 422 for a bad config, model, source or fault setting; 404 for an unknown recording."""
         planner_config = self.planner_config(config, seed)
         try:
             fault_config = self.settings.faults if faults is None else FaultConfig.from_dict(faults)
         except ValueError as exc:
-            raise UnprocessableError(str(exc)) from None
+            raise Invalid(str(exc)) from None
         name = model or self.settings.devices.model
         parts = build_parts(self.settings, name, source, seed, session_devices(self.settings, name, seed), fault_config)
         devices = session_devices(self.settings, parts.model, seed)
@@ -168,8 +144,8 @@ class SessionRegistry:
                 try:
                     journal = JournalWriter.create(self.settings.data_dir, session_id, header)
                 except OSError as exc:
-                    raise StorageError(f"cannot journal the session in the data directory ({exc.strerror})") from None
-            wb = self._workbench(session_id, parts, planner_config, devices, seed, journal)
+                    raise StorageFault(f"cannot journal the session in the data directory ({exc.strerror})") from None
+            wb = self._session(session_id, parts, planner_config, devices, seed, journal)
             with self._lock:
                 self._sessions[session_id] = wb
         finally:
@@ -179,21 +155,16 @@ class SessionRegistry:
             hook(wb)
         return wb
 
-    def _workbench(
-        self, sid: str, parts: Any, config: PlannerConfig, devices: DeviceConfig, seed: int, journal: Any
-    ) -> Workbench:
+    def _session(
+        self, sid: str, parts: SessionParts, config: PlannerConfig, devices: DeviceConfig, seed: int, journal: Any
+    ) -> Session:
         s = self.settings
-        return Workbench(
+        return Session(
             sid,
-            parts.model,
-            parts.mesh,
-            parts.cell,
+            parts,
             config,
             devices,
             seed,
-            parts.surface_samples,
-            source=parts.source,
-            injector=parts.injector,
             journal=journal,
             capture_timeout=s.capture_timeout,
             move_timeout=s.move_timeout,
@@ -201,18 +172,18 @@ class SessionRegistry:
 
     # ------------------------------------------------------------------ find
 
-    def get(self, session_id: str) -> Workbench:
+    def get(self, session_id: str) -> Session:
         """The live session; 409 for an interrupted one (resume it first), 404 for an unknown id."""
         with self._lock:
             wb = self._sessions.get(session_id)
             dormant = session_id in self._dormant
         if wb is None:
             if dormant:
-                raise ConflictError(
+                raise Conflict(
                     f"session {session_id!r} was interrupted (the server stopped); "
                     f"POST /api/sessions/{session_id}/resume"
                 )
-            raise NotFoundError(f"session {session_id!r}: unknown")
+            raise NotFound(f"session {session_id!r}: unknown")
         return wb
 
     def status(self, session_id: str) -> dict[str, Any]:
@@ -220,7 +191,7 @@ class SessionRegistry:
             dormant = self._dormant.get(session_id)
         return dormant.status() if dormant is not None else self.get(session_id).status()
 
-    def list(self) -> list[Workbench]:
+    def list(self) -> list[Session]:
         with self._lock:
             return list(self._sessions.values())
 
@@ -233,15 +204,15 @@ class SessionRegistry:
 
     # ------------------------------------------------------------------ resume
 
-    def resume(self, session_id: str) -> tuple[Workbench, Rebuilt]:
+    def resume(self, session_id: str) -> tuple[Session, Rebuilt]:
         """Rebuild an interrupted session from its journal: same frames, same config, same seed -> same map
         and same next plan. Fault injection is not re-armed. 404 unknown, 409 live or resuming, 422 damaged."""
         with self._lock:
             dormant = self._dormant.get(session_id)
             if dormant is None:
                 if session_id in self._sessions or session_id in self._resuming:
-                    raise ConflictError(f"session {session_id!r} is live; nothing to resume")
-                raise NotFoundError(f"session {session_id!r}: unknown")
+                    raise Conflict(f"session {session_id!r} is live; nothing to resume")
+                raise NotFound(f"session {session_id!r}: unknown")
             del self._dormant[session_id]
             self._resuming.add(session_id)
         try:
@@ -259,7 +230,7 @@ class SessionRegistry:
             hook(wb)
         return wb, rebuilt
 
-    def _rebuild(self, dormant: DormantSession) -> tuple[Workbench, Rebuilt]:
+    def _rebuild(self, dormant: DormantSession) -> tuple[Session, Rebuilt]:
         from workbench.metrics import coverage
 
         try:
@@ -269,21 +240,21 @@ class SessionRegistry:
             config = PlannerConfig.from_dict(header["config"])
             seed = int(header["seed"])
         except (ValueError, KeyError, TypeError) as exc:
-            raise UnprocessableError(f"session {dormant.id}: cannot resume: {exc}") from None
+            raise Invalid(f"session {dormant.id}: cannot resume: {exc}") from None
         parts = build_parts(self.settings, header["model"]["name"], header.get("source"), seed, devices, FaultConfig())
         samples = parts.surface_samples
         try:
             writer = JournalWriter.reopen(journal)  # first: it locks the journal against a second resumer
         except JournalBusyError as exc:
-            raise ConflictError(str(exc)) from None
-        wb = self._workbench(dormant.id, parts, config, devices, seed, None)
+            raise Conflict(str(exc)) from None
+        wb = self._session(dormant.id, parts, config, devices, seed, None)
         try:
             rebuilt = rebuild(
                 journal, wb.cell.is_reachable, None if samples is None else lambda c: coverage(samples, c)
             )
         except (ValueError, KeyError, TypeError) as exc:
             writer.close()
-            raise UnprocessableError(f"session {dormant.id}: cannot resume: {exc}") from None
+            raise Invalid(f"session {dormant.id}: cannot resume: {exc}") from None
         wb.restore(rebuilt)
         wb.journal = writer
         writer.append(
@@ -301,7 +272,7 @@ class SessionRegistry:
             wb = self._sessions.pop(session_id, None)
             dormant = self._dormant.pop(session_id, None) if wb is None else None
         if wb is None and dormant is None:
-            raise NotFoundError(f"session {session_id!r}: unknown")
+            raise NotFound(f"session {session_id!r}: unknown")
         if wb is not None:
             if wb.journal is not None:
                 with contextlib.suppress(OSError):
@@ -315,7 +286,7 @@ class SessionRegistry:
             except JournalBusyError as exc:
                 with self._lock:
                     self._dormant[session_id] = dormant
-                raise ConflictError(str(exc)) from None
+                raise Conflict(str(exc)) from None
             writer.append("deleted")
             writer.close()
 

@@ -2,7 +2,7 @@
 
 One viser server serves every browser; it shows one session at a time (the
 *focused* one, chosen with ``PUT /api/scene``). The controller subscribes to that
-Workbench's events and redraws what changed, always inside ``server.atomic()``
+Session's events and redraws what changed, always inside ``server.atomic()``
 and under one lock, under stable node names::
 
     /map/occupied /map/frontier /map/unknown /map/empty      voxel centres (point clouds)
@@ -16,7 +16,7 @@ and under one lock, under stable node names::
     /override/gizmo (+ /override/gizmo/frustum)              custom-pose transform gizmo
 
 Every layer can be hidden (``set_layers``); GUI callbacks (a click on a
-candidate, a gizmo drag) call the Workbench, never the planner.
+candidate, a gizmo drag) call the Session, never the planner.
 """
 
 from __future__ import annotations
@@ -30,9 +30,8 @@ import numpy as np
 import trimesh
 import viser
 
-from app.errors import WorkbenchError
-from app.scene_camera import client_cameras, set_camera
-from app.scene_geometry import (
+from app.scene.camera import client_cameras, set_camera
+from app.scene.geometry import (
     COLORS,
     DEFAULT_LAYERS,
     GROUPS,
@@ -46,8 +45,10 @@ from app.scene_geometry import (
     sector_label_positions,
     sector_segments,
 )
-from app.workbench import SceneData, Workbench
 from planner import Pose
+from workbench.errors import Conflict, Invalid, NotFound, WorkbenchError
+from workbench.session import Session
+from workbench.states import SceneData
 
 log = logging.getLogger(__name__)
 
@@ -63,7 +64,7 @@ class SceneController:
         self.score_range = (0.0, 1.0)
         self._lock = threading.RLock()
         self._handles: dict[str, viser.SceneNodeHandle] = {}
-        self._session: Workbench | None = None
+        self._session: Session | None = None
         self._data: SceneData | None = None
         server.scene.set_up_direction("+z")
         server.scene.configure_default_lights(enabled=True, cast_shadow=False)
@@ -78,10 +79,10 @@ class SceneController:
     # ------------------------------------------------------------------ focus and events
 
     @property
-    def session(self) -> Workbench | None:
+    def session(self) -> Session | None:
         return self._session
 
-    def focus(self, wb: Workbench | None) -> None:
+    def focus(self, wb: Session | None) -> None:
         """Show ``wb`` (None: an empty scene) and follow its events."""
         with self._lock:
             old = self._session
@@ -94,7 +95,7 @@ class SceneController:
             if wb is not None:
                 self._redraw(wb.scene_data(), "all")
 
-    def _on_event(self, wb: Workbench, event: str) -> None:
+    def _on_event(self, wb: Session, event: str) -> None:
         if wb is not self._session or event == "state":
             return
         self._redraw(wb.scene_data(), event)
@@ -121,7 +122,7 @@ class SceneController:
         """Show / hide layers by name; ValueError for an unknown name (nothing changes then)."""
         unknown = set(changes) - set(self.layers)
         if unknown:
-            raise ValueError(f"layers: unknown {sorted(unknown)} (known: {', '.join(self.layers)})")
+            raise Invalid(f"layers: unknown {sorted(unknown)} (known: {', '.join(self.layers)})")
         with self._lock, self.server.atomic():
             self.layers.update({k: bool(v) for k, v in changes.items()})
             for layer in changes:
@@ -153,14 +154,14 @@ class SceneController:
     def look_at_candidate(self, index: int, distance: float = 0.3) -> int:
         """Point every connected client's camera at candidate ``index`` from outside the hemisphere.
 
-        Returns the number of clients moved. ValueError without a plan or for a bad index.
+        Returns the number of clients moved. Conflict without a plan, NotFound for a bad index.
         """
         with self._lock:
             data = self._data
             if data is None or data.plan is None:
-                raise ValueError("no plan is drawn")
+                raise Conflict("no plan is drawn")
             if not 0 <= index < len(data.plan.candidates):
-                raise ValueError(f"candidate {index}: out of range")
+                raise NotFound(f"candidate {index}: out of range")
             target = data.plan.candidates[index].position
             eye = outward_camera(target, data.plan.hemisphere_center, distance)
         return self.set_camera(eye, target)
@@ -271,7 +272,7 @@ class SceneController:
         self._put("/candidates", handle)
 
     def _on_candidate_click(self, event: viser.SceneNodePointerEvent) -> None:
-        """A click on a candidate marker selects it in the Workbench (viser thread pool, no lock held)."""
+        """A click on a candidate marker selects it in the Session (viser thread pool, no lock held)."""
         wb, data = self._session, self._data
         if wb is None or data is None or data.plan is None:
             return

@@ -9,8 +9,8 @@ machine down. The operator's own TOML config is not bounded.
 
 from __future__ import annotations
 
-from app.errors import UnprocessableError
 from planner import PlannerConfig
+from workbench.errors import Invalid
 
 MAX_GRID_CELLS_PER_AXIS = 300
 """``voxel.max_extent / voxel.resolution`` at most this: a grid of at most 300^3 = 27 M voxels."""
@@ -38,15 +38,15 @@ BOUNDS: dict[str, tuple[float, float]] = {
 
 
 def check_config(config: PlannerConfig) -> None:
-    """UnprocessableError (422) naming the first field outside ``BOUNDS`` or a grid that is too fine."""
+    """Invalid (422) naming the first field outside ``BOUNDS`` or a grid that is too fine."""
     for name, (low, high) in BOUNDS.items():
         section, key = name.split(".")
         value = getattr(getattr(config, section), key)
         if not low <= value <= high:
-            raise UnprocessableError(f"config: {name} must be in [{low:g}, {high:g}] over the API, got {value!r}")
+            raise Invalid(f"config: {name} must be in [{low:g}, {high:g}] over the API, got {value!r}")
     cells = config.voxel.max_extent / config.voxel.resolution
     if cells > MAX_GRID_CELLS_PER_AXIS:
-        raise UnprocessableError(
+        raise Invalid(
             f"config: voxel.max_extent / voxel.resolution = {cells:.0f} voxels per axis, "
             f"more than {MAX_GRID_CELLS_PER_AXIS} (coarser resolution or smaller max_extent)"
         )

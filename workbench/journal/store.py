@@ -24,10 +24,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from devices.frames import fsync_dir, load_frame, save_frame
 from planner import DepthFrame
+from workbench.jsonable import jsonable
 
 JOURNAL_FORMAT = "nbv-journal"
 JOURNAL_VERSION = 1
@@ -40,18 +39,9 @@ def sessions_dir(data_dir: Path) -> Path:
     return Path(data_dir) / "sessions"
 
 
-def _jsonable(value: Any) -> Any:
-    import math
-
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, np.generic):
-        return _jsonable(value.item())
-    return value
+def make_event(seq: int, kind: str, data: dict[str, Any]) -> dict[str, Any]:
+    """The event ``{"seq", "time", "kind", **data}`` as the journal stores it (data made JSON-ready)."""
+    return {"seq": seq, "time": time.time(), "kind": kind, **jsonable(data)}
 
 
 class JournalBusyError(ValueError):
@@ -103,7 +93,7 @@ class JournalWriter:
     def append(self, kind: str, **data: Any) -> dict[str, Any]:
         """Append one event ``{"seq", "time", "kind", **data}`` and make it durable; returns it."""
         with self._lock:
-            event = {"seq": self._seq, "time": time.time(), "kind": kind, **_jsonable(data)}
+            event = make_event(self._seq, kind, data)
             line = (json.dumps(event, separators=(",", ":"), allow_nan=False) + "\n").encode("utf-8")
             os.write(self._fd, line)
             if self.fsync:

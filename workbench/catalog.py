@@ -16,8 +16,8 @@ from typing import Any, Literal
 
 import trimesh
 
-from app.errors import NotFoundError, TooLargeError, UnprocessableError
-from app.settings import AppSettings
+from workbench.errors import Invalid, NotFound, TooLarge
+from workbench.settings import WorkbenchSettings
 
 ModelKind = Literal["builtin", "file", "upload"]
 UPLOAD_PREFIX = "uploads/"
@@ -58,11 +58,11 @@ def _files(directory: Path) -> list[Path]:
     )
 
 
-def upload_dir(settings: AppSettings) -> Path:
+def upload_dir(settings: WorkbenchSettings) -> Path:
     return settings.data_dir / "uploads"
 
 
-def list_models(settings: AppSettings) -> list[ModelInfo]:
+def list_models(settings: WorkbenchSettings) -> list[ModelInfo]:
     """Built-ins first, then the models directory, then uploads."""
     from devices.builtins import BUILTIN_OBJECTS
 
@@ -77,20 +77,20 @@ def list_models(settings: AppSettings) -> list[ModelInfo]:
     return models
 
 
-def find_model(settings: AppSettings, name: str) -> ModelInfo:
-    """The catalogue entry called ``name``; NotFoundError lists what exists."""
+def find_model(settings: WorkbenchSettings, name: str) -> ModelInfo:
+    """The catalogue entry called ``name``; NotFound lists what exists."""
     models = list_models(settings)
     for info in models:
         if info.name == name:
             return info
     known = ", ".join(m.name for m in models)
-    raise NotFoundError(f"model {name!r}: unknown (known: {known})")
+    raise NotFound(f"model {name!r}: unknown (known: {known})")
 
 
-def load_model(settings: AppSettings, name: str) -> trimesh.Trimesh:
+def load_model(settings: WorkbenchSettings, name: str) -> trimesh.Trimesh:
     """The placed mesh (on the plate, scaled to ``devices.size``) of model ``name``.
 
-    NotFoundError for an unknown name, UnprocessableError for a file that is not a usable mesh.
+    NotFound for an unknown name, Invalid for a file that is not a usable mesh.
     """
     from devices.builtins import make_builtin
     from devices.mesh import load_mesh
@@ -103,31 +103,29 @@ def load_model(settings: AppSettings, name: str) -> trimesh.Trimesh:
         assert info.path is not None
         return load_mesh(info.path, up=settings.devices.up, size=size)
     except ValueError as exc:
-        raise UnprocessableError(f"model {name!r}: {exc}") from None
+        raise Invalid(f"model {name!r}: {exc}") from None
 
 
 _SAFE = re.compile(r"[^A-Za-z0-9_.-]+")
 
 
-def save_upload(settings: AppSettings, filename: str, data: bytes) -> ModelInfo:
+def save_upload(settings: WorkbenchSettings, filename: str, data: bytes) -> ModelInfo:
     """Store an uploaded mesh under ``data_dir/uploads`` after checking it loads.
 
     The stored name is the sanitised stem plus a content hash, so two uploads
-    never overwrite each other and the name carries no path. TooLargeError over
-    ``max_upload_bytes``; UnprocessableError for an unsupported or unusable file
+    never overwrite each other and the name carries no path. TooLarge over
+    ``max_upload_bytes``; Invalid for an unsupported or unusable file
     (nothing is kept then).
     """
     from devices.mesh import load_mesh
 
     if len(data) > settings.max_upload_bytes:
-        raise TooLargeError(f"upload: {len(data)} bytes is over the limit of {settings.max_upload_bytes} bytes")
+        raise TooLarge(f"upload: {len(data)} bytes is over the limit of {settings.max_upload_bytes} bytes")
     if not data:
-        raise UnprocessableError("upload: empty file")
+        raise Invalid("upload: empty file")
     suffix = Path(filename).suffix.lower()
     if suffix not in _suffixes():
-        raise UnprocessableError(
-            f"upload: unsupported file type {suffix or '(none)'!r} (supported: {', '.join(_suffixes())})"
-        )
+        raise Invalid(f"upload: unsupported file type {suffix or '(none)'!r} (supported: {', '.join(_suffixes())})")
     stem = _SAFE.sub("_", Path(filename).stem)[:40].strip("._") or "mesh"
     digest = hashlib.sha256(data).hexdigest()[:10]
     directory = upload_dir(settings)
@@ -139,6 +137,6 @@ def save_upload(settings: AppSettings, filename: str, data: bytes) -> ModelInfo:
         load_mesh(tmp, up=settings.devices.up, size=settings.devices.size)
     except ValueError as exc:
         tmp.unlink(missing_ok=True)
-        raise UnprocessableError(f"upload {filename!r}: {str(exc).replace(str(tmp), 'file')}") from None
+        raise Invalid(f"upload {filename!r}: {str(exc).replace(str(tmp), 'file')}") from None
     tmp.replace(final)
     return ModelInfo(UPLOAD_PREFIX + final.name, "upload", f"uploaded {filename}", final)

@@ -25,14 +25,14 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from app.errors import NotFoundError, UnprocessableError
-from app.journal import SESSION_ID, list_journals, read_journal
-from app.models import find_model, load_model
-from app.settings import AppSettings
 from devices.cell import Cell
 from devices.config import DeviceConfig
 from devices.faults import FaultConfig, FaultInjector, with_faults
 from planner import DepthFrame
+from workbench.catalog import find_model, load_model
+from workbench.errors import Invalid, NotFound
+from workbench.journal.store import SESSION_ID, list_journals, read_journal
+from workbench.settings import WorkbenchSettings
 
 SURFACE_SAMPLES = 10_000
 """Points sampled on the ground-truth mesh to measure coverage (simulation only)."""
@@ -52,11 +52,11 @@ class SessionParts:
     injector: FaultInjector
 
 
-def recordings_dir(settings: AppSettings) -> Path:
+def recordings_dir(settings: WorkbenchSettings) -> Path:
     return settings.data_dir / "recordings"
 
 
-def list_recordings(settings: AppSettings) -> list[str]:
+def list_recordings(settings: WorkbenchSettings) -> list[str]:
     """Names of the recording folders directly inside ``data_dir/recordings`` (no symlinks, no dot names)."""
     root = recordings_dir(settings)
     if not root.is_dir():
@@ -64,17 +64,18 @@ def list_recordings(settings: AppSettings) -> list[str]:
     return sorted(p.name for p in root.iterdir() if RECORDING_NAME.match(p.name) and p.is_dir() and not p.is_symlink())
 
 
-def _ground_truth(settings: AppSettings, name: str, seed: int) -> tuple[trimesh.Trimesh, NDArray[np.float64]]:
+def ground_truth(settings: WorkbenchSettings, name: str, seed: int) -> tuple[trimesh.Trimesh, NDArray[np.float64]]:
+    """The mesh of model ``name`` and ``SURFACE_SAMPLES`` points on it (seeded). NotFound / Invalid."""
     from devices.mesh import sample_surface
 
     mesh = load_model(settings, name)
     try:
         return mesh, sample_surface(mesh, SURFACE_SAMPLES, seed=seed)
     except ValueError as exc:
-        raise UnprocessableError(f"model {name!r}: {exc}") from None
+        raise Invalid(f"model {name!r}: {exc}") from None
 
 
-def replay_frames(settings: AppSettings, source: dict[str, Any]) -> tuple[list[DepthFrame], str, str | None]:
+def replay_frames(settings: WorkbenchSettings, source: dict[str, Any]) -> tuple[list[DepthFrame], str, str | None]:
     """(frames, label, ground-truth model name or None) of a replay source. 404 unknown name, 422 bad data."""
     from devices.replay import load_recording
 
@@ -82,30 +83,28 @@ def replay_frames(settings: AppSettings, source: dict[str, Any]) -> tuple[list[D
         name = str(source["recording"])
         if name not in list_recordings(settings):  # a lookup among what exists, never a path join
             known = ", ".join(list_recordings(settings)) or "none"
-            raise NotFoundError(f"recording {name!r}: unknown (known: {known})")
+            raise NotFound(f"recording {name!r}: unknown (known: {known})")
         try:
             return load_recording(recordings_dir(settings) / name), f"replay:{name}", None
         except ValueError as exc:
-            raise UnprocessableError(
-                f"recording {name!r}: {str(exc).replace(str(settings.data_dir), '<data>')}"
-            ) from None
+            raise Invalid(f"recording {name!r}: {str(exc).replace(str(settings.data_dir), '<data>')}") from None
     session = str(source.get("session") or "")
     folders = {p.name: p for p in list_journals(settings.data_dir)} if SESSION_ID.match(session) else {}
     if session not in folders:
-        raise NotFoundError(f"journaled session {session!r}: unknown")
+        raise NotFound(f"journaled session {session!r}: unknown")
     try:
         journal = read_journal(folders[session])
         frames = [journal.frame(e) for e in journal.of_kind("capture") if e.get("frame")]
     except ValueError as exc:
-        raise UnprocessableError(f"journaled session {session!r}: {exc}") from None
+        raise Invalid(f"journaled session {session!r}: {exc}") from None
     if not frames:
-        raise UnprocessableError(f"journaled session {session!r}: no frame to replay")
+        raise Invalid(f"journaled session {session!r}: no frame to replay")
     truth = journal.header.get("model", {}).get("name")
     return frames, f"replay:{session}", truth if journal.header.get("source", {}).get("kind") == "sim" else None
 
 
 def build_parts(
-    settings: AppSettings,
+    settings: WorkbenchSettings,
     model: str | None,
     source: dict[str, Any] | None,
     seed: int,
@@ -121,13 +120,13 @@ def build_parts(
         name = model or settings.devices.model
         try:
             info = find_model(settings, name)
-        except NotFoundError as exc:  # a bad parameter of this request, not an unknown resource
-            raise UnprocessableError(exc.detail) from None
-        mesh, samples = _ground_truth(settings, name, seed)
+        except NotFound as exc:  # a bad parameter of this request, not an unknown resource
+            raise Invalid(exc.detail) from None
+        mesh, samples = ground_truth(settings, name, seed)
         try:
             cell = make_sim_cell(mesh, devices.camera, devices.cell, seed=seed)
         except ValueError as exc:
-            raise UnprocessableError(f"model {name!r}: {exc}") from None
+            raise Invalid(f"model {name!r}: {exc}") from None
         model_kind = info.kind
     elif kind == "replay":
         from devices.replay import ReplayCell
@@ -135,19 +134,19 @@ def build_parts(
         frames, name, truth = replay_frames(settings, source)
         mesh, samples = trimesh.Trimesh(), None
         if truth is not None:
-            with contextlib.suppress(NotFoundError, UnprocessableError):  # gone: no coverage, the replay still works
-                mesh, samples = _ground_truth(settings, truth, seed)
+            with contextlib.suppress(NotFound, Invalid):  # gone: no coverage, the replay still works
+                mesh, samples = ground_truth(settings, truth, seed)
         try:
             cell = ReplayCell(frames, devices.cell, source.get("mode", "sequence"))
         except ValueError as exc:
-            raise UnprocessableError(f"{name}: {exc}") from None
+            raise Invalid(f"{name}: {exc}") from None
         model_kind = "replay"
     else:
-        raise UnprocessableError(f"source.kind: 'sim' or 'replay', got {kind!r}")
+        raise Invalid(f"source.kind: 'sim' or 'replay', got {kind!r}")
     injector = FaultInjector(faults)
     with_faults(cell, injector)
     return SessionParts(name, model_kind, mesh, cell, samples, source, injector)
 
 
-def session_devices(settings: AppSettings, model: str, seed: int) -> DeviceConfig:
+def session_devices(settings: WorkbenchSettings, model: str, seed: int) -> DeviceConfig:
     return dataclasses.replace(settings.devices, model=model, seed=seed)

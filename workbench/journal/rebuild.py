@@ -19,11 +19,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from app.journal import Journal
-from app.records import SessionLog
-from app.state import PendingPlan
-from planner import Planner, PlannerConfig, PlanResult, Pose, VoxelClass
+from planner import Planner, PlannerConfig, PlanResult, Pose
 from planner.planner import IntegrationReport
+from workbench.journal.store import Journal
+from workbench.record import SessionRecord
+from workbench.states import PendingPlan
+from workbench.summaries import best_of, capture_fields, plan_fields, voxel_counts
 
 SCORE_RTOL = 1e-9
 """Relative tolerance of a replayed score (the same computation on the same build is exact)."""
@@ -31,28 +32,6 @@ COVERAGE_ATOL = 1e-3
 """Absolute tolerance of a replayed coverage: open3d's ICP sums in parallel, so a pose can differ in its last
 bits when the original ran beside other sessions; a few of the 10 000 surface samples at the 5 mm radius may
 flip. Points and voxel counts are still compared exactly."""
-
-
-def voxel_counts(planner: Planner) -> dict[str, int]:
-    vm = planner.voxel_map
-    return {
-        "occupied": vm.count(VoxelClass.OCCUPIED),
-        "frontier": vm.count(VoxelClass.FRONTIER),
-        "unknown": vm.count(VoxelClass.UNKNOWN),
-        "empty": vm.count(VoxelClass.EMPTY),
-    }
-
-
-def best_of(plan: PlanResult) -> dict[str, Any] | None:
-    """``{"index", "score", "pose"}`` of the plan's best view, or None."""
-    best = plan.best_index
-    if best is None:
-        return None
-    return {
-        "index": best,
-        "score": float(plan.scores[best].score),
-        "pose": plan.candidates[best].T_world_camera.to_dict(),
-    }
 
 
 @dataclass
@@ -72,7 +51,7 @@ class Rebuilt:
 
     planner: Planner
     config: PlannerConfig
-    log: SessionLog
+    record: SessionRecord
     captures: list[ReplayedCapture]
     pending: PendingPlan | None
     last: PendingPlan | None
@@ -103,8 +82,7 @@ def rebuild(
     header = journal.header
     config = PlannerConfig.from_dict(header["config"])
     planner = Planner(config)
-    log = SessionLog(journal.session_id, str(header["model"]["name"]), config.to_dict(), int(header["seed"]))
-    log.created = float(header["time"])
+    record = SessionRecord.from_header(header)
     captures: list[ReplayedCapture] = []
     mismatches: list[str] = []
     pending: PendingPlan | None = None
@@ -122,7 +100,7 @@ def rebuild(
         if kind == "config":
             config = config.replace(**ev["changes"])
             planner.config = config
-            log.config = config.to_dict()
+            record.apply(ev)
         elif kind == "capture":
             it = int(ev["iteration"])
             report = planner.integrate(journal.frame(ev))
@@ -136,8 +114,8 @@ def rebuild(
                 differ(f"capture {it}: voxel counts", ev["voxels"], voxels)
             if cov is not None and ev.get("coverage") is not None and abs(cov - ev["coverage"]) > COVERAGE_ATOL:
                 differ(f"capture {it}: coverage", ev["coverage"], cov)
-            record = log.iteration(report, cov, {"kind": ev.get("decision"), "plan_id": ev.get("plan_id")})
-            record["time"] = ev["time"]
+            # a journal of an older build lacks some fields: the replay supplies them, the journal's values win
+            record.apply({**capture_fields(report, voxels, cov), **ev})
             captures.append(ReplayedCapture(ev, report, voxels, cov))
             if in_flight is not None:
                 used.add(in_flight.plan_id)
@@ -158,22 +136,17 @@ def rebuild(
             if pending is not None:
                 stale.add(pending.plan_id)
             pending = last = entry
-            log.plan(entry.plan_id, plan)["time"] = ev["time"]
+            record.apply({**plan_fields(plan), **ev})
             if captures:
                 captures[-1].plans.append((ev, plan))
-        elif kind in ("decision", "retry"):
-            if kind == "decision":
-                log.decision({k: v for k, v in ev.items() if k not in ("seq", "kind")} | {"kind": ev["decision"]})
-            if pending is not None and ev.get("plan_id") == pending.plan_id:
+        else:
+            record.apply(ev)
+            if kind in ("decision", "retry") and pending is not None and ev.get("plan_id") == pending.plan_id:
                 in_flight, pending = pending, None
-        elif kind == "error":
-            log.event("error", message=ev.get("message"))
-            if in_flight is not None and ev.get("restored_plan") == in_flight.plan_id:
+            elif kind == "error" and in_flight is not None and ev.get("restored_plan") == in_flight.plan_id:
                 pending, in_flight = in_flight, None
-        elif kind not in ("session", "resume"):
-            log.event(kind, **{k: v for k, v in ev.items() if k not in ("seq", "time", "kind")})
     interrupted = None
     if in_flight is not None:  # killed between the decision and its capture: the step never completed
         interrupted = in_flight.plan_id
         pending = in_flight
-    return Rebuilt(planner, config, log, captures, pending, last, used, stale, mismatches, interrupted, device_state)
+    return Rebuilt(planner, config, record, captures, pending, last, used, stale, mismatches, interrupted, device_state)
