@@ -16,8 +16,11 @@ from __future__ import annotations
 
 import math
 import statistics
-from collections.abc import Hashable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import TypeVar
+
+K = TypeVar("K")
 
 THRESHOLDS = (0.90, 0.95, 0.98)
 """Fractions of the ceiling for the views-to-reach columns (``views_to_90`` ...)."""
@@ -115,8 +118,8 @@ class Paired:
 
 
 def paired_comparison(
-    planner: Mapping[Hashable, float],
-    reference: Mapping[Hashable, float],
+    planner: Mapping[K, float],
+    reference: Mapping[K, float],
     *,
     higher_is_better: bool = True,
     tie: float = 0.0,
