@@ -148,6 +148,22 @@ def _pool_pass(tasks: Sequence[RunTask], jobs: int, done: Done) -> list[RunTask]
 # ---------------------------------------------------------------- dask
 
 
+def check_reachable(address: str, timeout: float) -> None:
+    """OSError (one line) when nothing accepts TCP connections at ``address`` (``tcp://host:port``), so a
+    wrong address fails in seconds instead of after the Dask client's retries."""
+    import socket
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(address if "://" in address else f"tcp://{address}")
+    if parts.scheme not in ("tcp", "tls") or parts.hostname is None or parts.port is None:
+        raise OSError(f"expected tcp://host:port, got {address!r}")
+    try:
+        with socket.create_connection((parts.hostname, parts.port), timeout=timeout):
+            pass
+    except OSError as exc:
+        raise OSError(f"no Dask scheduler at {address} ({exc.strerror or exc})") from None
+
+
 def run_dask(
     tasks: Sequence[RunTask],
     meshes: Mapping[str, MeshPayload],
@@ -174,6 +190,7 @@ def run_dask(
         )
         client = Client(cluster)
     else:
+        check_reachable(address, min(connect_timeout, 5.0))
         client = Client(address, timeout=connect_timeout)
     try:
         scattered = {label: client.scatter(mesh, hash=False) for label, mesh in meshes.items()}
