@@ -66,9 +66,6 @@ class CeilingConfig:
     sample no view sees (area / spacing^2 probes, at most ``max_probes``)."""
     max_probes: int = 400_000
     """At most this many probes (a huge surface gets a coarser probe spacing)."""
-    probe_views: int = 0
-    """Probes are cast from at most this many views, spread over the hemisphere (0: every view). A patch
-    next to a hidden sample is seen by many views or none, so a spread subset finds it as well."""
     rays_per_batch: int = 50_000
     """Rays per open3d call (bounds the memory: 24 bytes a ray)."""
 
@@ -81,7 +78,6 @@ class CeilingConfig:
         require(integer(self.sample_seed) and self.sample_seed >= 0, "ceiling.sample_seed: must be an integer >= 0")
         require(self.probe_spacing > 0, f"ceiling.probe_spacing: must be > 0, got {self.probe_spacing!r}")
         require(integer(self.max_probes) and self.max_probes >= 1, "ceiling.max_probes: must be an integer >= 1")
-        require(integer(self.probe_views) and self.probe_views >= 0, "ceiling.probe_views: must be an integer >= 0")
         require(integer(self.rays_per_batch) and self.rays_per_batch >= 1, "ceiling.rays_per_batch: must be >= 1")
 
 
