@@ -115,7 +115,8 @@ def write_results(out: Path, outcomes: Sequence[RunOutcome], ceilings: Ceilings 
 
 
 def _grid(n: int) -> tuple[int, int]:
-    cols = min(n, 3)
+    """(rows, columns) of the panel grid: near square, at most three columns."""
+    cols = min(3, math.ceil(math.sqrt(n)))
     return math.ceil(n / cols), cols
 
 
@@ -175,7 +176,8 @@ def plot(
             if name == "ratio":
                 for level in (0.9, 0.95):
                     ax.axhline(level, ls=":", lw=0.8, color="0.5")
-                ax.set_ylim(0.0, 1.02)
+                low = min((y for line in ax.get_lines() for y in line.get_ydata()), default=0.0)  # type: ignore[union-attr]
+                ax.set_ylim(max(0.0, math.floor(10 * (float(low) - 0.05)) / 10), 1.02)
                 ax.set_ylabel("coverage / ceiling")
             elif name == "coverage":
                 values = [v for (m, _), v in ceilings.items() if m == model]
@@ -237,11 +239,13 @@ def _ratio_panel(
 def write_report(
     out: Path, outcomes: Sequence[RunOutcome], meta: dict[str, Any], ceilings: Ceilings | None = None
 ) -> None:
-    """results.csv, runs.json, summary.md, the plots and report.html (the summary and plots in one file)."""
+    """results.csv, runs.json, meta.json (the bench's settings and wall times), summary.md, the plots and
+    report.html (the summary and plots in one file)."""
     from nbv.bench_html import report_html
 
     ceilings = ceilings or {}
     write_results(out, outcomes, ceilings, meta["views"])
+    _atomic_write(out / "meta.json", json.dumps(meta, indent=1))
     summary = summary_markdown(outcomes, meta, ceilings)
     _atomic_write(out / "summary.md", summary)
     images = plot(out, outcomes, meta["models"], meta["planners"], ceilings, meta["views"])
