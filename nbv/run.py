@@ -47,17 +47,21 @@ def simulate(
     reachable: bool = True,
     keep_plans: bool = False,
     console: Console | None = None,
+    mesh: Any = None,
 ) -> SimScan:
     """Load ``model``, build the simulated cell, run Algorithm 1, measure coverage.
 
     ``yaw_deg`` turns the placed object about the turntable axis (z through the plate
-    centre) before the scan: the same object, set down another way round.
+    centre) before the scan: the same object, set down another way round. ``mesh``: the
+    placed mesh already loaded (then ``model`` is only its name; ``up`` and ``size`` are not
+    applied again). ``reachable``: also compute the reachable-coverage ceiling of the object
+    and placement (:func:`workbench.object_ceiling.object_ceiling`, independent of the run).
     """
     from devices.builtins import resolve_model
     from devices.config import CameraConfig, CellConfig
     from devices.mesh import sample_surface, turned_about_plate_axis
     from devices.sim import make_sim_cell
-    from nbv.reachable import reachable_coverage
+    from workbench.object_ceiling import object_ceiling
 
     if not (math.isfinite(size) and size > 0):
         raise ValueError(f"--size: must be > 0, got {size}")
@@ -65,7 +69,10 @@ def simulate(
         raise ValueError("--depth-noise and --pose-noise must be >= 0")
     if not math.isfinite(yaw_deg):
         raise ValueError(f"--yaw: must be finite, got {yaw_deg}")
-    name, mesh = resolve_model(model, up=up, size=size)  # type: ignore[arg-type]
+    if mesh is None:
+        name, mesh = resolve_model(model, up=up, size=size)  # type: ignore[arg-type]
+    else:
+        name = model
     if yaw_deg % 360.0 != 0.0:
         mesh = turned_about_plate_axis(mesh, yaw_deg)
     camera = CameraConfig(depth_noise_std=depth_noise, pose_noise_translation=pose_noise)
@@ -84,7 +91,7 @@ def simulate(
     ceiling = None
     if reachable:
         t0 = time.perf_counter()
-        ceiling = reachable_coverage(cell, planner, samples)
+        ceiling = object_ceiling(mesh, cell, CameraConfig(), config).coverage
         if console is not None:
             console.print(f"reachable coverage {ceiling:.4f} ({time.perf_counter() - t0:.1f} s)")
     return SimScan(name, config, result, planner, ceiling, samples, cell)
