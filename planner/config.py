@@ -158,6 +158,28 @@ class ScoringConfig:
 
 
 @dataclass(frozen=True)
+class ZBufferConfig:
+    """The visible-frontier score V of the ``projection-zbuffer`` evaluator (``planner.visibility``; not the paper's)."""
+
+    width: int = 80
+    """Raster columns per candidate view (80: one raster pixel per 8 x 8 pixels of a 640 x 480 camera)."""
+    height: int = 60
+    """Raster rows per candidate view."""
+    depth_tolerance_voxels: float = 1.0
+    """A pixel shows frontier when its nearest frontier ellipsoid is at most this many voxels behind the nearest
+    occupied one (frontier voxels touch occupied ones, so their ellipsoids interpenetrate)."""
+
+    def __post_init__(self) -> None:
+        for name in ("width", "height"):
+            n = getattr(self, name)
+            require(integer(n) and 1 <= n <= 1024, f"zbuffer.{name}: must be an integer in [1, 1024], got {n!r}")
+        require(
+            finite(self.depth_tolerance_voxels) and self.depth_tolerance_voxels >= 0,
+            f"zbuffer.depth_tolerance_voxels: must be >= 0, got {self.depth_tolerance_voxels!r}",
+        )
+
+
+@dataclass(frozen=True)
 class PartitionConfig:
     """Global longitude partitions (paper §III-F)."""
 
@@ -285,6 +307,7 @@ class PlannerConfig:
     cluster: ClusterConfig = field(default_factory=ClusterConfig)
     candidates: CandidateConfig = field(default_factory=CandidateConfig)
     scoring: ScoringConfig = field(default_factory=ScoringConfig)
+    zbuffer: ZBufferConfig = field(default_factory=ZBufferConfig)
     partitions: PartitionConfig = field(default_factory=PartitionConfig)
     termination: TerminationConfig = field(default_factory=TerminationConfig)
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)

@@ -1,0 +1,240 @@
+"""The visible-frontier score V of the ``projection-zbuffer`` evaluator (a departure from §III-E).
+
+For each candidate view, every ellipsoid of both kinds is rasterised with its per-pixel depth
+(``planner.zbuffer``, a ``w x h`` raster). For every raster pixel:
+
+- ``z_o`` = depth of the nearest occupied ellipsoid along the pixel's ray (inf if none),
+- ``z_f`` = depth of the nearest frontier ellipsoid (inf if none);
+
+the pixel shows frontier when ``z_f < inf`` and ``z_f <= z_o + tol``: the frontier is in
+front of every occupied ellipsoid. ``tol`` (``zbuffer.depth_tolerance_voxels`` voxels)
+absorbs that frontier voxels are by definition next to occupied ones, so their ellipsoids
+and the occupied ones interpenetrate by about a voxel. Then::
+
+    V = sum over frontier pixels of  w_e      (e: the nearest frontier ellipsoid of the pixel)
+
+with ``w_e`` a per-ellipsoid weight (1 by default; see ``frontier_weights``). Unlike the paper's
+``F = sum w L (frontier) - sum w L (occupied)``, V does not go down with the occupied surface in
+view: after every sector is scanned and the frontier left is behind the object, F rewards views
+that see little of the object, V still follows the frontier that a view can reach.
+
+``ViewScore`` per-ellipsoid terms (length E, order of ``ellipsoids``):
+
+- ``pixels[e]``: frontier e: the frontier pixels it owns (it is the nearest frontier there);
+  occupied e: the frontier pixels it hides (it is the nearest occupied one in front of them);
+- ``weights[e]``: ``w_e`` (occupied: the mean weight of the frontier they hide, 0 if none);
+- ``weighted[e] = weights[e] * pixels[e]``; ``score = frontier = sum over frontier ellipsoids``,
+  ``occupied = sum over occupied ellipsoids``, the weighted frontier pixels hidden in this view;
+- ``ranks[e]``: depth rank of the centre, as in ``planner.scoring`` (for the inspector only).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from planner.config import ZBufferConfig
+from planner.scoring import depth_ranks
+from planner.types import Candidate, Ellipsoid, Intrinsics, Pose, ViewScore
+from planner.zbuffer import Fragments, rasterize
+
+
+@dataclass(frozen=True, eq=False)
+class PixelOwners:
+    """Per raster pixel of C cameras (P = C * w * h, index ``camera * w * h + j * w + i``).
+
+    frontier_owner, occupied_owner: (P,) int64 nearest ellipsoid of each kind, -1 for none;
+    frontier_depth, occupied_depth: (P,) float64 their depths, inf for none;
+    visible: (P,) bool, the pixel shows frontier (``z_f <= z_o + tol``).
+    """
+
+    frontier_owner: NDArray[np.int64]
+    occupied_owner: NDArray[np.int64]
+    frontier_depth: NDArray[np.float64]
+    occupied_depth: NDArray[np.float64]
+    visible: NDArray[np.bool_]
+
+
+_DEPTH_STEP = 1e-5
+"""Depths are compared in steps of 10 µm: depth and ellipsoid index go into one int64 key per fragment, so one
+``np.minimum.at`` finds both the nearest depth and its ellipsoid."""
+_INDEX_BITS = 20
+
+
+def _nearest(frags: Fragments, select: NDArray[np.bool_], n_pixels: int) -> tuple[NDArray, NDArray]:
+    """Depth (P,) and ellipsoid (P,) of the nearest selected fragment per global pixel (inf / -1 for none).
+
+    Ties within ``_DEPTH_STEP`` go to the lower ellipsoid index.
+    """
+    gid = frags.camera[select] * (frags.width * frags.height) + frags.pixel[select]
+    key = np.rint(frags.depth[select] / _DEPTH_STEP).astype(np.int64) << _INDEX_BITS
+    key |= frags.ellipsoid[select]
+    none = np.iinfo(np.int64).max
+    best = np.full(n_pixels, none, dtype=np.int64)
+    np.minimum.at(best, gid, key)
+    found = best != none
+    zbuf = np.where(found, (best >> _INDEX_BITS) * _DEPTH_STEP, np.inf)
+    owner = np.where(found, best & ((1 << _INDEX_BITS) - 1), -1)
+    return zbuf, owner
+
+
+def pixel_owners(frags: Fragments, is_frontier: NDArray[np.bool_], depth_tolerance: float) -> PixelOwners:
+    """The z-buffers of both kinds and which pixels show frontier (see the module docstring)."""
+    n_pixels = frags.n_cameras * frags.width * frags.height
+    frontier_frag = is_frontier[frags.ellipsoid]
+    z_f, own_f = _nearest(frags, frontier_frag, n_pixels)
+    z_o, own_o = _nearest(frags, ~frontier_frag, n_pixels)
+    visible = np.isfinite(z_f) & (z_f <= z_o + depth_tolerance)
+    return PixelOwners(own_f, own_o, z_f, z_o, visible)
+
+
+def _checked(
+    ellipsoids: Sequence[Ellipsoid],
+    candidates: Sequence[Candidate],
+    intrinsics: Intrinsics,
+    config: ZBufferConfig,
+    eligible: ArrayLike,
+    resolution: float,
+    frontier_weights: ArrayLike | None,
+) -> tuple[NDArray[np.bool_], NDArray[np.float64]]:
+    for i, e in enumerate(ellipsoids):
+        if not isinstance(e, Ellipsoid):
+            raise ValueError(f"ellipsoids[{i}]: expected an Ellipsoid, got {type(e).__name__}")
+    for i, c in enumerate(candidates):
+        if not isinstance(c, Candidate):
+            raise ValueError(f"candidates[{i}]: expected a Candidate, got {type(c).__name__}")
+    if not isinstance(intrinsics, Intrinsics):
+        raise ValueError(f"intrinsics: expected an Intrinsics, got {type(intrinsics).__name__}")
+    if not isinstance(config, ZBufferConfig):
+        raise ValueError(f"config: expected a ZBufferConfig, got {type(config).__name__}")
+    if isinstance(resolution, bool) or not np.isfinite(resolution) or resolution <= 0:
+        raise ValueError(f"resolution: must be a finite number > 0, got {resolution!r}")
+    mask = np.asarray(eligible)
+    if mask.shape != (len(candidates),):
+        raise ValueError(f"eligible: expected shape ({len(candidates)},), got {mask.shape}")
+    if mask.size and mask.dtype != np.bool_:
+        raise ValueError(f"eligible: expected a bool array, got dtype {mask.dtype}")
+    if frontier_weights is None:
+        weights = np.ones(len(ellipsoids))
+    else:
+        weights = np.asarray(frontier_weights, dtype=np.float64)
+        if weights.shape != (len(ellipsoids),):
+            raise ValueError(f"frontier_weights: expected shape ({len(ellipsoids)},), got {weights.shape}")
+        if not np.all(np.isfinite(weights)) or np.any(weights < 0):
+            raise ValueError("frontier_weights: must be finite and >= 0")
+    return mask.astype(bool), weights
+
+
+def score_visible_frontier(
+    ellipsoids: Sequence[Ellipsoid],
+    candidates: Sequence[Candidate],
+    intrinsics: Intrinsics,
+    config: ZBufferConfig,
+    eligible: ArrayLike,
+    resolution: float,
+    frontier_weights: ArrayLike | None = None,
+) -> tuple[ViewScore, ...]:
+    """Score every candidate (C) by its visible frontier V -> C ViewScores, in candidate order.
+
+    resolution: voxel edge, metres (scales ``config.depth_tolerance_voxels``).
+    frontier_weights: (E,) float64 ``w_e`` >= 0 per ellipsoid (only frontier entries are used); None: all 1.
+    eligible: (C,) bool, copied into ``ViewScore.eligible``; it does not change any score.
+    """
+    mask, weights = _checked(ellipsoids, candidates, intrinsics, config, eligible, resolution, frontier_weights)
+    if not candidates:
+        return ()
+    poses = [c.T_world_camera for c in candidates]
+    C, E = len(candidates), len(ellipsoids)
+    is_frontier = np.array([e.kind == "frontier" for e in ellipsoids], dtype=bool)
+    frags = rasterize(ellipsoids, poses, intrinsics, config.width, config.height)
+    owners = pixel_owners(frags, is_frontier, config.depth_tolerance_voxels * resolution)
+    n_pix = config.width * config.height
+    camera = np.arange(C * n_pix) // n_pix
+    shown = owners.visible
+    hidden = np.isfinite(owners.frontier_depth) & ~shown & (owners.occupied_owner >= 0)
+    hidden_at = camera[hidden] * E + owners.occupied_owner[hidden]
+    pixels = np.bincount(camera[shown] * E + owners.frontier_owner[shown], minlength=C * E).astype(np.float64)
+    pixels += np.bincount(hidden_at, minlength=C * E)
+    # occupied e: the total weight of the frontier it hides
+    hidden_weight = np.bincount(hidden_at, weights=weights[owners.frontier_owner[hidden]], minlength=C * E)
+    pixels = pixels.reshape(C, E)
+    hidden_weight = hidden_weight.reshape(C, E)
+    w = np.where(is_frontier[None, :], weights[None, :], 0.0) * np.ones((C, 1))
+    w[:, ~is_frontier] = np.divide(
+        hidden_weight[:, ~is_frontier],
+        pixels[:, ~is_frontier],
+        out=np.zeros_like(hidden_weight[:, ~is_frontier]),
+        where=pixels[:, ~is_frontier] > 0,
+    )
+    weighted = w * pixels
+    frontier = weighted[:, is_frontier].sum(axis=1)
+    occupied = weighted[:, ~is_frontier].sum(axis=1)
+    ranks = depth_ranks(_center_depths(ellipsoids, poses)) if E else np.zeros((C, 0), dtype=np.int64)
+    for a in (ranks, w, pixels, weighted):
+        a.setflags(write=False)
+    return tuple(
+        ViewScore(
+            index=c.index,
+            score=float(frontier[i]),
+            frontier=float(frontier[i]),
+            occupied=float(occupied[i]),
+            eligible=bool(mask[i]),
+            ranks=ranks[i],
+            weights=w[i],
+            pixels=pixels[i],
+            weighted=weighted[i],
+        )
+        for i, c in enumerate(candidates)
+    )
+
+
+def _center_depths(ellipsoids: Sequence[Ellipsoid], poses: Sequence[Pose]) -> NDArray[np.float64]:
+    """(C, E) camera-frame z of every ellipsoid centre."""
+    centers = np.stack([e.center for e in ellipsoids])
+    R = np.stack([p.rotation for p in poses])
+    t = np.stack([p.translation for p in poses])
+    return np.einsum("ca,cea->ce", R[:, :, 2], centers[None, :, :] - t[:, None, :])
+
+
+@dataclass(frozen=True, eq=False)
+class ZBufferImage:
+    """The raster of one candidate, for the inspector (h, w images, row j = raster row, column i).
+
+    frontier_owner, occupied_owner: (h, w) int64 nearest ellipsoid of each kind (index into the
+    ellipsoids), -1 for none; frontier_depth, occupied_depth: (h, w) float64, metres, inf for none;
+    visible: (h, w) bool, the pixel counts in V.
+    """
+
+    frontier_owner: NDArray[np.int64]
+    occupied_owner: NDArray[np.int64]
+    frontier_depth: NDArray[np.float64]
+    occupied_depth: NDArray[np.float64]
+    visible: NDArray[np.bool_]
+
+
+def zbuffer_image(
+    ellipsoids: Sequence[Ellipsoid],
+    T_world_camera: Pose,
+    intrinsics: Intrinsics,
+    config: ZBufferConfig,
+    resolution: float,
+) -> ZBufferImage:
+    """The rasterised z-buffers of one view ``T_world_camera`` (what V counts), as images."""
+    if not isinstance(config, ZBufferConfig):
+        raise ValueError(f"config: expected a ZBufferConfig, got {type(config).__name__}")
+    if isinstance(resolution, bool) or not np.isfinite(resolution) or resolution <= 0:
+        raise ValueError(f"resolution: must be a finite number > 0, got {resolution!r}")
+    is_frontier = np.array([e.kind == "frontier" for e in ellipsoids], dtype=bool)
+    frags = rasterize(ellipsoids, [T_world_camera], intrinsics, config.width, config.height)
+    o = pixel_owners(frags, is_frontier, config.depth_tolerance_voxels * resolution)
+    shape = (config.height, config.width)
+    return ZBufferImage(
+        o.frontier_owner.reshape(shape),
+        o.occupied_owner.reshape(shape),
+        o.frontier_depth.reshape(shape),
+        o.occupied_depth.reshape(shape),
+        o.visible.reshape(shape),
+    )
