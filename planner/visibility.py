@@ -43,52 +43,67 @@ from planner.zbuffer import Fragments, rasterize
 
 
 @dataclass(frozen=True, eq=False)
-class PixelOwners:
-    """Per raster pixel of C cameras (P = C * w * h, index ``camera * w * h + j * w + i``).
+class FrontierPixels:
+    """The K raster pixels (over all C cameras) that some frontier ellipsoid covers.
 
-    frontier_owner, occupied_owner: (P,) int64 nearest ellipsoid of each kind, -1 for none;
-    frontier_depth, occupied_depth: (P,) float64 their depths, inf for none;
-    visible: (P,) bool, the pixel shows frontier (``z_f <= z_o + tol``).
+    camera: (K,) int64; pixel: (K,) int64 raster pixel ``j * w + i``;
+    frontier_owner: (K,) int64 the nearest frontier ellipsoid, frontier_depth: (K,) float64 its depth;
+    occupied_owner: (K,) int64 the nearest occupied ellipsoid (-1: none), occupied_depth: (K,) float64 (inf: none);
+    visible: (K,) bool, the pixel shows frontier (``z_f <= z_o + tol``).
     """
 
+    camera: NDArray[np.int64]
+    pixel: NDArray[np.int64]
     frontier_owner: NDArray[np.int64]
-    occupied_owner: NDArray[np.int64]
     frontier_depth: NDArray[np.float64]
+    occupied_owner: NDArray[np.int64]
     occupied_depth: NDArray[np.float64]
     visible: NDArray[np.bool_]
 
 
 _DEPTH_STEP = 1e-5
 """Depths are compared in steps of 10 µm: depth and ellipsoid index go into one int64 key per fragment, so one
-``np.minimum.at`` finds both the nearest depth and its ellipsoid."""
+``np.minimum.at`` finds both the nearest depth and its ellipsoid (ties go to the lower index)."""
 _INDEX_BITS = 20
+_NONE = np.iinfo(np.int64).max
 
 
-def _nearest(frags: Fragments, select: NDArray[np.bool_], n_pixels: int) -> tuple[NDArray, NDArray]:
-    """Depth (P,) and ellipsoid (P,) of the nearest selected fragment per global pixel (inf / -1 for none).
-
-    Ties within ``_DEPTH_STEP`` go to the lower ellipsoid index.
-    """
-    gid = frags.camera[select] * (frags.width * frags.height) + frags.pixel[select]
+def _keys(frags: Fragments, select: NDArray[np.bool_]) -> NDArray[np.int64]:
     key = np.rint(frags.depth[select] / _DEPTH_STEP).astype(np.int64) << _INDEX_BITS
-    key |= frags.ellipsoid[select]
-    none = np.iinfo(np.int64).max
-    best = np.full(n_pixels, none, dtype=np.int64)
-    np.minimum.at(best, gid, key)
-    found = best != none
-    zbuf = np.where(found, (best >> _INDEX_BITS) * _DEPTH_STEP, np.inf)
-    owner = np.where(found, best & ((1 << _INDEX_BITS) - 1), -1)
-    return zbuf, owner
+    return key | frags.ellipsoid[select]
 
 
-def pixel_owners(frags: Fragments, is_frontier: NDArray[np.bool_], depth_tolerance: float) -> PixelOwners:
-    """The z-buffers of both kinds and which pixels show frontier (see the module docstring)."""
-    n_pixels = frags.n_cameras * frags.width * frags.height
-    frontier_frag = is_frontier[frags.ellipsoid]
-    z_f, own_f = _nearest(frags, frontier_frag, n_pixels)
-    z_o, own_o = _nearest(frags, ~frontier_frag, n_pixels)
-    visible = np.isfinite(z_f) & (z_f <= z_o + depth_tolerance)
-    return PixelOwners(own_f, own_o, z_f, z_o, visible)
+def _decode(best: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    found = best != _NONE
+    depth = np.where(found, (best >> _INDEX_BITS) * _DEPTH_STEP, np.inf)
+    return depth, np.where(found, best & ((1 << _INDEX_BITS) - 1), -1)
+
+
+def frontier_pixels(frags: Fragments, is_frontier: NDArray[np.bool_], depth_tolerance: float) -> FrontierPixels:
+    """Nearest frontier and occupied ellipsoid at every pixel a frontier ellipsoid covers (module docstring).
+
+    is_frontier: (E,) bool. Frontier ellipsoids that contain the camera take no part (their voxels are
+    not in front of it).
+    """
+    n_pix = frags.width * frags.height
+    gid = frags.camera * n_pix + frags.pixel
+    kind_f = is_frontier[frags.ellipsoid]
+    sel_f = kind_f & ~frags.inside[frags.camera, frags.ellipsoid]
+    gid_f, key_f = gid[sel_f], _keys(frags, sel_f)
+    best = np.full(frags.n_cameras * n_pix, _NONE, dtype=np.int64)
+    np.minimum.at(best, gid_f, key_f)
+    owner = key_f == best[gid_f]  # one fragment per covered pixel: keys are unique per pixel
+    gid_k = gid_f[owner]
+    z_f, own_f = _decode(key_f[owner])
+    slot = np.full(frags.n_cameras * n_pix, -1, dtype=np.int64)
+    slot[gid_k] = np.arange(len(gid_k))
+    s_o = slot[gid[~kind_f]]
+    keep = s_o >= 0
+    best_o = np.full(len(gid_k), _NONE, dtype=np.int64)
+    np.minimum.at(best_o, s_o[keep], _keys(frags, ~kind_f)[keep])
+    z_o, own_o = _decode(best_o)
+    visible = z_f <= z_o + depth_tolerance
+    return FrontierPixels(gid_k // n_pix, gid_k % n_pix, own_f, z_f, own_o, z_o, visible)
 
 
 def _checked(
@@ -149,17 +164,15 @@ def score_visible_frontier(
     poses = [c.T_world_camera for c in candidates]
     C, E = len(candidates), len(ellipsoids)
     is_frontier = np.array([e.kind == "frontier" for e in ellipsoids], dtype=bool)
-    frags = rasterize(ellipsoids, poses, intrinsics, config.width, config.height)
-    owners = pixel_owners(frags, is_frontier, config.depth_tolerance_voxels * resolution)
-    n_pix = config.width * config.height
-    camera = np.arange(C * n_pix) // n_pix
-    shown = owners.visible
-    hidden = np.isfinite(owners.frontier_depth) & ~shown & (owners.occupied_owner >= 0)
-    hidden_at = camera[hidden] * E + owners.occupied_owner[hidden]
-    pixels = np.bincount(camera[shown] * E + owners.frontier_owner[shown], minlength=C * E).astype(np.float64)
+    frags = rasterize(ellipsoids, poses, intrinsics, config.width, config.height, focus=is_frontier)
+    px = frontier_pixels(frags, is_frontier, config.depth_tolerance_voxels * resolution)
+    shown = px.visible
+    hidden = ~shown
+    hidden_at = px.camera[hidden] * E + px.occupied_owner[hidden]
+    pixels = np.bincount(px.camera[shown] * E + px.frontier_owner[shown], minlength=C * E).astype(np.float64)
     pixels += np.bincount(hidden_at, minlength=C * E)
     # occupied e: the total weight of the frontier it hides
-    hidden_weight = np.bincount(hidden_at, weights=weights[owners.frontier_owner[hidden]], minlength=C * E)
+    hidden_weight = np.bincount(hidden_at, weights=weights[px.frontier_owner[hidden]], minlength=C * E)
     pixels = pixels.reshape(C, E)
     hidden_weight = hidden_weight.reshape(C, E)
     w = np.where(is_frontier[None, :], weights[None, :], 0.0) * np.ones((C, 1))
@@ -229,12 +242,15 @@ def zbuffer_image(
         raise ValueError(f"resolution: must be a finite number > 0, got {resolution!r}")
     is_frontier = np.array([e.kind == "frontier" for e in ellipsoids], dtype=bool)
     frags = rasterize(ellipsoids, [T_world_camera], intrinsics, config.width, config.height)
-    o = pixel_owners(frags, is_frontier, config.depth_tolerance_voxels * resolution)
+    n_pix = config.width * config.height
+    images = []
+    for select in (is_frontier[frags.ellipsoid] & ~frags.inside[0, frags.ellipsoid], ~is_frontier[frags.ellipsoid]):
+        best = np.full(n_pix, _NONE, dtype=np.int64)
+        np.minimum.at(best, frags.pixel[select], _keys(frags, select))
+        images.append(_decode(best))
+    (z_f, own_f), (z_o, own_o) = images
+    visible = np.isfinite(z_f) & (z_f <= z_o + config.depth_tolerance_voxels * resolution)
     shape = (config.height, config.width)
     return ZBufferImage(
-        o.frontier_owner.reshape(shape),
-        o.occupied_owner.reshape(shape),
-        o.frontier_depth.reshape(shape),
-        o.occupied_depth.reshape(shape),
-        o.visible.reshape(shape),
+        own_f.reshape(shape), own_o.reshape(shape), z_f.reshape(shape), z_o.reshape(shape), visible.reshape(shape)
     )

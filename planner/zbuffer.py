@@ -148,8 +148,14 @@ def rasterize(
     intrinsics: Intrinsics,
     width: int,
     height: int,
+    focus: NDArray[np.bool_] | None = None,
 ) -> Fragments:
-    """Every ray hit of every ellipsoid (E) in the ``width x height`` raster of every camera (C, ``T_world_camera``)."""
+    """Every ray hit of every ellipsoid (E) in the ``width x height`` raster of every camera (C, ``T_world_camera``).
+
+    focus: (E,) bool or None. If given, the other ellipsoids are only rasterised inside each camera's
+    bounding box of the focus ellipsoids' pixels (nothing where no focus ellipsoid is in view): enough
+    when only the pixels of the focus ellipsoids matter, and much less work.
+    """
     for i, e in enumerate(ellipsoids):
         if not isinstance(e, Ellipsoid):
             raise ValueError(f"ellipsoids[{i}]: expected an Ellipsoid, got {type(e).__name__}")
@@ -182,7 +188,18 @@ def rasterize(
     j0, j1 = _pixel_span(y_lo, y_hi, ys)
     i0, i1 = np.where(front, i0, 0), np.where(front, i1, width - 1)
     j0, j1 = np.where(front, j0, 0), np.where(front, j1, height - 1)
-    active = (front | cross) & (i1 >= i0) & (j1 >= j0)
+    visible = front | cross
+    if focus is not None:
+        f = np.asarray(focus, dtype=bool)
+        if f.shape != (E,):
+            raise ValueError(f"focus: expected shape ({E},), got {f.shape}")
+        on = visible & f[None, :] & (i1 >= i0) & (j1 >= j0)
+        big = max(width, height)
+        lo_i, hi_i = np.where(on, i0, big).min(axis=1, keepdims=True), np.where(on, i1, -1).max(axis=1, keepdims=True)
+        lo_j, hi_j = np.where(on, j0, big).min(axis=1, keepdims=True), np.where(on, j1, -1).max(axis=1, keepdims=True)
+        i0, i1 = np.where(f, i0, np.maximum(i0, lo_i)), np.where(f, i1, np.minimum(i1, hi_i))
+        j0, j1 = np.where(f, j0, np.maximum(j0, lo_j)), np.where(f, j1, np.minimum(j1, hi_j))
+    active = visible & (i1 >= i0) & (j1 >= j0)
     pc, pe = np.nonzero(active)
     # per active pair: the ray polynomial's coefficients (see the module docstring), float32 for speed
     Ap, Amp = A[pc, pe], Am[pc, pe]
