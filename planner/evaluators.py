@@ -9,7 +9,7 @@ registered in ``EVALUATORS`` by their own modules.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Protocol
 
@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from planner.config import PlannerConfig
 from planner.ellipsoids import EllipsoidFitter
+from planner.frontier_age import FrontierAge, ellipsoid_weights
 from planner.scoring import score_views
 from planner.types import Candidate, ClusterFit, Ellipsoid, Intrinsics, ViewScore, VoxelClass
 from planner.visibility import score_visible_frontier
@@ -108,9 +109,26 @@ class ZBufferEvaluator(ProjectionEvaluator):
 
     name = "projection-zbuffer"
 
+    def __init__(self, config: PlannerConfig) -> None:
+        super().__init__(config)
+        self._age = FrontierAge()
+
+    def reset(self) -> None:
+        super().reset()
+        self._age.reset()
+
+    def frontier_weights(self, ctx: EvaluationContext, ellipsoids: Sequence[Ellipsoid]) -> NDArray[np.float64]:
+        """(E,) w_e: 1, or with ``zbuffer.frontier_decay`` < 1 the mean decayed weight of each frontier ellipsoid."""
+        decay = self.config.zbuffer.frontier_decay
+        centers, ages = self._age.update(ctx.voxel_map, ctx.voxel_map.frames)
+        if decay == 1.0:
+            return np.ones(len(ellipsoids))
+        return ellipsoid_weights(ellipsoids, centers, decay ** ages.astype(np.float64))
+
     def evaluate(self, ctx: EvaluationContext) -> Evaluation:
         ellipsoids, fits, timings = self.fit(ctx)
         t0 = time.perf_counter()
+        weights = self.frontier_weights(ctx, ellipsoids)
         scores = score_visible_frontier(
             ellipsoids,
             ctx.candidates,
@@ -118,6 +136,7 @@ class ZBufferEvaluator(ProjectionEvaluator):
             self.config.zbuffer,
             ctx.eligible,
             self.config.voxel.resolution,
+            weights,
         )
         timings["score"] = time.perf_counter() - t0
         return Evaluation(tuple(scores), tuple(ellipsoids), tuple(fits), timings)

@@ -59,23 +59,30 @@ class Fragments:
     inside: NDArray[np.bool_]
 
 
-def raster_rays(intrinsics: Intrinsics, width: int, height: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Normalised ray coordinates of the raster's pixel centres: x (width,), y (height,)."""
+def raster_rays(intrinsics: Intrinsics, width: int, height: int) -> tuple[NDArray, NDArray]:
+    """Normalised ray coordinates of the raster's pixel centres: x (width,), y (height,) float64."""
     u = (np.arange(width) + 0.5) * (intrinsics.width / width) - 0.5
     v = (np.arange(height) + 0.5) * (intrinsics.height / height) - 0.5
     return (u - intrinsics.cx) / intrinsics.fx, (v - intrinsics.cy) / intrinsics.fy
 
 
+_PAIRS = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+
+
 def _camera_frame(ellipsoids: Sequence[Ellipsoid], poses: Sequence[Pose]) -> tuple[NDArray, NDArray, NDArray]:
-    """Camera-frame centres m (C, E, 3), shapes A' (C, E, 3, 3) and inverse shapes N (C, E, 3, 3)."""
+    """Camera-frame centres m (3, C, E), and the entries xx, xy, xz, yy, yz, zz (6, C, E) of the shapes
+    A' = R^T A R and of their inverses N = R^T A^-1 R (one BLAS product each, not C * E small ones)."""
     centers = np.stack([e.center for e in ellipsoids])
     shapes = np.stack([e.shape_matrix for e in ellipsoids])
     covs = np.stack([(e.rotation * e.axes**2) @ e.rotation.T for e in ellipsoids])
     R = np.stack([p.rotation for p in poses])
     t = np.stack([p.translation for p in poses])
-    m = np.einsum("cai,cea->cei", R, centers[None, :, :] - t[:, None, :])
-    A = np.einsum("cai,eab,cbj->ceij", R, shapes, R, optimize=True)
-    N = np.einsum("cai,eab,cbj->ceij", R, covs, R, optimize=True)
+    C, E = len(R), len(centers)
+    m = np.einsum("cai,cea->ice", R, centers[None, :, :] - t[:, None, :])
+    outer = np.stack([np.einsum("ca,cb->cab", R[:, :, i], R[:, :, j]).reshape(C, 9) for i, j in _PAIRS])  # (6, C, 9)
+    flat = outer.reshape(6 * C, 9)
+    A = (flat @ shapes.reshape(E, 9).T).reshape(6, C, E)
+    N = (flat @ covs.reshape(E, 9).T).reshape(6, C, E)
     return m, A, N
 
 
@@ -120,26 +127,31 @@ def _tile_hits(
     bh: int,
     cam: NDArray[np.int64],
     ell: NDArray[np.int64],
+    front_only: bool,
 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64], NDArray[np.float32]]:
     """Hits of P pairs tested over dense (P, bh, bw) tiles: camera, ellipsoid, raster pixel, depth per hit.
 
     coef: (10, P) ray polynomial coefficients; box: (4, P) first column, first row, columns, rows.
+    front_only: every pair lies in front of the camera, so a real root is a hit (``b > 0`` holds).
     """
     w, h = len(xs), len(ys)
     di, dj = np.arange(bw), np.arange(bh)
-    ii = box[0][:, None] + di[None, :]  # (P, bw)
-    jj = box[1][:, None] + dj[None, :]  # (P, bh)
-    x = xs[np.minimum(ii, w - 1)][:, None, :]  # (P, 1, bw)
-    y = ys[np.minimum(jj, h - 1)][:, :, None]  # (P, bh, 1)
+    x = xs[np.minimum(box[0][:, None] + di, w - 1)][:, None, :]  # (P, 1, bw)
+    y = ys[np.minimum(box[1][:, None] + dj, h - 1)][:, :, None]  # (P, bh, 1)
     c = coef[:, :, None, None]
-    a = (c[0] * x + c[3]) * x + (c[1] * x + c[2] * y + c[4]) * y + c[5]
+    # separable parts first (small arrays), then 6 passes over the (P, bh, bw) tile
+    a = ((c[0] * x + c[3]) * x + (c[2] * y + c[4]) * y + c[5]) + (c[1] * x) * y
     b = c[6] * x + (c[7] * y + c[8])
     disc = b * b - a * c[9]
-    inbox = (di[None, None, :] < box[2][:, None, None]) & (dj[None, :, None] < box[3][:, None, None])
-    hit = (disc >= 0) & (b > 0) & inbox
-    p, r, q = np.nonzero(hit)
-    depth = (b[p, r, q] - np.sqrt(disc[p, r, q])) / a[p, r, q]
-    return cam[p], ell[p], jj[p, r] * w + ii[p, q], depth
+    inbox = (di < box[2][:, None])[:, None, :] & (dj < box[3][:, None])[:, :, None]
+    hit = (disc >= 0) & inbox
+    if not front_only:
+        hit &= b > 0
+    flat = np.flatnonzero(hit)  # flat indices: one gather per array instead of three-index gathers
+    depth = (b.ravel()[flat] - np.sqrt(disc.ravel()[flat])) / a.ravel()[flat]
+    p, rq = np.divmod(flat, bh * bw)
+    r, q = np.divmod(rq, bw)
+    return cam[p], ell[p], (box[1][p] + r) * w + box[0][p] + q, depth
 
 
 def rasterize(
@@ -173,17 +185,25 @@ def rasterize(
         return Fragments(width, height, C, E, empty, empty, empty, np.zeros(0), np.zeros((C, E), dtype=bool))
     xs, ys = raster_rays(intrinsics, width, height)
     m, A, N = _camera_frame(ellipsoids, poses)
-    Am = np.einsum("ceij,cej->cei", A, m)
-    g = np.einsum("cei,cei->ce", m, Am) - 1.0
+    Axx, Axy, Axz, Ayy, Ayz, Azz = A
+    Nxx, _, Nxz, Nyy, Nyz, Nzz = N
+    Am = np.stack(
+        [
+            Axx * m[0] + Axy * m[1] + Axz * m[2],
+            Axy * m[0] + Ayy * m[1] + Ayz * m[2],
+            Axz * m[0] + Ayz * m[1] + Azz * m[2],
+        ]
+    )
+    g = (m * Am).sum(axis=0) - 1.0
     inside = g <= 0.0
-    mz = m[..., 2]
-    D = mz * mz - N[..., 2, 2]
+    mz = m[2]
+    D = mz * mz - Nzz
     front = ~inside & (mz > 0) & (1e-12 * mz * mz < D)
     cross = ~inside & ~front & ~((mz < 0) & (D > 0))  # crosses z = 0: test every pixel
     with np.errstate(divide="ignore", invalid="ignore"):
         Ds = np.where(front, D, 1.0)
-        x_lo, x_hi = _tangent_range(m[..., 0], mz, N[..., 0, 0], N[..., 0, 2], Ds)
-        y_lo, y_hi = _tangent_range(m[..., 1], mz, N[..., 1, 1], N[..., 1, 2], Ds)
+        x_lo, x_hi = _tangent_range(m[0], mz, Nxx, Nxz, Ds)
+        y_lo, y_hi = _tangent_range(m[1], mz, Nyy, Nyz, Ds)
     i0, i1 = _pixel_span(x_lo, x_hi, xs)
     j0, j1 = _pixel_span(y_lo, y_hi, ys)
     i0, i1 = np.where(front, i0, 0), np.where(front, i1, width - 1)
@@ -202,22 +222,13 @@ def rasterize(
     active = visible & (i1 >= i0) & (j1 >= j0)
     pc, pe = np.nonzero(active)
     # per active pair: the ray polynomial's coefficients (see the module docstring), float32 for speed
-    Ap, Amp = A[pc, pe], Am[pc, pe]
     coef = np.stack(
-        [
-            Ap[:, 0, 0],
-            2.0 * Ap[:, 0, 1],
-            Ap[:, 1, 1],
-            2.0 * Ap[:, 0, 2],
-            2.0 * Ap[:, 1, 2],
-            Ap[:, 2, 2],
-            *Amp.T,
-            g[pc, pe],
-        ]
-    ).astype(np.float32)  # (10, P)
+        [Axx, 2.0 * Axy, Ayy, 2.0 * Axz, 2.0 * Ayz, Azz, Am[0], Am[1], Am[2], g], axis=-1, dtype=np.float32
+    )[pc, pe].T  # (10, P)
     box = np.stack([i0[pc, pe], j0[pc, pe], i1[pc, pe] - i0[pc, pe] + 1, j1[pc, pe] - j0[pc, pe] + 1])  # (4, P)
+    x32, y32, is_front = xs.astype(np.float32), ys.astype(np.float32), front[pc, pe]
     parts = [
-        _tile_hits(coef[:, sel], box[:, sel], xs.astype(np.float32), ys.astype(np.float32), bw, bh, pc[sel], pe[sel])
+        _tile_hits(coef[:, sel], box[:, sel], x32, y32, bw, bh, pc[sel], pe[sel], bool(np.all(is_front[sel])))
         for sel, bw, bh in _buckets(box[2], box[3])
     ]
     cam = np.concatenate([q[0] for q in parts]) if parts else empty
