@@ -166,14 +166,20 @@ class ZBufferConfig:
     measured no better and 4x slower, docs/method.md)."""
     height: int = 30
     """Raster rows per candidate view."""
-    depth_tolerance_voxels: float = 1.0
+    depth_tolerance_voxels: float = 0.0
     """A pixel shows frontier when its nearest frontier ellipsoid is at most this many voxels behind the nearest
-    occupied one (frontier voxels touch occupied ones, so their ellipsoids interpenetrate)."""
+    occupied one (0: strictly in front; 1 and 3 measured worse early, docs/method.md)."""
+    hidden_weight: float = 0.0
+    """A frontier pixel hidden behind an occupied ellipsoid counts this much (0: only frontier in view counts)."""
     frontier_decay: float = 1.0
     """A frontier voxel's weight is ``frontier_decay ** k`` after it stayed FRONTIER through k new frames; a frontier
     ellipsoid weighs the mean of its voxels (1: every frontier pixel counts the same)."""
 
     def __post_init__(self) -> None:
+        require(
+            finite(self.hidden_weight) and 0 <= self.hidden_weight <= 1,
+            f"zbuffer.hidden_weight: must be in [0, 1], got {self.hidden_weight!r}",
+        )
         require(
             finite(self.frontier_decay) and 0 < self.frontier_decay <= 1,
             f"zbuffer.frontier_decay: must be in (0, 1], got {self.frontier_decay!r}",

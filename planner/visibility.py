@@ -188,10 +188,11 @@ def score_visible_frontier(
     ranks = depth_ranks(_center_depths(ellipsoids, poses)) if E else np.zeros((C, 0), dtype=np.int64)
     for a in (ranks, w, pixels, weighted):
         a.setflags(write=False)
+    score = frontier + config.hidden_weight * occupied
     return tuple(
         ViewScore(
             index=c.index,
-            score=float(frontier[i]),
+            score=float(score[i]),
             frontier=float(frontier[i]),
             occupied=float(occupied[i]),
             eligible=bool(mask[i]),

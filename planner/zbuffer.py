@@ -2,8 +2,8 @@
 
 The paper orders ellipsoids by the depth of their centres and weighs them by ``0.5^rank``
 (§III-E); it never asks whether an ellipsoid actually hides another. Here every ellipsoid
-is drawn into a coarse ``w x h`` image of each candidate camera (default 80 x 60 for a
-640 x 480 camera: one raster pixel per 8 x 8 camera pixels) with its true per-pixel depth,
+is drawn into a coarse ``w x h`` image of each candidate camera (default 40 x 30 for a
+640 x 480 camera: one raster pixel per 16 x 16 camera pixels) with its true per-pixel depth,
 so visibility is decided per pixel by a z-buffer. Still ellipsoids, not voxels: the cost
 grows with the pixels the ellipses cover, never with the voxel count.
 
