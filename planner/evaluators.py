@@ -120,7 +120,7 @@ class ZBufferEvaluator(ProjectionEvaluator):
     def frontier_weights(self, ctx: EvaluationContext, ellipsoids: Sequence[Ellipsoid]) -> NDArray[np.float64]:
         """(E,) w_e: 1, or with ``zbuffer.frontier_decay`` < 1 the mean decayed weight of each frontier ellipsoid."""
         decay = self.config.zbuffer.frontier_decay
-        centers, ages = self._age.update(ctx.voxel_map, ctx.voxel_map.frames)
+        centers, ages = self._age.update_map(ctx.voxel_map)
         if decay == 1.0:
             return np.ones(len(ellipsoids))
         return ellipsoid_weights(ellipsoids, centers, decay ** ages.astype(np.float64))

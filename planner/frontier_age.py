@@ -39,10 +39,18 @@ class FrontierAge:
         """Forget every age (a new scan)."""
         self.__init__()
 
-    def update(self, voxel_map: VoxelMap, frames: int) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-        """Frontier voxel centres (N, 3) of ``voxel_map`` and their ages (N,) after ``frames`` frames integrated."""
+    def update_map(self, voxel_map: VoxelMap) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """Frontier voxel centres (N, 3) of ``voxel_map`` and their ages (N,)."""
         centers = voxel_map.centers(VoxelClass.FRONTIER)
-        keys = _lattice_keys(centers, voxel_map.resolution)
+        return centers, self.update(centers, voxel_map.resolution, voxel_map.frames)
+
+    def update(self, centers_world: NDArray[np.float64], resolution: float, frames: int) -> NDArray[np.int64]:
+        """(N,) ages of the frontier voxels with centres ``centers_world`` (N, 3) after ``frames`` frames.
+
+        A voxel that was frontier at the last update and ``frames`` has grown is one older; one that was
+        not is 0; with ``frames`` unchanged (a re-plan) the ages are those of the last update.
+        """
+        keys = _lattice_keys(np.asarray(centers_world, dtype=np.float64).reshape(-1, 3), resolution)
         previous = np.full(len(keys), -1, dtype=np.int64)  # -1: not frontier at the last update
         if len(self._keys):
             pos = np.minimum(np.searchsorted(self._keys, keys), len(self._keys) - 1)
@@ -51,7 +59,7 @@ class FrontierAge:
         ages = previous + 1 if frames != self._frames else np.maximum(previous, 0)
         order = np.argsort(keys)
         self._keys, self._ages, self._frames = keys[order], ages[order], frames
-        return centers, ages
+        return ages
 
 
 def ellipsoid_weights(

@@ -172,7 +172,7 @@ def score_visible_frontier(
     pixels = np.bincount(px.camera[shown] * E + px.frontier_owner[shown], minlength=C * E).astype(np.float64)
     pixels += np.bincount(hidden_at, minlength=C * E)
     # occupied e: the total weight of the frontier it hides
-    hidden_weight = np.bincount(hidden_at, weights=weights[px.frontier_owner[hidden]], minlength=C * E)
+    hidden_weight = np.bincount(hidden_at, weights=weights[px.frontier_owner[hidden]], minlength=C * E).astype(float)
     pixels = pixels.reshape(C, E)
     hidden_weight = hidden_weight.reshape(C, E)
     w = np.where(is_frontier[None, :], weights[None, :], 0.0) * np.ones((C, 1))
