@@ -169,6 +169,9 @@ class ZBufferConfig:
     depth_tolerance_voxels: float = 0.0
     """A pixel shows frontier when its nearest frontier ellipsoid is at most this many voxels behind the nearest
     occupied one (0: strictly in front; 1 and 3 measured worse early, docs/method.md)."""
+    measure: Literal["pixels", "voxels"] = "pixels"
+    """What a frontier pixel is worth: 1 ("pixels"), or its ellipsoid's voxel count over the pixels the ellipsoid
+    covers in that view ("voxels": V = sum of n_points x the visible fraction of each frontier ellipsoid)."""
     hidden_weight: float = 0.0
     """A frontier pixel hidden behind an occupied ellipsoid counts this much (0: only frontier in view counts)."""
     frontier_decay: float = 1.0
@@ -176,6 +179,7 @@ class ZBufferConfig:
     ellipsoid weighs the mean of its voxels (1: every frontier pixel counts the same)."""
 
     def __post_init__(self) -> None:
+        require(self.measure in ("pixels", "voxels"), f"zbuffer.measure: 'pixels' or 'voxels', got {self.measure!r}")
         require(
             finite(self.hidden_weight) and 0 <= self.hidden_weight <= 1,
             f"zbuffer.hidden_weight: must be in [0, 1], got {self.hidden_weight!r}",

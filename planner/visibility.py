@@ -172,10 +172,15 @@ def score_visible_frontier(
     pixels = np.bincount(px.camera[shown] * E + px.frontier_owner[shown], minlength=C * E).astype(np.float64)
     pixels += np.bincount(hidden_at, minlength=C * E)
     # occupied e: the total weight of the frontier it hides
-    hidden_weight = np.bincount(hidden_at, weights=weights[px.frontier_owner[hidden]], minlength=C * E).astype(float)
     pixels = pixels.reshape(C, E)
-    hidden_weight = hidden_weight.reshape(C, E)
     w = np.where(is_frontier[None, :], weights[None, :], 0.0) * np.ones((C, 1))
+    if config.measure == "voxels":  # a frontier pixel stands for its ellipsoid's voxels / the pixels it covers
+        sel = is_frontier[frags.ellipsoid] & ~frags.inside[frags.camera, frags.ellipsoid]
+        covered = np.bincount(frags.camera[sel] * E + frags.ellipsoid[sel], minlength=C * E).reshape(C, E)
+        n_points = np.array([float(e.n_points) for e in ellipsoids])
+        w *= np.divide(n_points[None, :], covered, out=np.zeros((C, E)), where=covered > 0)
+    per_pixel = w[px.camera[hidden], px.frontier_owner[hidden]]  # the weight of each hidden frontier pixel
+    hidden_weight = np.bincount(hidden_at, weights=per_pixel, minlength=C * E).astype(float).reshape(C, E)
     w[:, ~is_frontier] = np.divide(
         hidden_weight[:, ~is_frontier],
         pixels[:, ~is_frontier],
