@@ -210,8 +210,21 @@ def test_bad_resolution_and_objects_name_the_field() -> None:
         ({"depth_tolerance_voxels": -1.0}, "zbuffer.depth_tolerance_voxels"),
         ({"hidden_weight": 1.5}, "zbuffer.hidden_weight"),
         ({"frontier_decay": 0.0}, "zbuffer.frontier_decay"),
+        ({"measure": "area"}, "zbuffer.measure"),
     ],
 )
 def test_config_refuses_bad_values(section: dict, field: str) -> None:
     with pytest.raises(ValueError, match=re.escape(field)):
         PlannerConfig().replace(zbuffer=section)
+
+
+def test_voxel_measure_is_the_voxel_count_times_the_visible_fraction() -> None:
+    o = sphere([-0.06, 0.0, 0.45], 0.05)
+    f = Ellipsoid(np.array([0.0, 0.0, 0.8]), np.full(3, 0.12), np.eye(3), "frontier", n_points=40)
+    shown, covered = (hits(f) & ~hits(o)).sum(), hits(f).sum()
+    (s,) = score([o, f], cfg=ZBufferConfig(width=48, height=36, measure="voxels"))
+    assert 0 < shown < covered
+    assert s.score == pytest.approx(40.0 * shown / covered)
+    assert s.occupied == pytest.approx(40.0 * (covered - shown) / covered)  # what o hides, in voxels
+    (alone,) = score([f], cfg=ZBufferConfig(width=48, height=36, measure="voxels"))
+    assert alone.score == pytest.approx(40.0)
