@@ -153,6 +153,10 @@ class RealSenseCamera:
         if self._pipeline is not None:
             pipeline, self._pipeline = self._pipeline, None
             with contextlib.suppress(RuntimeError):
+                if self.config.playback:
+                    # librealsense#3126: stopping a pipeline whose playback is not real time can hang or
+                    # abort while the reader waits for the consumer; back to real time releases it first.
+                    pipeline.get_active_profile().get_device().as_playback().set_real_time(True)
                 pipeline.stop()
 
     def __enter__(self) -> RealSenseCamera:
