@@ -11,7 +11,7 @@ A capture optionally runs librealsense post-processing filters by name (``spatia
 frames that had a return there (0 if none had). A frame that does not arrive within ``timeout_s`` is a
 :class:`devices.protocols.CaptureError`.
 
-``playback`` names a recording (``.bag``; librealsense >= 2.56 writes rosbag2 ``.db3``) played back not
+``playback`` names a recording (``.bag``, or rosbag2 ``.db3`` as librealsense 2.59 writes) played back not
 in real time, frame by frame: how the driver is tested offline, and how a recorded scan is replayed
 through the exact code path of the live camera.
 """

@@ -5,7 +5,7 @@ The file is what a real camera's recording looks like to :class:`devices.drivers
 driver is tested without a camera (images rendered by :class:`devices.sim.SimulatedCamera`), and how a
 simulated scan becomes a recording to rehearse the RealSense path of the workbench.
 
-librealsense 2.56 and later write rosbag2 (the path must end in ``.db3``); older ones write ``.bag``.
+librealsense 2.59 (the tested version) writes rosbag2: the path must end in ``.db3``; older versions wrote ``.bag``.
 """
 
 from __future__ import annotations
