@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from devices.drivers.common import import_vendor
+from devices.drivers.plate import PlateScale, check_angle, wrap_deg
 from devices.protocols import DeviceError
 from devices.timeout import DeviceTimeoutError
 from planner.validate import finite, integer, require
@@ -103,12 +104,6 @@ class GrblConfig:
             require(finite(v) and v > 0, f"{p}{name}: must be > 0, got {v!r}")
 
 
-def _wrap_deg(a: float) -> float:
-    """``a`` wrapped to (-180, 180]."""
-    w = math.remainder(a, 360.0)
-    return 180.0 if w == -180.0 else w
-
-
 class GrblTurntable:
     """A GRBL-driven turntable behind :class:`devices.protocols.Turntable` (angles in radians), plus ``stop``.
 
@@ -118,6 +113,7 @@ class GrblTurntable:
 
     def __init__(self, config: GrblConfig) -> None:
         self.config = config
+        self._scale = PlateScale(config.units_per_degree, config.invert, config.zero_offset_deg, config.continuous)
         serial = import_vendor("serial", "turntable", "GRBL turntable")
         self._write_lock = threading.Lock()
         self._stop = threading.Event()
@@ -218,15 +214,8 @@ class GrblTurntable:
                         return fields[0], values[index]
                 raise DeviceError(f"turntable: GRBL status without a position: {line}")
 
-    # ------------------------------------------------------------------ plate angle <-> axis units
-
     def _plate_deg(self, units: float) -> float:
-        sign = -1.0 if self.config.invert else 1.0
-        return sign * units / self.config.units_per_degree + self.config.zero_offset_deg
-
-    def _units(self, plate_deg: float) -> float:
-        sign = -1.0 if self.config.invert else 1.0
-        return sign * (plate_deg - self.config.zero_offset_deg) * self.config.units_per_degree
+        return self._scale.plate_deg(units)
 
     # ------------------------------------------------------------------ Turntable protocol
 
@@ -234,7 +223,7 @@ class GrblTurntable:
     def angle(self) -> float:
         """The plate angle, radians in (-pi, pi]."""
         _, units = self._status()
-        return math.radians(_wrap_deg(self._plate_deg(units)))
+        return math.radians(wrap_deg(self._plate_deg(units)))
 
     def home(self) -> None:
         """Run the homing cycle ($H); the plate is then at ``zero_offset_deg``."""
@@ -242,16 +231,13 @@ class GrblTurntable:
 
     def rotate_to(self, angle: float) -> None:
         """Turn the plate to ``angle`` (radians) and wait until it is there (the short way when continuous)."""
-        if not isinstance(angle, int | float) or isinstance(angle, bool) or not math.isfinite(angle):
-            raise ValueError(f"angle: must be a finite number (radians), got {angle!r}")
+        wanted = check_angle(angle)
         cfg = self.config
         state, units = self._status()
         if state.startswith("Alarm"):
             raise DeviceError(f"turntable: GRBL is in alarm ({self.last_alarm or 'unlock or home it'}); not moving")
-        current = self._plate_deg(units)
-        wanted = math.degrees(float(angle))
-        target = current + _wrap_deg(wanted - current) if cfg.continuous else _wrap_deg(wanted)
-        goal = self._units(target)
+        target = self._scale.target_deg(self._plate_deg(units), wanted)
+        goal = self._scale.units(target)
         self._stop.clear()
         self._moving = True
         try:
@@ -302,4 +288,4 @@ class GrblTurntable:
     def describe(self) -> str:
         """One line for ``nbv devices check``."""
         state, units = self._status()
-        return f"{self.version or 'GRBL'} on {self.config.port}, {state}, plate at {_wrap_deg(self._plate_deg(units)):.2f} deg"
+        return f"{self.version or 'GRBL'} on {self.config.port}, {state}, plate at {wrap_deg(self._plate_deg(units)):.2f} deg"
