@@ -7,6 +7,10 @@ package is a :class:`devices.drivers.common.MissingVendorPackageError` naming th
 - ``rsrecord``   write depth images into a RealSense recording (software device + recorder)
 - ``ur``         Universal Robots arm over RTDE (``ur-rtde``, extra ``[ur]``)
 - ``grbl``       stepper turntable on GRBL firmware over a serial port (``pyserial``, extra ``[turntable]``)
+- ``modbus``     turntable on a Modbus RTU position drive (``minimalmodbus``, extra ``[turntable]``)
+- ``plate``      plate angle <-> controller units, shared by the turntables
+- ``limits``     joint limits checked before a trajectory is sent
+- ``common``     lazy vendor imports, ArmFaultError
 - ``registry``   driver names of the cell file -> config class + factory
 
 Importing this package imports no vendor package.

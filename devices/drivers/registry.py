@@ -3,7 +3,7 @@
 ``[devices.camera] driver = "realsense"`` picks ``REGISTRY[("camera", "realsense")]``: the remaining keys of
 the section build its config class (one frozen dataclass per driver, fields documented there), and
 ``open(config)`` connects the device. Built in: cameras ``realsense``, ``sim``, ``replay``; arm ``ur``;
-turntables ``grbl``, ``sim``. Nothing here imports a vendor package.
+turntables ``grbl``, ``modbus``, ``sim``. Nothing here imports a vendor package.
 
 :func:`override` swaps how a registered driver opens, for a ``with`` block: the tests run
 ``nbv devices check`` in-process on a production cell file (``driver = "ur"``) with the UR driver talking
@@ -21,6 +21,7 @@ from typing import Any, Literal
 
 from devices.config import CameraConfig
 from devices.drivers.grbl import GrblConfig
+from devices.drivers.modbus import ModbusTurntableConfig
 from devices.drivers.realsense import RealSenseConfig
 from devices.drivers.ur import URConfig
 from planner.validate import finite, integer, require
@@ -113,6 +114,12 @@ def _open_grbl(config: GrblConfig) -> Any:
     return GrblTurntable(config)
 
 
+def _open_modbus(config: ModbusTurntableConfig) -> Any:
+    from devices.drivers.modbus import ModbusTurntable
+
+    return ModbusTurntable(config)
+
+
 def _open_sim_turntable(config: SimTurntableConfig) -> Any:
     import math
 
@@ -136,6 +143,7 @@ REGISTRY: dict[tuple[Kind, str], Driver] = {
     ("camera", "replay"): Driver(ReplayCameraConfig, _open_replay, ("recording",)),
     ("arm", "ur"): Driver(URConfig, _open_ur),
     ("turntable", "grbl"): Driver(GrblConfig, _open_grbl),
+    ("turntable", "modbus"): Driver(ModbusTurntableConfig, _open_modbus),
     ("turntable", "sim"): Driver(SimTurntableConfig, _open_sim_turntable),
 }
 

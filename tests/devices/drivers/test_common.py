@@ -21,7 +21,8 @@ def test_a_missing_vendor_package_names_the_extra_to_install():
 
 def test_importing_the_drivers_imports_no_vendor_package():
     code = (
-        "import sys, devices.drivers.realsense, devices.drivers.ur, devices.drivers.grbl, devices.drivers.rsrecord, "
+        "import sys, devices.drivers.realsense, devices.drivers.ur, devices.drivers.grbl, devices.drivers.modbus, "
+        "devices.drivers.rsrecord, devices.rig, "
         "devices.cellfile; "
         "print(sorted(m for m in ('pyrealsense2', 'rtde_control', 'rtde_receive', 'serial', 'minimalmodbus') "
         "if m in sys.modules))"
