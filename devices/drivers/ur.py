@@ -210,14 +210,13 @@ class URArm:
 
     def close(self) -> None:
         """Stop the control script and disconnect both interfaces."""
-        for iface in (getattr(self, "_control", None), getattr(self, "_receive", None)):
+        control, receive = getattr(self, "_control", None), getattr(self, "_receive", None)
+        for iface in (control, receive):
             if iface is not None:
-                try:
-                    if iface is self._control:
+                with contextlib.suppress(RuntimeError):
+                    if iface is control:
                         iface.stopScript()
                     iface.disconnect()
-                except RuntimeError:
-                    pass
 
     # ------------------------------------------------------------------ state
 

@@ -1,10 +1,10 @@
 """``nbv devices check`` and ``open_rig`` on a cell of the RealSense recording, the fake UR and the fake GRBL.
 
-The camera plays a recording written by librealsense (rendered by the simulated camera); the turntable
-is the fake GRBL firmware on a pseudo terminal (a real serial device to pyserial, so it also works from a
-subprocess); the UR driver talks to the in-process controller of ``fake_ur`` through
-``registry.override`` (the cell file says ``driver = "ur"`` like a lab's; only the RTDE classes differ),
-so those tests run the CLI in-process.
+The cell comes from ``rigfixtures.fake_hardware_cell``: the camera plays a recording written by
+librealsense (rendered by the simulated camera); the turntable is the fake GRBL firmware on a pseudo
+terminal (a real serial device to pyserial, so it also works from a subprocess); the UR driver talks to
+the in-process controller of ``fake_ur`` through ``registry.override`` (the cell file says
+``driver = "ur"`` like a lab's; only the RTDE classes differ), so those tests run the CLI in-process.
 """
 
 from __future__ import annotations
@@ -21,65 +21,25 @@ import pytest
 
 from devices.cellfile import load_cell_file
 from devices.drivers.common import ArmFaultError
-from devices.drivers.registry import override
-from devices.drivers.ur import UR_JOINTS, URArm
+from devices.drivers.ur import UR_JOINTS
 from devices.protocols import DeviceError
 from devices.rig import open_rig
 from devices.trajectory import JointTrajectory
 from nbv.cli import main
 from tests.devices.drivers.fake_grbl import FakeGrbl
-from tests.devices.drivers.fake_ur import CONTROLLERS, FakeController, FakeRTDEControl, FakeRTDEReceive
-from tests.devices.drivers.rsfixtures import DEPTH_UNIT, record_views
+from tests.devices.drivers.fake_ur import CONTROLLERS
+from tests.devices.drivers.rigfixtures import UR_HOST, cell_toml, fake_hardware_cell
+from tests.devices.drivers.rsfixtures import DEPTH_UNIT, record_views, rendered_views
 
 ROOT = Path(__file__).resolve().parents[3]
-
-
-def cell_text(port: str, *, arm: bool = True) -> str:
-    text = f"""
-[devices]
-allow_auto = false
-
-[devices.camera]
-driver = "realsense"
-width = 80
-height = 60
-min_depth = 0.05
-timeout_s = 1.0
-playback = "scan.db3"
-
-[devices.turntable]
-driver = "grbl"
-port = "{port}"
-command_timeout_s = 0.5
-poll_s = 0.01
-"""
-    if arm:
-        text += """
-[devices.arm]
-driver = "ur"
-host = "ur-cell"
-max_joint_speed_deg = 30
-
-[devices.hand_eye]
-translation = [0.0, 0.0, 0.05]
-"""
-    return text
 
 
 @pytest.fixture
 def cell(tmp_path):
     """(cell file path, rendered depths, fake GRBL, fake UR controller)."""
-    _, depths, _ = record_views(tmp_path, n=3)
-    controller = FakeController()
-    CONTROLLERS["ur-cell"] = controller
-    with FakeGrbl() as grbl:
-        path = tmp_path / "cell.toml"
-        path.write_text(cell_text(grbl.port))
-        with override(
-            "arm", "ur", lambda cfg: URArm(cfg, control_factory=FakeRTDEControl, receive_factory=FakeRTDEReceive)
-        ):
-            yield path, depths, grbl, controller
-    CONTROLLERS.pop("ur-cell", None)
+    depths, k = rendered_views(3)
+    with fake_hardware_cell(tmp_path, depths, k) as fake:
+        yield fake.path, depths, fake.grbl, fake.controller
 
 
 def test_devices_check_prints_one_ok_line_per_device(cell, capsys):
@@ -99,7 +59,6 @@ def test_devices_check_reports_each_failure_and_exits_1(cell, capsys):
     path, _, grbl, controller = cell
     grbl.silent = True
     controller.safety_mode = 3  # connecting works; the arm's state is readable even in a protective stop
-    CONTROLLERS["ur-cell"] = controller
     assert main(["devices", "check", "--config", str(path)]) == 1
     lines = capsys.readouterr().out.strip().splitlines()
     assert lines[0].split()[2] == "ok"
@@ -107,7 +66,7 @@ def test_devices_check_reports_each_failure_and_exits_1(cell, capsys):
     assert lines[2].split()[:3] == ["turntable", "grbl", "FAILED"]
     assert "DeviceTimeoutError: turntable: no answer from GRBL" in lines[2] and "(no Grbl banner)" in lines[2]
     assert lines[3] == "2 of 3 devices ok; 1 failed"
-    CONTROLLERS.pop("ur-cell")
+    CONTROLLERS.pop(UR_HOST)
     assert main(["devices", "check", "--config", str(path)]) == 1
     lines = capsys.readouterr().out.strip().splitlines()
     assert lines[1].split()[:3] == ["arm", "ur", "FAILED"] and "Connection refused" in lines[1]
@@ -122,10 +81,10 @@ def test_a_bad_cell_file_is_one_error_line_and_exit_2(tmp_path, capsys):
 
 
 def test_the_cli_in_a_subprocess_checks_the_recording_and_the_serial_turntable(tmp_path):
-    record_views(tmp_path, n=1)
+    path, _, k = record_views(tmp_path, n=1)
     with FakeGrbl() as grbl:
         path = tmp_path / "cell.toml"
-        path.write_text(cell_text(grbl.port, arm=False))
+        path.write_text(cell_toml(grbl.port, k, arm=False))
         env = {**os.environ, "PYTHONPATH": str(ROOT)}
         out = subprocess.run(
             [sys.executable, "-m", "nbv.cli", "devices", "check", "--config", str(path)],
