@@ -124,3 +124,16 @@ def test_open_rig_closes_what_it_opened_when_a_device_fails(cell):
     with pytest.raises(DeviceError, match="no Grbl banner"):
         open_rig(load_cell_file(path))
     assert ("stopScript",) in controller.calls and ("receive.disconnect",) in controller.calls
+
+
+def test_a_rehearsal_cell_of_simulated_devices_checks_ok(tmp_path, capsys):
+    path = tmp_path / "cell.toml"
+    path.write_text(
+        '[devices.camera]\ndriver = "sim"\nmodel = "l-block"\nwidth = 64\nheight = 48\nfx = 50.0\nfy = 50.0\n'
+        'cx = 31.5\ncy = 23.5\n\n[devices.turntable]\ndriver = "sim"\nangle_deg = 30\n'
+    )
+    assert main(["devices", "check", "--config", str(path)]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[0].split()[:3] == ["camera", "sim", "ok"] and "64x48, renders once mounted" in lines[0]
+    assert lines[1] == "turntable  sim        ok      SimulatedTurntable: plate at 30.00 deg"
+    assert lines[2] == "2 of 2 devices ok"
