@@ -115,3 +115,20 @@ def test_a_missing_recording_is_a_device_error(tmp_path):
 def test_bad_config_names_the_field(overrides, message):
     with pytest.raises(ValueError, match=message):
         RealSenseConfig(**overrides)
+
+
+def test_played_back_captures_back_project_to_the_rendered_points(tmp_path):
+    """With the poses they were rendered from, the captures give the planner the rendered scene: the same
+    pixels back-project (intrinsics from the stream profile) to world points within the depth rounding."""
+    from planner.types import DepthFrame, Pose
+
+    path, depths, k = record_views(tmp_path, n=3)
+    with open_camera(path) as camera:
+        for i, depth in enumerate(depths):
+            a = 2 * np.pi * i / 3
+            pose = Pose.look_at((0.45 * np.cos(a), 0.45 * np.sin(a), 0.3), (0.0, 0.0, 0.06))
+            rendered = DepthFrame(depth, pose, k).points_world
+            played = camera.capture().with_pose(pose).points_world
+            assert played.shape == rendered.shape and len(played) > 1000
+            # a depth error dz moves a point by dz * |(x/z, y/z, 1)| < 1.5 dz in this field of view
+            assert np.max(np.linalg.norm(played - rendered, axis=1)) <= 1.5 * DEPTH_UNIT
