@@ -92,6 +92,16 @@ class CellFile:
         (``T_base_armbase @ T_armbase_flange @ T_flange_camera``)."""
         return self.arm_base @ T_armbase_flange @ self.hand_eye
 
+    def arm_mount(self) -> tuple[tuple[float, float, float], float]:
+        """(position in metres, yaw in degrees) of the arm's mount: ``arm_base`` for a kinematic model that
+        mounts the arm upright (rotated about the vertical only). ValueError if ``arm_base`` is tilted."""
+        R = self.arm_base.rotation
+        if abs(R[2, 2] - 1.0) > 1e-6:
+            tilt = math.degrees(math.acos(max(-1.0, min(1.0, float(R[2, 2])))))
+            raise ValueError(f"devices.arm_base: tilted {tilt:.2f} deg from upright; the arm model mounts it upright")
+        x, y, z = (float(v) for v in self.arm_base.translation)
+        return (x, y, z), math.degrees(math.atan2(R[1, 0], R[0, 0]))
+
 
 def _coerce(cls: type, settings: dict[str, Any], prefix: str) -> dict[str, Any]:
     """``settings`` checked against the fields of dataclass ``cls``: unknown names, bool/number mixes."""

@@ -143,3 +143,12 @@ def test_rotation_is_extrinsic_xyz_degrees(tmp_path):
     assert np.allclose(R @ [0, 1, 0], [0, 0, 1], atol=1e-12)
     assert np.allclose(R @ [1, 0, 0], [0, 1, 0], atol=1e-12)
     assert math.isclose(np.linalg.det(R), 1.0)
+
+
+def test_arm_mount_is_position_and_yaw_of_an_upright_arm_base():
+    cell = parse_cell({"devices": {"arm_base": {"translation": [-0.8, 0.1, 0.02], "rotation_deg": [0, 0, 30]}}})
+    (x, y, z), yaw = cell.arm_mount()
+    assert (x, y, z) == (-0.8, 0.1, 0.02) and yaw == pytest.approx(30.0)
+    tilted = parse_cell({"devices": {"arm_base": {"rotation_deg": [5, 0, 0]}}})
+    with pytest.raises(ValueError, match=r"devices.arm_base: tilted 5.00 deg from upright"):
+        tilted.arm_mount()
