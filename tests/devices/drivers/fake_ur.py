@@ -213,9 +213,12 @@ class FakeRTDEControl:
         return True
 
     def initPeriod(self) -> datetime.timedelta:
-        return datetime.timedelta(seconds=time.monotonic())
+        start = datetime.timedelta(seconds=time.monotonic())
+        self._c.calls.append(("initPeriod", start))
+        return start
 
     def waitPeriod(self, arg0: datetime.timedelta) -> None:
+        self._c.calls.append(("waitPeriod", arg0))
         rest = arg0.total_seconds() + self._period - time.monotonic()
         if rest > 0:
             time.sleep(rest)

@@ -105,7 +105,7 @@ def test_open_rig_drives_the_cell_and_stop_halts_arm_and_turntable(cell):
         rig.turntable.rotate_to(math.pi / 4)
         assert grbl.position == 45.0
         q0 = rig.arm.joint_positions()
-        goal = q0 + np.radians([20, 0, 0, 0, 0, 0])  # 0.67 s at 30 deg/s
+        goal = q0 + np.radians([40, 0, 0, 0, 0, 0])  # 1.33 s at 30 deg/s, stopped after 0.2 s
         t = np.linspace(0, 1, 11)
         traj = JointTrajectory(UR_JOINTS, t, q0 + t[:, None] * (goal - q0), np.zeros((11, 6)))
         timer = threading.Timer(0.2, rig.stop)
@@ -113,7 +113,7 @@ def test_open_rig_drives_the_cell_and_stop_halts_arm_and_turntable(cell):
         with pytest.raises(ArmFaultError, match="stopped on request"):
             rig.arm.execute(traj)
         timer.join()
-        assert 1.0 < math.degrees(rig.arm.joint_positions()[0] - q0[0]) < 19.0
+        assert 1.0 < math.degrees(rig.arm.joint_positions()[0] - q0[0]) < 38.0
         assert np.allclose(rig.cell.hand_eye.translation, [0, 0, 0.05])
     assert ("stopScript",) in controller.calls
 

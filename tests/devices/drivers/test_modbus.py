@@ -29,9 +29,7 @@ def test_rotate_to_writes_the_target_and_waits_for_the_drive(drive):
     with table(drive) as t:
         assert isinstance(t, Turntable)
         assert t.angle == 0.0
-        started = time.monotonic()
         t.rotate_to(math.radians(90.0))
-        assert time.monotonic() - started >= 0.2  # 9000 steps at 36000 steps/s
         assert drive.target == 9000 and drive.position == 9000 and drive.commands == [1]
         assert t.angle == pytest.approx(math.radians(90.0))
         assert "Modbus drive 1 on /dev/pts/" in t.describe() and "idle" in t.describe()
@@ -87,7 +85,7 @@ def test_a_slow_move_times_out_and_is_stopped():
 
 
 def test_stop_from_another_thread(drive):
-    drive.rate = 9000.0  # 1 s for 90 deg
+    drive.rate = 4500.0  # 2 s for 90 deg, stopped after 0.2 s
     with table(drive) as t:
         timer = threading.Timer(0.2, t.stop)
         timer.start()
