@@ -22,7 +22,7 @@ import numpy as np
 
 from devices.cellfile import CellFile, DeviceSpec
 from devices.drivers.registry import REGISTRY
-from devices.protocols import DeviceError
+from devices.protocols import CaptureError, DeviceError
 
 
 def open_device(spec: DeviceSpec) -> Any:
@@ -113,10 +113,13 @@ def _state(kind: str, device: Any) -> str:
     describe = getattr(device, "describe", None)
     head = str(describe()) if callable(describe) else type(device).__name__
     if kind == "camera":
-        if getattr(device, "pose_source", True) is None:
-            k = device.intrinsics
+        try:
+            frame = device.capture()
+        except CaptureError:
+            if getattr(device, "pose_source", True) is not None:
+                raise
+            k = device.intrinsics  # a simulated camera renders from the pose of the cell it is mounted in
             return f"{head}: {k.width}x{k.height}, renders once mounted in a cell (no test capture)"
-        frame = device.capture()
         valid = frame.depth[frame.depth > 0]
         median = f", median depth {float(np.median(valid)):.3f} m" if valid.size else ""
         return f"{head}; test capture {valid.size} of {frame.depth.size} pixels with a return{median}"

@@ -9,6 +9,7 @@ the in-process controller of ``fake_ur`` through ``registry.override`` (the cell
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import subprocess
@@ -26,6 +27,7 @@ from devices.protocols import DeviceError
 from devices.rig import open_rig
 from devices.trajectory import JointTrajectory
 from nbv.cli import main
+from planner.types import DepthFrame, Pose
 from tests.devices.drivers.fake_grbl import FakeGrbl
 from tests.devices.drivers.fake_ur import CONTROLLERS
 from tests.devices.drivers.rigfixtures import UR_HOST, cell_toml, fake_hardware_cell
@@ -137,3 +139,25 @@ def test_a_rehearsal_cell_of_simulated_devices_checks_ok(tmp_path, capsys):
     assert lines[0].split()[:3] == ["camera", "sim", "ok"] and "64x48, renders once mounted" in lines[0]
     assert lines[1] == "turntable  sim        ok      SimulatedTurntable: plate at 30.00 deg"
     assert lines[2] == "2 of 2 devices ok"
+
+
+def test_a_replay_camera_is_checked_with_a_test_capture(tmp_path, capsys):
+    from devices.ply import write_ply
+
+    depths, k = rendered_views(1)
+    pose = Pose.look_at((0.45, 0.0, 0.3), (0.0, 0.0, 0.06))
+    frame = DepthFrame(depths[0], pose, k)
+    folder = tmp_path / "views"
+    folder.mkdir()
+    write_ply(folder / "view_00.ply", frame.points_world)
+    meta = {
+        "T_world_camera": pose.to_dict(),
+        "intrinsics": dict(width=80, height=60, fx=70.0, fy=72.0, cx=39.0, cy=30.5),
+    }
+    (folder / "view_00.json").write_text(json.dumps(meta))
+    path = tmp_path / "cell.toml"
+    path.write_text('[devices.camera]\ndriver = "replay"\nrecording = "views"\n')
+    assert main(["devices", "check", "--config", str(path)]) == 0
+    line = capsys.readouterr().out.splitlines()[0]
+    assert line.split()[:3] == ["camera", "replay", "ok"]
+    assert f"test capture {int((depths[0] > 0).sum())} of 4800 pixels" in line
