@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -152,3 +153,17 @@ def test_arm_mount_is_position_and_yaw_of_an_upright_arm_base():
     tilted = parse_cell({"devices": {"arm_base": {"rotation_deg": [5, 0, 0]}}})
     with pytest.raises(ValueError, match=r"devices.arm_base: tilted 5.00 deg from upright"):
         tilted.arm_mount()
+
+
+def test_the_examples_in_docs_hardware_md_parse():
+    import re
+    import tomllib
+
+    text = (Path(__file__).resolve().parents[3] / "docs" / "hardware.md").read_text()
+    blocks = re.findall(r"```toml\n(.*?)```", text, flags=re.S)
+    assert len(blocks) == 2
+    full = parse_cell(tomllib.loads(blocks[0]))
+    assert [d.driver for d in full.devices()] == ["realsense", "ur", "grbl"]
+    assert full.arm is not None and full.arm.config.joint_upper_deg[1] == 0.0
+    modbus = parse_cell(tomllib.loads(textwrap.dedent(blocks[1])))
+    assert modbus.turntable is not None and modbus.turntable.driver == "modbus"
