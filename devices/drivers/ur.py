@@ -317,12 +317,17 @@ class URArm:
         steps = np.max(np.abs(np.diff(waypoints, axis=0)), axis=1) if len(waypoints) > 1 else np.zeros(0)
         expected = float(np.sum(steps / speed + speed / acc))
         deadline = time.monotonic() + 1.5 * expected + cfg.timeout_margin_s
+        # Progress is >= 0 while an async operation runs; between operations it is negative and toggles
+        # between two values, so a negative value other than the one before the command means "finished"
+        # (the command may be acknowledged before the operation starts: the same value means "not yet").
+        idle_before = self._control.getAsyncOperationProgress()
         if not self._call(lambda: self._control.moveJ(path, True), "moveJ"):
             self._raise_fault(self.fault() or "the controller refused the motion", "moveJ returned false")
         while True:
             time.sleep(cfg.poll_s)
             self._watch(deadline, lambda: self._control.stopJ(2.0, False))
-            if self._control.getAsyncOperationProgress() < 0:
+            progress = self._control.getAsyncOperationProgress()
+            if progress < 0 and progress != idle_before:
                 return
 
     def _run_servo(self, trajectory: JointTrajectory) -> None:

@@ -31,9 +31,12 @@ class FakeController:
     connected: bool = True
     program_running: bool = True
     connect_delay_s: float = 0.0
+    start_delay_s: float = 0.0
+    """An async path starts this long after moveJ returns (its progress stays negative until then)."""
     calls: list[tuple] = field(default_factory=list)
     _segments: list[tuple[float, float, np.ndarray, np.ndarray]] = field(default_factory=list)
     _progress: int = -1
+    _idle: int = -1  # the negative progress while no async operation runs: toggles -1 / -2 at each end
     _fault: tuple[str, float] | None = None
     _fault_at: float | None = None
     _lock: threading.RLock = field(default_factory=threading.RLock)
@@ -62,7 +65,7 @@ class FakeController:
             if self._fault_at is not None and now >= self._fault_at:
                 if self._segments:
                     self.q = self._position(self._fault_at)
-                self._segments, self._progress = [], -1
+                    self._finish()
                 kind = self._fault[0] if self._fault else ""
                 self._fault, self._fault_at = None, None
                 if kind == "protective_stop":
@@ -78,27 +81,33 @@ class FakeController:
                 self.q = self._position(now)
                 ends = [t1 for _, t1, _, _ in self._segments]
                 if now >= ends[-1]:
-                    self._segments, self._progress = [], -1
-                else:
+                    self._finish()
+                elif now >= self._segments[0][0]:
                     self._progress = int(np.searchsorted(ends, now))
 
     def start_path(self, path: list[list[float]]) -> None:
         with self._lock:
             now = time.monotonic()
             self._arm_fault(now)
-            t, q = now, self.q.copy()
+            t, q = now + self.start_delay_s, self.q.copy()
             self._segments = []
             for entry in path:
                 target, speed = np.array(entry[:6]), entry[6]
                 duration = float(np.max(np.abs(target - q))) / speed
                 self._segments.append((t, t + duration, q, target))
                 t, q = t + duration, target
-            self._progress = 0
+            self._progress = self._idle if self.start_delay_s else 0
+
+    def _finish(self) -> None:
+        """The async operation ended (done, stopped or aborted): its progress becomes the other negative value."""
+        self._idle = -2 if self._idle == -1 else -1
+        self._segments, self._progress = [], self._idle
 
     def halt(self) -> None:
         with self._lock:
             self.update()
-            self._segments, self._progress = [], -1
+            if self._segments:
+                self._finish()
 
 
 def _controller(hostname: str) -> FakeController:

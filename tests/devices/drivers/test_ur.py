@@ -268,3 +268,14 @@ def test_bad_config_names_the_field(overrides, message):
     settings = {"host": "ur-test", **overrides}
     with pytest.raises(ValueError, match=message):
         URConfig(**settings)
+
+
+def test_path_mode_waits_for_an_async_operation_that_starts_late(controller):
+    """ur_rtde acknowledges moveJ before the path starts; its progress stays at the idle value until then."""
+    controller.start_delay_s = 0.15
+    a = arm()
+    goal = Q0 + np.radians([9, 0, 0, 0, 0, 0])  # 0.1 s at 90 deg/s, after the 0.15 s delay
+    a.execute(move(Q0, goal, 1.0))
+    assert np.allclose(a.joint_positions(), goal)
+    a.execute(move(goal, Q0, 1.0))  # the next operation ends on the other idle value
+    assert np.allclose(a.joint_positions(), Q0)
