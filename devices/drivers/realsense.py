@@ -1,0 +1,222 @@
+"""Intel RealSense depth camera (``pyrealsense2``, extra ``[realsense]``), live or playing a recording.
+
+The depth stream runs at the configured resolution and rate; the depth scale (metres per z16 unit) is
+read from the device's depth sensor and the pinhole intrinsics from the stream profile, never typed
+in. librealsense puts pixel centres at integer coordinates like OpenCV and like
+:class:`planner.types.DepthFrame`, so ``ppx``/``ppy`` are ``cx``/``cy`` as they are. Depth streams of
+D400 cameras are rectified (distortion coefficients all zero); a stream with distortion is refused.
+
+A capture optionally runs librealsense post-processing filters by name (``spatial``, ``temporal``,
+``hole_filling``: they keep the resolution) and averages several frames: each pixel is the mean of the
+frames that had a return there (0 if none had). A frame that does not arrive within ``timeout_s`` is a
+:class:`devices.protocols.CaptureError`.
+
+``playback`` names a recording (``.bag``, or rosbag2 ``.db3`` as librealsense 2.59 writes) played back not
+in real time, frame by frame: how the driver is tested offline, and how a recorded scan is replayed
+through the exact code path of the live camera.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from devices.drivers.common import import_vendor
+from devices.protocols import CaptureError, DeviceError
+from planner.types import DepthFrame, Intrinsics, Pose
+from planner.validate import finite, integer, require
+
+FILTERS = ("spatial", "temporal", "hole_filling")
+"""Post-processing filters a config may name, applied in the order given."""
+
+
+@dataclass(frozen=True)
+class RealSenseConfig:
+    """``[devices.camera] driver = "realsense"``."""
+
+    width: int = 640
+    """Depth image width, pixels (a mode the camera supports, e.g. 640, 848, 1280)."""
+    height: int = 480
+    """Depth image height, pixels."""
+    fps: int = 30
+    """Depth frame rate, frames per second."""
+    serial: str = ""
+    """Serial number of the camera to open; empty: the first one found."""
+    playback: str = ""
+    """A recording (.bag / .db3) to play back instead of a live camera; empty: live."""
+    filters: tuple[str, ...] = ()
+    """Post-processing filters by name, in order: any of "spatial", "temporal", "hole_filling"."""
+    average: int = 1
+    """Frames averaged per capture (each pixel: the mean of the frames with a return there)."""
+    timeout_s: float = 2.0
+    """Longest wait for one frame, seconds; longer is a CaptureError."""
+    settle_frames: int = 5
+    """Live camera: frames dropped before each capture, so the image is taken after the arm stopped."""
+    min_depth: float = 0.1
+    """Returns nearer than this are dropped (depth 0), metres."""
+    max_depth: float = 1.5
+    """Returns farther than this are dropped (depth 0), metres."""
+
+    def __post_init__(self) -> None:
+        p = "devices.camera."
+        for name in ("width", "height", "fps", "average"):
+            v = getattr(self, name)
+            require(integer(v) and v >= 1, f"{p}{name}: must be an integer >= 1, got {v!r}")
+        require(
+            integer(self.settle_frames) and self.settle_frames >= 0,
+            f"{p}settle_frames: must be an integer >= 0, got {self.settle_frames!r}",
+        )
+        require(isinstance(self.serial, str), f"{p}serial: must be a string, got {self.serial!r}")
+        require(isinstance(self.playback, str), f"{p}playback: must be a file path, got {self.playback!r}")
+        filters = self.filters
+        require(
+            isinstance(filters, list | tuple) and all(isinstance(f, str) for f in filters),
+            f"{p}filters: must be a list of names, got {filters!r}",
+        )
+        for f in filters:
+            require(f in FILTERS, f"{p}filters: unknown filter {f!r} (known: {', '.join(FILTERS)})")
+        object.__setattr__(self, "filters", tuple(filters))
+        require(finite(self.timeout_s) and self.timeout_s > 0, f"{p}timeout_s: must be > 0, got {self.timeout_s!r}")
+        require(finite(self.min_depth) and self.min_depth >= 0, f"{p}min_depth: must be >= 0, got {self.min_depth!r}")
+        require(
+            finite(self.max_depth) and self.max_depth > self.min_depth,
+            f"{p}max_depth: must be > min_depth ({self.min_depth!r}), got {self.max_depth!r}",
+        )
+
+
+class RealSenseCamera:
+    """A RealSense depth camera behind the :class:`devices.protocols.Camera` protocol.
+
+    Opening starts the pipeline (DeviceError when there is no camera, the recording is missing or has
+    no depth stream at the configured resolution). ``T_world_camera`` of a capture is the identity:
+    the cell puts the pose from the arm and the turntable. Call :meth:`close` (or use ``with``) to stop.
+    """
+
+    def __init__(self, config: RealSenseConfig | None = None) -> None:
+        self.config = config if config is not None else RealSenseConfig()
+        self._rs: Any = import_vendor("pyrealsense2", "realsense", "RealSense camera")
+        self.captures = 0
+        self._pipeline: Any = None
+        self._open()
+
+    # ------------------------------------------------------------------ opening
+
+    def _open(self) -> None:
+        rs, cfg = self._rs, self.config
+        pipeline = rs.pipeline()
+        rs_config = rs.config()
+        if cfg.playback:
+            path = Path(cfg.playback)
+            if not path.is_file():
+                raise DeviceError(f"RealSense: playback file {cfg.playback!r} not found")
+            rs_config.enable_device_from_file(str(path), repeat_playback=False)
+        elif cfg.serial:
+            rs_config.enable_device(cfg.serial)
+        rs_config.enable_stream(rs.stream.depth, cfg.width, cfg.height, rs.format.z16, cfg.fps)
+        source = f"recording {Path(cfg.playback).name!r}" if cfg.playback else f"camera {cfg.serial or '(first)'}"
+        try:
+            if cfg.playback:
+                # Not real time from the first frame: resolving loads the playback device, which the
+                # pipeline then reuses; set after start, frames already played in real time are lost.
+                resolved = rs_config.resolve(rs.pipeline_wrapper(pipeline))
+                resolved.get_device().as_playback().set_real_time(False)
+            profile = pipeline.start(rs_config)
+        except RuntimeError as exc:
+            raise DeviceError(
+                f"RealSense: cannot start a {cfg.width}x{cfg.height} z16 depth stream at {cfg.fps} fps "
+                f"from {source} ({exc})"
+            ) from None
+        self._pipeline = pipeline
+        try:
+            device = profile.get_device()
+            self.depth_scale = float(device.first_depth_sensor().get_depth_scale())
+            stream = profile.get_stream(rs.stream.depth).as_video_stream_profile()
+            k = stream.get_intrinsics()
+            if any(abs(c) > 0 for c in k.coeffs):
+                raise DeviceError(f"RealSense: the depth stream has lens distortion {list(k.coeffs)} (not supported)")
+            self._intrinsics = Intrinsics(int(k.width), int(k.height), float(k.fx), float(k.fy), k.ppx, k.ppy)
+            self.serial = str(device.get_info(rs.camera_info.serial_number))
+            self.name = str(device.get_info(rs.camera_info.name))
+        except BaseException:
+            self.close()
+            raise
+        makers = {"spatial": rs.spatial_filter, "temporal": rs.temporal_filter, "hole_filling": rs.hole_filling_filter}
+        self._filters = [makers[name]() for name in cfg.filters]
+
+    def close(self) -> None:
+        """Stop the pipeline (harmless when already stopped)."""
+        if self._pipeline is not None:
+            pipeline, self._pipeline = self._pipeline, None
+            with contextlib.suppress(RuntimeError):
+                if self.config.playback:
+                    # librealsense#3126: stopping a pipeline whose playback is not real time can hang or
+                    # abort while the reader waits for the consumer; back to real time releases it first.
+                    pipeline.get_active_profile().get_device().as_playback().set_real_time(True)
+                pipeline.stop()
+
+    def __enter__(self) -> RealSenseCamera:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ Camera protocol
+
+    @property
+    def intrinsics(self) -> Intrinsics:
+        return self._intrinsics
+
+    def _next_depth(self) -> NDArray[np.float32]:
+        """(H, W) float32 metres of the next frame, after the filters. CaptureError on timeout."""
+        if self._pipeline is None:
+            raise CaptureError("RealSense: the camera is closed")
+        timeout_ms = max(1, round(self.config.timeout_s * 1000))
+        try:
+            frames = self._pipeline.wait_for_frames(timeout_ms)
+        except RuntimeError as exc:
+            raise CaptureError(f"RealSense: no depth frame within {self.config.timeout_s:g} s ({exc})") from None
+        depth = frames.get_depth_frame()
+        if not depth:
+            raise CaptureError("RealSense: a frame set without a depth frame")
+        for f in self._filters:
+            depth = f.process(depth)
+        raw = np.asanyarray(depth.get_data())
+        k = self._intrinsics
+        if raw.shape != (k.height, k.width):
+            raise CaptureError(f"RealSense: depth image {raw.shape}, expected {(k.height, k.width)}")
+        return raw.astype(np.float32) * np.float32(self.depth_scale)
+
+    def capture(self) -> DepthFrame:
+        """The mean of ``average`` depth images (after ``settle_frames`` dropped, live only); 0 = no return.
+
+        Returns a DepthFrame with (height, width) float32 planar z-depth in metres and the identity pose.
+        """
+        cfg = self.config
+        if not cfg.playback:
+            for _ in range(cfg.settle_frames):
+                self._next_depth()
+        k = self._intrinsics
+        total = np.zeros((k.height, k.width), dtype=np.float64)
+        count = np.zeros((k.height, k.width), dtype=np.int64)
+        for _ in range(cfg.average):
+            depth = self._next_depth()
+            valid = depth > 0
+            total[valid] += depth[valid]
+            count += valid
+        mean = np.divide(total, count, out=np.zeros_like(total), where=count > 0)
+        in_range = (mean >= cfg.min_depth) & (mean <= cfg.max_depth)
+        self.captures += 1
+        return DepthFrame(np.where(in_range, mean, 0.0).astype(np.float32), Pose.identity(), k)
+
+    def describe(self) -> str:
+        """One line for ``nbv devices check``: model, serial, stream, depth scale."""
+        k = self._intrinsics
+        return (
+            f"{self.name} #{self.serial}, depth {k.width}x{k.height} @ {self.config.fps} fps, "
+            f"scale {self.depth_scale * 1000:.4g} mm, fx {k.fx:.1f} fy {k.fy:.1f}"
+        )

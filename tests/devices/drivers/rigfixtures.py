@@ -1,0 +1,95 @@
+"""A whole fake hardware cell for tests: a RealSense recording, the fake UR controller, the fake GRBL firmware.
+
+``fake_hardware_cell(folder, depths, intrinsics)`` writes ``depths`` into ``folder/scan.db3`` with
+librealsense's recorder, starts the GRBL firmware on a pseudo terminal, registers an in-process UR
+controller under the host ``ur-cell``, swaps the UR driver's RTDE classes for the fake ones
+(``registry.override``), writes ``folder/cell.toml`` naming all three (``driver = "realsense"``,
+``"ur"``, ``"grbl"``) and yields a :class:`FakeCell`. Everything is undone on exit. A session test can
+open the cell with ``devices.rig.open_rig(load_cell_file(cell.path))`` or pass the path to a command
+in the same process.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from devices.drivers.registry import override
+from devices.drivers.rsrecord import write_depth_recording
+from devices.drivers.ur import URArm
+from planner.types import Intrinsics
+from tests.devices.drivers.fake_grbl import FakeGrbl
+from tests.devices.drivers.fake_ur import CONTROLLERS, FakeController, FakeRTDEControl, FakeRTDEReceive
+
+UR_HOST = "ur-cell"
+
+
+@dataclass
+class FakeCell:
+    """The cell file and the fakes behind it (to inspect them or inject faults)."""
+
+    path: Path
+    grbl: FakeGrbl
+    controller: FakeController
+
+
+def cell_toml(port: str, intrinsics: Intrinsics, *, arm: bool = True, extra: str = "") -> str:
+    """A cell file for the recording ``scan.db3`` next to it, the GRBL on ``port`` and (if ``arm``) the fake UR."""
+    k = intrinsics
+    text = f"""
+[devices]
+allow_auto = false
+
+[devices.camera]
+driver = "realsense"
+width = {k.width}
+height = {k.height}
+min_depth = 0.05
+max_depth = 3.0
+timeout_s = 1.0
+playback = "scan.db3"
+
+[devices.turntable]
+driver = "grbl"
+port = "{port}"
+command_timeout_s = 0.5
+poll_s = 0.01
+"""
+    if arm:
+        text += f"""
+[devices.arm]
+driver = "ur"
+host = "{UR_HOST}"
+max_joint_speed_deg = 30
+
+[devices.hand_eye]
+translation = [0.0, 0.0, 0.05]
+"""
+    return text + extra
+
+
+@contextmanager
+def fake_hardware_cell(
+    folder: Path, depths: Sequence[NDArray[np.float32]], intrinsics: Intrinsics, *, depth_unit: float = 1e-4
+) -> Iterator[FakeCell]:
+    """See the module docstring. ``depths``: (H, W) float32 metres each, played back in order."""
+    write_depth_recording(folder / "scan.db3", depths, intrinsics, depth_unit=depth_unit)
+    controller = FakeController()
+    CONTROLLERS[UR_HOST] = controller
+    try:
+        with FakeGrbl() as grbl:
+            path = folder / "cell.toml"
+            path.write_text(cell_toml(grbl.port, intrinsics))
+
+            def open_ur(config):
+                return URArm(config, control_factory=FakeRTDEControl, receive_factory=FakeRTDEReceive)
+
+            with override("arm", "ur", open_ur):
+                yield FakeCell(path, grbl, controller)
+    finally:
+        CONTROLLERS.pop(UR_HOST, None)
