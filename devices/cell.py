@@ -27,6 +27,7 @@ In both, the arm moves the camera to ``T_base_camera = Rz(theta) @ T_table_camer
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -41,6 +42,10 @@ from planner.types import BoundingBox, DepthFrame, Intrinsics, Pose
 
 if TYPE_CHECKING:
     from devices.arm.kinematics import ArmKinematics
+
+
+SPHERE_CAMERA_SPEED = 0.25
+"""Reach sphere: the camera's straight-line speed assumed for a move's duration estimate, m/s."""
 
 
 def rz(theta: float) -> Pose:
@@ -226,6 +231,31 @@ class Cell:
             return [self.reachability(T) for T in poses]
         q, angle = self.arm.joint_positions(), self.turntable.angle
         return [self.kinematics.reachability(T, q, angle) for T in poses]
+
+    def move_estimate(self, T_table_camera: Pose) -> float:
+        """Seconds the move to a view would take from the current state (inf if unreachable): plate turn plus
+        the slowest joint for a URDF arm (no path planned), plate turn plus the camera's straight travel at
+        ``SPHERE_CAMERA_SPEED`` for the reach sphere."""
+        if self.kinematics is not None:
+            target, _ = self.kinematics.reach.reachability(
+                T_table_camera, self.arm.joint_positions(), self.turntable.angle
+            )
+            return math.inf if target is None else target.move_estimate
+        try:
+            motion = self.plan_motion(T_table_camera)
+        except UnreachableError:
+            return math.inf
+        turn = abs(wrap_angle(motion.angle - self.turntable.angle)) / math.radians(self.config.arm.turntable_speed_deg)
+        travel = float(np.linalg.norm(motion.T_base_camera.translation - self.arm.pose.translation))
+        return turn + travel / SPHERE_CAMERA_SPEED
+
+    def move_costs(self, candidates: Sequence[Any], eligible: NDArray[np.bool_]) -> NDArray[np.float64]:
+        """(C,) :meth:`move_estimate` of each eligible candidate (``.T_world_camera``), inf for the others: the
+        ``move_cost`` callable of ``Planner.plan``."""
+        out = np.full(len(candidates), math.inf)
+        for i in np.flatnonzero(np.asarray(eligible, dtype=bool)):
+            out[i] = self.move_estimate(candidates[i].T_world_camera)
+        return out
 
     def is_reachable(self, T_table_camera: Pose) -> bool:
         """Whether the view is reachable (:meth:`reachability`; for the sphere in closed form, no Pose built).

@@ -75,6 +75,7 @@ def _execute(task: RunTask, t0: float) -> RunOutcome:
         depth_noise=task.depth_noise,
         pose_noise=task.pose_noise,
         reachable=False,
+        arm=task.arm,
     )
     outcome = RunOutcome(task.label, task.planner, task.seed, terminated=scan.result.terminated)
     for r in scan.result.records:
@@ -89,6 +90,7 @@ def _execute(task: RunTask, t0: float) -> RunOutcome:
                 "plan_seconds": r.plan_seconds,
                 "eval_seconds": r.timings.get("score", 0.0),
                 "fit_seconds": r.timings.get("cluster", 0.0) + r.timings.get("ellipsoids", 0.0),
+                "robot_seconds": r.robot_seconds,
             }
         )
         outcome.poses.append(r.pose.to_dict())
@@ -239,6 +241,7 @@ def make_tasks(args: argparse.Namespace) -> list[RunTask]:
                         pose_noise=args.pose_noise,
                         reachable=not args.no_reachable and name == ceiling,
                         threads=threads,
+                        arm=args.arm,
                     )
                 )
     tasks.sort(key=lambda t: not t.reachable)  # the slower runs start first

@@ -35,6 +35,7 @@ COLUMNS = (
     "plan_seconds",
     "eval_seconds",
     "fit_seconds",
+    "robot_seconds",
     "reachable_coverage",
 )
 """The columns of results.csv, in order."""
@@ -153,6 +154,16 @@ def summary_markdown(outcomes: Sequence[RunOutcome], meta: dict[str, Any]) -> st
     for p in planners:
         totals = [_cell([sum(r["plan_seconds"] for r in o.rows) for o in runs[(m, p)]], 3) for m in models]
         body.append([p, *totals, _fmt(_mean(col(p, "plan_seconds")), 3)])
+    out += [*_table(header, body), "", "## Total robot time (s)", ""]
+    out += [
+        "The sum over a scan's views of the move durations (plate turn + timed joint trajectory), the captures,",
+        "the planning and the motion planning (mean over seeds): what the scan costs at the robot.",
+        "",
+    ]
+    body = []
+    for p in planners:
+        totals = [_cell([sum(r.get("robot_seconds") or 0.0 for r in o.rows) for o in runs[(m, p)]], 2) for m in models]
+        body.append([p, *totals, _fmt(_mean(col(p, "robot_seconds")), 2)])
     out += [*_table(header, body), "", "## Candidate evaluation time per iteration (s, mean)", ""]
     body = []
     for p in planners:

@@ -37,6 +37,9 @@ def reachable_coverage(
     candidates, _, _ = propose_candidates(bbox, cfg.candidates, cfg.partitions)
     clean = replace(cfg.preprocess, outlier_min_neighbors=0)
     covered = np.zeros(len(surface_samples), dtype=bool)
+    set_box = getattr(cell, "set_object_box", None)
+    if callable(set_box):
+        set_box(bbox)  # the arm keeps clear of the final box, as during the scan
     for cand in candidates:
         if not cell.is_reachable(cand.T_world_camera):
             continue

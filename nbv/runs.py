@@ -29,6 +29,8 @@ class RunTask:
     """Compute the reachable-coverage ceiling of (model, seed) in this run."""
     threads: int | None = None
     """BLAS/OpenMP threads of the worker (None: library default)."""
+    arm: str = "urdf"
+    """The cell's arm (``--arm``): 'urdf' (the UR5) or 'reach_sphere'."""
 
 
 @dataclass
