@@ -65,8 +65,9 @@ class Motion:
     """How the cell reaches a view: turntable ``angle`` (rad, in (-pi, pi]) and the arm's ``T_base_camera``.
 
     With a URDF arm also: ``q`` (n,) the joint target, ``trajectory`` the timed joint trajectory from the
-    current configuration, ``duration`` seconds of the whole move (plate turn + trajectory; 0 for the reach
-    sphere), ``path_method`` ('straight' or 'rrt_connect') and ``planning_seconds``.
+    current configuration, ``duration`` seconds of the whole move (plate turn + trajectory; for the reach
+    sphere: the plate turn plus the camera's straight travel at ``SPHERE_CAMERA_SPEED``), ``path_method``
+    ('straight' or 'rrt_connect') and ``planning_seconds``.
     """
 
     angle: float
@@ -213,7 +214,9 @@ class Cell:
                 f"unreachable: camera {distance:.3f} m from the arm base, "
                 f"nearer than arm_min_reach {cfg.arm_min_reach:.3f} m"
             )
-        return Motion(theta, T_base_camera)
+        turn = abs(wrap_angle(theta - self.turntable.angle)) / math.radians(cfg.arm.turntable_speed_deg)
+        travel = float(np.linalg.norm(T_base_camera.translation - self.arm.pose.translation))
+        return Motion(theta, T_base_camera, duration=turn + travel / SPHERE_CAMERA_SPEED)
 
     def reachability(self, T_table_camera: Pose) -> tuple[bool, str | None]:
         """(reachable, reason): IK + joint limits + collisions at some plate angle for a URDF arm (reason
@@ -234,27 +237,24 @@ class Cell:
 
     def move_estimate(self, T_table_camera: Pose) -> float:
         """Seconds the move to a view would take from the current state (inf if unreachable): plate turn plus
-        the slowest joint for a URDF arm (no path planned), plate turn plus the camera's straight travel at
+        the slowest joint to the nearest target (every plate angle and IK branch; no path planned) for a URDF arm, plate turn plus the camera's straight travel at
         ``SPHERE_CAMERA_SPEED`` for the reach sphere."""
         if self.kinematics is not None:
-            target, _ = self.kinematics.reach.reachability(
+            target, _ = self.kinematics.reach.best_target(
                 T_table_camera, self.arm.joint_positions(), self.turntable.angle
             )
             return math.inf if target is None else target.move_estimate
         try:
-            motion = self.plan_motion(T_table_camera)
+            return self.plan_motion(T_table_camera).duration
         except UnreachableError:
             return math.inf
-        turn = abs(wrap_angle(motion.angle - self.turntable.angle)) / math.radians(self.config.arm.turntable_speed_deg)
-        travel = float(np.linalg.norm(motion.T_base_camera.translation - self.arm.pose.translation))
-        return turn + travel / SPHERE_CAMERA_SPEED
 
     def move_costs(self, candidates: Sequence[Any], eligible: NDArray[np.bool_]) -> NDArray[np.float64]:
         """(C,) :meth:`move_estimate` of each eligible candidate (``.T_world_camera``), inf for the others: the
         ``move_cost`` callable of ``Planner.plan``."""
         out = np.full(len(candidates), math.inf)
         for i in np.flatnonzero(np.asarray(eligible, dtype=bool)):
-            out[i] = self.move_estimate(candidates[i].T_world_camera)
+            out[i] = self.move_estimate(candidates[int(i)].T_world_camera)
         return out
 
     def is_reachable(self, T_table_camera: Pose) -> bool:

@@ -163,7 +163,8 @@ def summary_markdown(outcomes: Sequence[RunOutcome], meta: dict[str, Any]) -> st
     body = []
     for p in planners:
         totals = [_cell([sum(r.get("robot_seconds") or 0.0 for r in o.rows) for o in runs[(m, p)]], 2) for m in models]
-        body.append([p, *totals, _fmt(_mean(col(p, "robot_seconds")), 2)])
+        per_view = [float(r.get("robot_seconds") or 0.0) for r in rows[p]]  # older runs lack the column
+        body.append([p, *totals, _fmt(_mean(per_view), 2)])
     out += [*_table(header, body), "", "## Candidate evaluation time per iteration (s, mean)", ""]
     body = []
     for p in planners:

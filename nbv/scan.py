@@ -9,7 +9,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -180,7 +180,7 @@ def run_scan(
         record = make_record(report, plan, planner, cov)
         record.capture_seconds = capture_seconds
         to_json = getattr(motion, "to_json", None)
-        record.move = to_json() if callable(to_json) else None
+        record.move = cast(dict[str, Any], to_json()) if callable(to_json) else None
         records.append(record)
         if keep_plans:
             plans.append(plan)

@@ -9,7 +9,7 @@ converged: the pose is out of the arm's workspace) or ``joint_limit`` (it conver
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -85,11 +85,13 @@ def solve_ik(
     data: Any | None = None,
     *,
     first: bool = True,
+    accept: Callable[[NDArray[np.float64]], bool] | None = None,
 ) -> tuple[list[NDArray[np.float64]], str | None]:
     """Solutions (each (n,), inside the limits) for ``T_base_camera`` from ``seeds``, and the reason when none.
 
     first: stop at the first solution (a reachability test); else try every seed and return the distinct
     solutions sorted by joint distance from ``reference`` (the current configuration).
+    accept: solutions it refuses (e.g. in collision) are dropped and the next seed is tried.
     """
     import pinocchio as pin  # pyright: ignore[reportMissingImports]  (under cmeel.prefix)
 
@@ -107,6 +109,8 @@ def solve_ik(
         if fitted is None:
             continue
         if any(np.max(np.abs(fitted - s)) < 1e-3 for s in solutions):
+            continue
+        if accept is not None and not accept(fitted):
             continue
         solutions.append(fitted)
         if first:

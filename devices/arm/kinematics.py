@@ -61,9 +61,9 @@ class ArmKinematics:
         self.config = config
         self.model: ArmModel = load_arm(config, config.base)
         self.world = CollisionWorld(self.model, plate_radius, plate_thickness)
-        self.reach = ArmReach(self.model, self.world)
         home = np.radians(config.home_deg) if len(config.home_deg) == self.model.nq else np.zeros(self.model.nq)
         self.home: NDArray[np.float64] = np.clip(home, self.model.lower, self.model.upper)
+        self.reach = ArmReach(self.model, self.world, self.home)
 
     @property
     def joint_names(self) -> tuple[str, ...]:

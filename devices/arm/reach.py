@@ -6,11 +6,14 @@ view's azimuth at the arm's azimuth plus each of ``ArmConfig.plate_offsets_deg``
 one of them has an IK solution inside the joint limits, free of collisions; otherwise the reason of the attempt
 that got furthest is kept: ``no_ik`` < ``joint_limit`` < ``collision:<link>:<obstacle>``.
 
-Speed (400 candidates per plan): with the object near the turntable axis, every candidate of one parallel
-maps to almost the same ``T_base_camera``, so IK solutions are cached by that pose (quantised); the last
-solution seeds the next IK (the planner asks candidate after candidate along the parallels), and a library
-of configurations sampled at start-up gives seeds near any pose. Collisions are always checked (the object
-box and the plate angle change).
+Reachability is a pure function of the view and the object box (not of the arm's state or of what was asked
+before), so replaying a journal gives the same eligible candidates. Speed (400 candidates per plan): IK is
+seeded by the solution of an *anchor*, the centre of the view's cell on a coarse pose grid (solved once, kept
+for the whole session: with the turntable, successive plans put their candidates in the same cells), then by
+a library of configurations sampled at start-up; results are cached by exact pose; a reach bound answers
+``no_ik`` for far poses without IK; the plate offset that served the previous view is tried first (the
+verdict does not depend on the order). Collisions are always checked (the object box and the plate angle
+change).
 """
 
 from __future__ import annotations
@@ -31,8 +34,10 @@ LIBRARY_SIZE = 600
 """Configurations sampled at start-up whose camera poses seed IK for nearby targets."""
 ORIENTATION_WEIGHT = 0.2
 """Metres per unit of camera-axis difference in the seed library's pose distance."""
-FAILURE_RADIUS = 0.005
-"""A pose within this distance (metres, in the seed library's pose metric) of one whose IK failed fails too."""
+ANCHOR_STEP = 0.03
+"""Grid step of the IK anchors' positions, metres."""
+ANCHOR_AXIS_STEP = 0.1
+"""Grid step of the IK anchors' camera axes (per component of the unit z and x axes)."""
 CACHE_SIZE = 20_000
 """IK results kept (cleared when full)."""
 
@@ -68,11 +73,13 @@ def _severity(reason: str) -> int:
 class ArmReach:
     """Reachability and targets of views for one arm in one cell (not thread-safe: one per cell).
 
-    arm: the loaded model. world: its collision world (plate, table, object box).
+    arm: the loaded model. world: its collision world (plate, table, object box). home: (n,) the configuration
+    reachability's IK solutions are wrapped towards (joint turns), so they do not depend on the current state.
     """
 
-    def __init__(self, arm: ArmModel, world: CollisionWorld) -> None:
+    def __init__(self, arm: ArmModel, world: CollisionWorld, home: NDArray[np.float64]) -> None:
         self.arm = arm
+        self.home = np.asarray(home, dtype=np.float64)
         self.world = world
         self._data = arm.model.createData()
         mount = arm.T_base_mount.translation
@@ -82,10 +89,9 @@ class ArmReach:
         self._library_tree = KDTree(np.array([self._feature(arm.camera_pose(q, self._data)) for q in self._library]))
         self._wrist_joint = int(arm.model.frames[arm.camera_frame].parentJoint)
         self._wrist_in_camera, self._root, self.reach = self._reach_bound()
-        self._cache: dict[tuple[int, ...], tuple[list[NDArray[np.float64]], str | None]] = {}
-        self._last: NDArray[np.float64] | None = None
+        self._cache: dict[tuple[object, ...], tuple[list[NDArray[np.float64]], str | None]] = {}
+        self._anchors: dict[tuple[int, ...], NDArray[np.float64] | None] = {}
         self._last_offset = 0
-        self._failed: list[NDArray[np.float64]] = []
 
     # ------------------------------------------------------------------ helpers
 
@@ -136,33 +142,56 @@ class ArmReach:
     def _ik(
         self, T_base_camera: Pose, reference: NDArray[np.float64], *, first: bool
     ) -> tuple[list[NDArray[np.float64]], str | None]:
-        key = (
-            *np.round(T_base_camera.translation * 2000).astype(int),  # 0.5 mm
-            *np.round(T_base_camera.rotation[:, :2].ravel() * 1000).astype(int),  # ~1 mrad
-            int(first),
-        )
+        """IK of one pose. first=True (reachability): a pure function of the pose (seeds: its anchor and the
+        library; limits fitted towards home), so a replay of the same plans gets the same answers whatever was
+        asked before. first=False (a move): every branch, the current configuration ``reference`` first."""
+        key = (T_base_camera.translation.tobytes(), T_base_camera.rotation.tobytes(), first)
+        if not first:
+            key += (np.asarray(reference).tobytes(),)
         hit = self._cache.get(key)
         if hit is not None:
             return hit
-        feature = self._feature(T_base_camera)
-        if self._failed and float(np.min(np.linalg.norm(np.array(self._failed) - feature, axis=1))) < FAILURE_RADIUS:
-            return [], "no_ik"
-        seeds: list[NDArray[np.float64]] = []
-        if self._last is not None:
-            seeds.append(self._last)
-        seeds.append(reference)
+        seeds: list[NDArray[np.float64]] = [] if first else [np.asarray(reference, dtype=np.float64)]
+        anchor = self._anchor(T_base_camera)
+        if anchor is not None:
+            seeds.append(anchor)
         k = self.arm.config.ik_seeds if first else 2 * self.arm.config.ik_seeds
-        _, idx = self._library_tree.query(feature, k=min(k, len(self._library)))
-        seeds += [self._library[i] for i in np.atleast_1d(idx)]
-        result = solve_ik(self.arm, T_base_camera, seeds, reference, self._data, first=first)
+        if first and anchor is None:
+            k = 1  # the cell's centre is out of reach: one more try (a cell on the workspace's edge), not all
+        seeds += self._library_seeds(T_base_camera, k)
+        result = solve_ik(self.arm, T_base_camera, seeds, self.home if first else reference, self._data, first=first)
         if len(self._cache) >= CACHE_SIZE:
             self._cache.clear()
         self._cache[key] = result
-        if result[0]:
-            self._last = result[0][0]
-        elif result[1] == "no_ik":
-            self._failed = [*self._failed[-(CACHE_SIZE // 100) :], feature]
         return result
+
+    def _library_seeds(self, T_base_camera: Pose, k: int) -> list[NDArray[np.float64]]:
+        _, idx = self._library_tree.query(self._feature(T_base_camera), k=min(k, len(self._library)))
+        return [self._library[i] for i in np.atleast_1d(idx)]
+
+    def _anchor(self, T_base_camera: Pose) -> NDArray[np.float64] | None:
+        """The IK solution of the centre of the pose's grid cell (``ANCHOR_STEP`` metres, ``ANCHOR_AXIS_STEP`` per
+        camera-axis component), computed once per cell: a seed a few iterations from any pose of the cell."""
+        p = np.round(T_base_camera.translation / ANCHOR_STEP)
+        z = np.round(T_base_camera.rotation[:, 2] / ANCHOR_AXIS_STEP)
+        x = np.round(T_base_camera.rotation[:, 0] / ANCHOR_AXIS_STEP)
+        key = (*p.astype(int), *z.astype(int), *x.astype(int))
+        if key in self._anchors:
+            return self._anchors[key]
+        z_axis = z / max(float(np.linalg.norm(z)), 1e-12)
+        x_axis = x - (x @ z_axis) * z_axis
+        anchor: NDArray[np.float64] | None = None
+        if float(np.linalg.norm(x_axis)) > 1e-6 and float(np.linalg.norm(z)) > 1e-6:
+            x_axis /= np.linalg.norm(x_axis)
+            centre = Pose(np.column_stack([x_axis, np.cross(z_axis, x_axis), z_axis]), p * ANCHOR_STEP)
+            if not self.out_of_reach(centre):
+                seeds = self._library_seeds(centre, self.arm.config.ik_seeds)
+                solutions, _ = solve_ik(self.arm, centre, seeds, self.home, self._data, first=True)
+                anchor = solutions[0] if solutions else None
+        if len(self._anchors) >= CACHE_SIZE:
+            self._anchors.clear()
+        self._anchors[key] = anchor
+        return anchor
 
     # ------------------------------------------------------------------ queries
 
@@ -210,10 +239,16 @@ class ArmReach:
         solutions, reason = self._ik(T_base_camera, q_current, first=first)
         if not solutions:
             return None, reason
-        if first and self.world.collision(solutions[0], angle) is not None:
-            solutions, _ = self._ik(T_base_camera, q_current, first=False)  # another branch may be free
         best: ArmTarget | None = None
         collision: str | None = None
+        if first and (collision := self.world.collision(solutions[0], angle)) is not None:
+            # another branch may be free: the library's seeds, keeping only a free solution (state-independent)
+            seeds = self._library_seeds(T_base_camera, self.arm.config.ik_seeds)
+
+            def free(q: NDArray[np.float64]) -> bool:
+                return self.world.collision(q, angle) is None
+
+            solutions, _ = solve_ik(self.arm, T_base_camera, seeds, self.home, self._data, first=True, accept=free)
         for q in solutions:
             hit = self.world.collision(q, angle)
             if hit is not None:
