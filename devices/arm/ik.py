@@ -9,7 +9,7 @@ converged: the pose is out of the arm's workspace) or ``joint_limit`` (it conver
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable
 from typing import Any
 
 import numpy as np
@@ -40,9 +40,8 @@ def dls(
     eye6 = np.eye(6)
     history: list[float] = []
     for i in range(iterations):
-        pin.computeJointJacobians(model, data, q)  # runs the forward kinematics too
+        pin.forwardKinematics(model, data, q)
         M = pin.updateFramePlacement(model, data, frame)
-        J_frame = pin.getFrameJacobian(model, data, frame, pin.LOCAL)
         iMd = M.actInv(M_target)
         err = pin.log6(iMd).vector
         position, rotation = math.sqrt(err[:3] @ err[:3]), math.sqrt(err[3:] @ err[3:])
@@ -51,7 +50,8 @@ def dls(
         history.append(position + 0.1 * rotation)
         if i >= STALL_WINDOW and history[-1] > STALL_RATIO * history[-1 - STALL_WINDOW]:
             return None  # stalled: out of reach from this seed (a singular or limit-bound configuration)
-        J = -pin.Jlog6(iMd.inverse()) @ J_frame
+        pin.computeJointJacobians(model, data)  # from the placements just computed (no second FK)
+        J = -pin.Jlog6(iMd.inverse()) @ pin.getFrameJacobian(model, data, frame, pin.LOCAL)
         v = -J.T @ np.linalg.solve(J @ J.T + DAMPING * eye6, err)
         largest = float(np.max(np.abs(v)))
         if largest > MAX_STEP:
@@ -80,14 +80,15 @@ def fit_limits(
 def solve_ik(
     arm: ArmModel,
     T_base_camera: Pose,
-    seeds: Sequence[NDArray[np.float64]],
+    seeds: Iterable[NDArray[np.float64]],
     reference: NDArray[np.float64],
     data: Any | None = None,
     *,
     first: bool = True,
     accept: Callable[[NDArray[np.float64]], bool] | None = None,
 ) -> tuple[list[NDArray[np.float64]], str | None]:
-    """Solutions (each (n,), inside the limits) for ``T_base_camera`` from ``seeds``, and the reason when none.
+    """Solutions (each (n,), inside the limits) for ``T_base_camera`` from ``seeds`` (any iterable: a generator
+    computes the later seeds only when the earlier ones failed), and the reason when none.
 
     first: stop at the first solution (a reachability test); else try every seed and return the distinct
     solutions sorted by joint distance from ``reference`` (the current configuration).

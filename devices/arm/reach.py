@@ -19,6 +19,7 @@ change).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -151,15 +152,19 @@ class ArmReach:
         hit = self._cache.get(key)
         if hit is not None:
             return hit
-        seeds: list[NDArray[np.float64]] = [] if first else [np.asarray(reference, dtype=np.float64)]
-        anchor = self._anchor(T_base_camera)
-        if anchor is not None:
-            seeds.append(anchor)
-        k = self.arm.config.ik_seeds if first else 2 * self.arm.config.ik_seeds
-        if first and anchor is None:
-            k = 1  # the cell's centre is out of reach: one more try (a cell on the workspace's edge), not all
-        seeds += self._library_seeds(T_base_camera, k)
-        result = solve_ik(self.arm, T_base_camera, seeds, self.home if first else reference, self._data, first=first)
+
+        def seeds() -> Iterator[NDArray[np.float64]]:  # lazily: the library is searched only if needed
+            if not first:
+                yield np.asarray(reference, dtype=np.float64)
+            anchor = self._anchor(T_base_camera)
+            if anchor is not None:
+                yield anchor
+            k = self.arm.config.ik_seeds if first else 2 * self.arm.config.ik_seeds
+            if first and anchor is None:
+                k = 1  # the cell's centre is out of reach: one more try (a cell on the workspace's edge), not all
+            yield from self._library_seeds(T_base_camera, k)
+
+        result = solve_ik(self.arm, T_base_camera, seeds(), self.home if first else reference, self._data, first=first)
         if len(self._cache) >= CACHE_SIZE:
             self._cache.clear()
         self._cache[key] = result
