@@ -17,13 +17,18 @@ from numpy.typing import NDArray
 
 from devices.arm.collision import CollisionWorld
 from devices.arm.config import ArmConfig
+from devices.arm.ik import dls
 from devices.arm.model import ArmModel, load_arm
 from devices.arm.motion import NoPathError, plan_path, time_path
-from devices.arm.reach import ArmReach, ArmTarget, wrap
+from devices.arm.reach import ArmReach, ArmTarget, rz_matrix, wrap
 from devices.protocols import UnreachableError
 from devices.trajectory import JointTrajectory
 from planner.types import Pose
 
+REFINE_TOLERANCE = 1e-9
+"""A move's joint target is polished to this IK tolerance (metres; radians x 10)."""
+REFINE_ITERATIONS = 10
+"""Damped least squares iterations of that polish (from a converged solution it needs one or two)."""
 TURN_CHECKS_PER_RADIAN = 12
 """While the plate turns, the arm (standing still) is checked against the turning object this often."""
 
@@ -88,6 +93,18 @@ class ArmKinematics:
             return "joint_limit"
         return self.world.collision(np.asarray(q, dtype=np.float64), angle)
 
+    def _refined(self, T_table_camera: Pose, target: ArmTarget) -> ArmTarget:
+        """The target with its joints polished to ``REFINE_TOLERANCE`` (the camera lands on the view to about a
+        micrometre, not just within the IK tolerance), if the polished joints are still inside the limits and free."""
+        import pinocchio as pin  # pyright: ignore[reportMissingImports]  (under cmeel.prefix)
+
+        R = rz_matrix(target.angle)
+        M = pin.SE3(R @ T_table_camera.rotation, R @ T_table_camera.translation)
+        q = dls(self.model, self.model.model.createData(), M, target.q, REFINE_ITERATIONS, REFINE_TOLERANCE)
+        if q is None or self.violations(q, target.angle) is not None:
+            return target
+        return ArmTarget(target.angle, q, self.camera_pose(q), target.move_estimate)
+
     def plan(self, T_table_camera: Pose, q: NDArray[np.float64], angle: float) -> ArmMove:
         """The move to a view from the state (q (n,), plate angle): the reachable, collision-free target with the
         shortest move and its trajectory. UnreachableError(reason) when there is none."""
@@ -96,6 +113,7 @@ class ArmKinematics:
         target, reason = self.reach.best_target(T_table_camera, q, angle)
         if target is None:
             raise UnreachableError(f"unreachable: {reason}", reason=reason or "no_ik")
+        target = self._refined(T_table_camera, target)
         turn = wrap(target.angle - angle)
         for s in np.linspace(0.0, 1.0, max(2, math.ceil(abs(turn) * TURN_CHECKS_PER_RADIAN) + 1)):
             hit = self.world.collision(q, angle + s * turn)
