@@ -186,6 +186,7 @@ def make_tasks(args: argparse.Namespace, models: Sequence[tuple[str, str, Any]] 
                             depth_noise=args.depth_noise,
                             pose_noise=args.pose_noise,
                             threads=threads,
+                            arm=args.arm,
                         )
                     )
     return tasks
@@ -208,7 +209,7 @@ def compute_ceilings(
         for yaw in yaws:
             try:
                 placed = turned_about_plate_axis(mesh, yaw) if yaw % 360.0 != 0.0 else mesh
-                cell = make_sim_cell(placed, camera, CellConfig())
+                cell = make_sim_cell(placed, camera, CellConfig(kinematics=args.arm))
                 ceiling = cached_ceiling(placed, cell, camera, config, args.ceiling_cache)
             except Exception as exc:  # the runs are still worth doing
                 errors.append(f"ceiling of {label} / yaw {yaw:g}: {one_line(exc)}")

@@ -48,6 +48,7 @@ COLUMNS = (
     "plan_seconds",
     "eval_seconds",
     "fit_seconds",
+    "robot_seconds",
     "auc",
     "views_to_90",
     "views_to_95",

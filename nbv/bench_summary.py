@@ -220,6 +220,17 @@ def summary_markdown(
     for p in planners:
         totals = [_cell([sum(r["plan_seconds"] for r in o.rows) for o in runs[(m, p)]], 3) for m in models]
         body.append([p, *totals, _fmt(_mean(col(p, "plan_seconds")), 3)])
+    out += [*_table(header, body), "", "## Total robot time (s)", ""]
+    out += [
+        "The sum over a scan's views of the move durations (plate turn + timed joint trajectory), the captures,",
+        "the planning and the motion planning (mean over seeds): what the scan costs at the robot.",
+        "",
+    ]
+    body = []
+    for p in planners:
+        totals = [_cell([sum(r.get("robot_seconds") or 0.0 for r in o.rows) for o in runs[(m, p)]], 2) for m in models]
+        per_view = [float(r.get("robot_seconds") or 0.0) for r in rows[p]]  # runs of older benches lack it
+        body.append([p, *totals, _fmt(_mean(per_view), 2)])
     out += [*_table(header, body), "", "## Candidate evaluation time per iteration (s, mean)", ""]
     body = []
     for p in planners:

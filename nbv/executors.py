@@ -72,6 +72,7 @@ def _execute(task: RunTask, mesh: MeshPayload | None, t0: float) -> RunOutcome:
         depth_noise=task.depth_noise,
         pose_noise=task.pose_noise,
         reachable=False,
+        arm=task.arm,
         mesh=None if mesh is None else mesh.to_trimesh(),
     )
     outcome = RunOutcome(task.label, task.planner, task.seed, task.yaw_deg, terminated=scan.result.terminated)
@@ -88,6 +89,7 @@ def _execute(task: RunTask, mesh: MeshPayload | None, t0: float) -> RunOutcome:
                 "plan_seconds": r.plan_seconds,
                 "eval_seconds": r.timings.get("score", 0.0),
                 "fit_seconds": r.timings.get("cluster", 0.0) + r.timings.get("ellipsoids", 0.0),
+                "robot_seconds": r.robot_seconds,
             }
         )
         outcome.poses.append(r.pose.to_dict())

@@ -67,6 +67,8 @@ class RunTask:
     pose_noise: float = 0.0
     threads: int | None = None
     """BLAS/OpenMP threads of the worker (None: library default)."""
+    arm: str = "urdf"
+    """The cell's arm (``--arm``): 'urdf' (the UR5) or 'reach_sphere'."""
 
 
 @dataclass

@@ -232,6 +232,22 @@ class PartitionConfig:
 
 
 @dataclass(frozen=True)
+class SelectionConfig:
+    """How the next view is chosen among the eligible candidates."""
+
+    move_cost_weight: float = 0.0
+    """Trades F against the move's duration: the view maximising F / max|F| - weight * t / max t (both over the
+    eligible views; t the move seconds the caller gives per candidate). 0, the default, is the paper's greedy
+    rule (largest F, no move cost asked); MA-SCVP's movement-cost variants do the same trade."""
+
+    def __post_init__(self) -> None:
+        require(
+            finite(self.move_cost_weight) and self.move_cost_weight >= 0,
+            f"selection.move_cost_weight: must be >= 0, got {self.move_cost_weight!r}",
+        )
+
+
+@dataclass(frozen=True)
 class TerminationConfig:
     """When Algorithm 1 stops: any of these."""
 
@@ -327,6 +343,7 @@ class PlannerConfig:
     scoring: ScoringConfig = field(default_factory=ScoringConfig)
     zbuffer: ZBufferConfig = field(default_factory=ZBufferConfig)
     partitions: PartitionConfig = field(default_factory=PartitionConfig)
+    selection: SelectionConfig = field(default_factory=SelectionConfig)
     termination: TerminationConfig = field(default_factory=TerminationConfig)
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
     registration: RegistrationConfig = field(default_factory=RegistrationConfig)

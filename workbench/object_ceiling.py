@@ -97,6 +97,9 @@ def _inputs(
     mesh: trimesh.Trimesh, cell: Any, planner: PlannerConfig, config: CeilingConfig
 ) -> tuple[list[Any], NDArray[np.float64], NDArray[np.float64]]:
     bbox = true_bbox(mesh)
+    set_box = getattr(cell, "set_object_box", None)
+    if callable(set_box):
+        set_box(bbox)  # an arm keeps clear of the object's (padded) box, as during a scan
     views = reachable_views(bbox, planner, cell.is_reachable)
     samples, normals = samples_with_normals(mesh, config.samples, config.sample_seed)
     return views, samples, normals
