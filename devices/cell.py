@@ -312,9 +312,11 @@ class Cell:
         return frame.with_pose(self._perturb(self.pose))
 
     def device_state(self) -> dict[str, Any]:
-        """What a resumed session needs to continue exactly: the pose-noise RNG state and the camera's
-        ``device_state()`` (its noise RNG, or a replay camera's position), JSON-ready."""
-        state: dict[str, Any] = {"pose_noise": self._rng.bit_generator.state}
+        """What a resumed session needs to continue exactly: the pose-noise RNG state, the plate angle, the arm's
+        joints, and the camera's ``device_state()`` (its noise RNG, or a replay camera's position), JSON-ready."""
+        state: dict[str, Any] = {"pose_noise": self._rng.bit_generator.state, "plate_angle": self.turntable.angle}
+        if self.kinematics is not None:  # the joints: the next IK and plate choice start from where the arm is
+            state["arm_q"] = [float(v) for v in self.arm.joint_positions()]
         camera_state = getattr(self.camera, "device_state", None)
         if callable(camera_state):
             state["camera"] = camera_state()
@@ -325,6 +327,11 @@ class Cell:
         try:
             if "pose_noise" in state:
                 self._rng.bit_generator.state = state["pose_noise"]
+            if "plate_angle" in state:
+                self.turntable.rotate_to(float(state["plate_angle"]))
+            reset = getattr(self.arm, "reset", None)
+            if "arm_q" in state and callable(reset):
+                reset(np.asarray(state["arm_q"], dtype=np.float64))
             restore = getattr(self.camera, "restore_device_state", None)
             if "camera" in state and callable(restore):
                 restore(state["camera"])

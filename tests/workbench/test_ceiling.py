@@ -37,7 +37,7 @@ class NoReach:
 @pytest.mark.parametrize("model", ["l-block", "mug"])
 def test_visibility_ceiling_agrees_with_rendering(model: str) -> None:
     _, mesh = resolve_model(model)
-    cell = make_sim_cell(mesh, SMALL_CAMERA, CellConfig())
+    cell = make_sim_cell(mesh, SMALL_CAMERA, CellConfig(kinematics="reach_sphere"))
     fast, views = ceiling_mask(mesh, cell, SMALL_CAMERA, FEW_VIEWS, SAMPLES)
     ref = reference_mask(mesh, cell, FEW_VIEWS, SAMPLES)
     assert views == 30
@@ -67,7 +67,7 @@ def test_one_view_sees_the_near_face_and_not_the_far_one() -> None:
 
 def test_no_reachable_view_gives_zero() -> None:
     _, mesh = resolve_model("box")
-    cell = NoReach(CellConfig())
+    cell = NoReach(CellConfig(kinematics="reach_sphere"))
     covered, views = ceiling_mask(mesh, cell, SMALL_CAMERA, FEW_VIEWS, SAMPLES)
     assert views == 0
     assert not covered.any()
@@ -82,7 +82,7 @@ def test_spread_order_is_a_permutation_that_spreads() -> None:
 
 def test_cache_is_shared_and_keyed_by_placement(tmp_path: Path) -> None:
     _, mesh = resolve_model("l-block")
-    cell = make_sim_cell(mesh, SMALL_CAMERA, CellConfig())
+    cell = make_sim_cell(mesh, SMALL_CAMERA, CellConfig(kinematics="reach_sphere"))
     first = cached_ceiling(mesh, cell, SMALL_CAMERA, FEW_VIEWS, tmp_path, SAMPLES)
     again = cached_ceiling(mesh, cell, SMALL_CAMERA, FEW_VIEWS, tmp_path, SAMPLES)
     assert not first.cached and again.cached
