@@ -469,6 +469,7 @@ class PlanResult:
     scores[i] belongs to candidates[i]. best_index is None when no candidate is eligible.
     sector_edges: (beta,) float64 longitudes (rad) where sectors start.
     timings: seconds per stage ("cluster", "ellipsoids", "candidates", "score", "select").
+    ineligible_reasons: (C,) str, see the field.
     """
 
     iteration: int
@@ -486,6 +487,9 @@ class PlanResult:
     eligible_sectors: frozenset[int]
     timings: dict[str, float]
     terminated: str | None = None
+    ineligible_reasons: tuple[str, ...] = ()
+    """Per candidate, why it is not eligible ("sector locked", "unreachable", "near a taken view"), "" when it
+    is; empty for a PlanResult built without them (e.g. an older caller)."""
 
     @property
     def best(self) -> Candidate | None:
