@@ -99,6 +99,12 @@ class SessionCreate(BaseModel):
         description='any subset of the planner config, e.g. {"voxel": {"resolution": 0.02}, "cluster": {"t_max": 10}}',
     )
     seed: int = Field(default=0, ge=0, le=2**32 - 1, description="seeds the planner's fits and the simulated noise")
+    planner: str = Field(
+        default="projection",
+        max_length=40,
+        description="the view evaluator: projection (the paper's), a ray-casting baseline, or random "
+        "(GET /api/planners lists them)",
+    )
 
 
 class SessionCreated(BaseModel):
@@ -145,6 +151,7 @@ class SessionOut(BaseModel):
     auto_remaining: int
     moves: int
     seed: int
+    planner: str = Field(default="projection", description="the view evaluator this session plans with")
 
 
 class CandidateOut(BaseModel):
