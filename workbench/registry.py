@@ -43,9 +43,11 @@ class DormantSession:
     record: SessionRecord
     """Derived from the journal's events (no frame is read)."""
     stopped: float
+    planner: str = "projection"
+    """The header's planner (journals without one: projection)."""
 
     def status(self) -> dict[str, Any]:
-        return session_status(
+        return {"planner": self.planner} | session_status(
             self.record,
             state=State.INTERRUPTED,
             source="journal",
@@ -61,7 +63,8 @@ def _dormant(directory: Path) -> DormantSession | None:
     for event in journal.events:
         record.apply(event)
     stopped = journal.events[-1]["time"] if journal.events else journal.header["time"]
-    return DormantSession(journal.session_id, directory, record, float(stopped))
+    planner = str(journal.header.get("planner", "projection"))
+    return DormantSession(journal.session_id, directory, record, float(stopped), planner)
 
 
 class SessionRegistry:

@@ -26,7 +26,7 @@ from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 
 from workbench.jsonable import jsonable
 from app.settings import AppSettings
-from workbench.errors import WorkbenchError
+from workbench.errors import Conflict, WorkbenchError
 from workbench.session import Session
 from workbench.states import SessionEvent
 
@@ -64,9 +64,13 @@ async def events(ws: WebSocket, session: str | None = None) -> None:
         await ws.close(code=refused[0], reason=refused[1])
         return
     wb: Session | None = None
+    first: dict[str, Any] | None = None
     if session is not None:
         try:
+            first = registry.status(session)  # an interrupted session has a status too (state "interrupted")
             wb = registry.get(session)
+        except Conflict:
+            wb = None  # interrupted: followed once it is resumed
         except WorkbenchError as exc:
             await ws.accept()
             await ws.send_text(json.dumps({"type": "error", "detail": exc.detail}))
@@ -83,7 +87,12 @@ async def events(ws: WebSocket, session: str | None = None) -> None:
         push({"type": "status", "event": str(event), "status": s.status()})
 
     def on_create(s: Session) -> None:
+        nonlocal wb
         push({"type": "sessions", "change": "created", "id": s.id})
+        if s.id == session and wb is None:  # resumed: follow it from now on
+            wb = s
+            s.listeners.append(on_session)
+            push({"type": "status", "event": "state", "status": s.status()})
 
     def on_delete(s: Session) -> None:
         push({"type": "sessions", "change": "deleted", "id": s.id})
@@ -96,8 +105,8 @@ async def events(ws: WebSocket, session: str | None = None) -> None:
     registry.on_delete.append(on_delete)
     reader = asyncio.create_task(_drain(ws))
     try:
-        if wb is not None:
-            await ws.send_text(_dump({"type": "status", "event": "state", "status": wb.status()}))
+        if first is not None:
+            await ws.send_text(_dump({"type": "status", "event": "state", "status": first}))
         while not reader.done():
             getter = asyncio.ensure_future(queue.get())
             done, _ = await asyncio.wait({getter, reader}, return_when=asyncio.FIRST_COMPLETED)

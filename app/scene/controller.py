@@ -24,7 +24,7 @@ import viser
 
 from app.scene.camera import client_cameras
 from app.scene.drawing import SessionDrawing
-from app.scene.geometry import DEFAULT_LAYERS, SCALE_PERCENTILES, VIRIDIS, outward_camera
+from app.scene.geometry import COLORS, DEFAULT_LAYERS, SCALE_PERCENTILES, VIRIDIS, candidate_colors, outward_camera
 from app.scene.guard import install_guard
 from app.scene.tickets import Ticket, TicketBook
 from planner import Pose
@@ -187,6 +187,14 @@ class SceneController:
     def info(self, viewer_id: str) -> dict[str, Any]:
         """The viewer's session, whether its client is connected, layers, drawn nodes and the colour bar."""
         v = self.viewer(viewer_id)
+        try:
+            plan = self.registry.get(v.session_id).scene_data().plan
+        except WorkbenchError:
+            plan = None
+        lo_hi = (0.0, 1.0)
+        if plan is not None and plan.scores:
+            _, lo, hi = candidate_colors([s.score for s in plan.scores], [s.eligible for s in plan.scores])
+            lo_hi = (lo, hi)
         with self._lock:
             d = v.drawing
             return {
@@ -196,7 +204,8 @@ class SceneController:
                 "layers": dict(v.layers),
                 "nodes": [] if d is None else d.node_names(),
                 "colormap": [list(c) for c in VIRIDIS],
-                "score_range": list((0.0, 1.0) if d is None else d.score_range),
+                "score_range": list(lo_hi),
+                "colors": {k: list(COLORS[k]) for k in ("occupied", "frontier", "unknown", "empty", "cloud", "nbv", "selected")},
                 "scale": f"F of eligible candidates, {SCALE_PERCENTILES[0]:g}th to {SCALE_PERCENTILES[1]:g}th percentile",
             }
 
