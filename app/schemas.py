@@ -165,7 +165,9 @@ class CandidateOut(BaseModel):
     elevation_deg: float
     azimuth_deg: float
     best: bool
-    reason: str = Field(description='why it is not eligible: "sector locked", "unreachable", "near a taken view"; "" when eligible')
+    reason: str = Field(
+        description='why it is not eligible: "sector locked", "unreachable", "near a taken view"; "" when eligible'
+    )
 
 
 class EllipsoidTerm(BaseModel):

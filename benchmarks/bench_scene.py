@@ -29,11 +29,11 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from fastapi.testclient import TestClient  # noqa: E402
+from fastapi.testclient import TestClient
 
-from app.main import create_app  # noqa: E402
-from app.settings import AppSettings  # noqa: E402
-from tests.viewer_wire import RawViewer  # noqa: E402
+from app.main import create_app
+from app.settings import AppSettings
+from tests.viewer_wire import RawViewer
 
 QUIET = 0.4
 """Seconds without a new frame after which an update counts as fully received."""
@@ -81,7 +81,9 @@ def run(client: TestClient, model: str, steps: int) -> dict[str, list[float]]:
                 break
             mark = raw.mark()
             t0 = time.perf_counter()
-            r = client.post(f"/api/sessions/{sid}/approve", json={"plan_id": plan["plan_id"], "index": plan["best"]["index"]})
+            r = client.post(
+                f"/api/sessions/{sid}/approve", json={"plan_id": plan["plan_id"], "index": plan["best"]["index"]}
+            )
             t1 = time.perf_counter()
             assert r.status_code == 200, r.text
             drawn = settle(raw, mark)
@@ -113,7 +115,7 @@ def main() -> int:
         settings = AppSettings(viser_port=0, scene=True, models_dir=args.models, data_dir=Path(tmp))
         with TestClient(create_app(settings), base_url="http://127.0.0.1") as client:
             names = [m["name"] for m in client.get("/api/models").json()]
-            models = [n for n in names if n.startswith("bunny")][:1] + ["l-block"]
+            models = [*[n for n in names if n.startswith("bunny")][:1], "l-block"]
             print(f"{args.steps} rounds of plan + approve per model, resolution 0.01 m; medians [max]")
             for model in models:
                 r: dict[str, Any] = run(client, model, args.steps)
@@ -121,11 +123,17 @@ def main() -> int:
                 print(f"  bytes per plan            {fmt(r['plan_bytes'], 'kB')}")
                 print(f"  bytes per approve         {fmt(r['approve_bytes'], 'kB')}")
                 print(f"  approve request (capture) {fmt(r['approve_http'], 's')}")
-                print(f"  approve -> drawn          {fmt(r['approve_drawn'], 's')}   after the answer {fmt(r['approve_after'], 's')}")
+                print(
+                    f"  approve -> drawn          {fmt(r['approve_drawn'], 's')}   after the answer {fmt(r['approve_after'], 's')}"
+                )
                 print(f"  plan request              {fmt(r['plan_http'], 's')}")
-                print(f"  plan -> drawn             {fmt(r['plan_drawn'], 's')}   after the answer {fmt(r['plan_after'], 's')}")
+                print(
+                    f"  plan -> drawn             {fmt(r['plan_drawn'], 's')}   after the answer {fmt(r['plan_after'], 's')}"
+                )
                 print(f"  approve -> next plan drawn, beyond capture + plan time {fmt(r['next_plan_overhead'], 's')}")
-    print(f"\n(frames count as drawn once the viewer got them and then nothing for {QUIET} s; that wait is not in the times)")
+    print(
+        f"\n(frames count as drawn once the viewer got them and then nothing for {QUIET} s; that wait is not in the times)"
+    )
     return 0
 
 

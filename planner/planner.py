@@ -263,5 +263,7 @@ def ineligible_reasons(
     """
     out = []
     for s, r, f in zip(in_sector, reach, fresh, strict=True):
-        out.append("" if s and r and f else "sector locked" if not s else "unreachable" if not r else "near a taken view")
+        out.append(
+            "" if s and r and f else "sector locked" if not s else "unreachable" if not r else "near a taken view"
+        )
     return tuple(out)

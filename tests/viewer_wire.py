@@ -10,6 +10,7 @@ for scene nodes, ``name``. Client -> server messages are plain msgpack dicts wit
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 from typing import Any
@@ -95,10 +96,8 @@ class RawViewer:
         self.closed = (rcvd.code, rcvd.reason) if rcvd is not None else (1006, "")
 
     def send(self, message: dict[str, Any]) -> None:
-        try:
+        with contextlib.suppress(websockets.exceptions.ConnectionClosed):
             self.ws.send(encode(message))
-        except websockets.exceptions.ConnectionClosed:
-            pass
 
     def messages(self) -> list[dict[str, Any]]:
         with self._lock:

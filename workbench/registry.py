@@ -17,11 +17,10 @@ from devices.config import DeviceConfig
 from devices.faults import FaultConfig
 from planner import PlannerConfig
 from planner.config import from_dict
+from planner.evaluators import evaluator_names
 from workbench.errors import Conflict, Invalid, NotFound, StorageFault
 from workbench.factory import SURFACE_SAMPLES, SessionParts, build_parts, session_devices
 from workbench.journal.rebuild import Rebuilt, rebuild
-from planner.evaluators import evaluator_names
-from workbench.trash import empty_trash, move_to_trash
 from workbench.journal.store import JournalBusyError, JournalWriter, in_use, list_journals, read_journal, sessions_dir
 from workbench.limits import check_config
 from workbench.record import SessionRecord
@@ -29,6 +28,7 @@ from workbench.session import Session
 from workbench.settings import WorkbenchSettings
 from workbench.states import State
 from workbench.summaries import session_status
+from workbench.trash import empty_trash, move_to_trash
 
 __all__ = ["SURFACE_SAMPLES", "DormantSession", "SessionRegistry"]
 log = logging.getLogger(__name__)

@@ -24,9 +24,9 @@ from urllib.parse import urlsplit
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 
-from workbench.jsonable import jsonable
 from app.settings import AppSettings
 from workbench.errors import Conflict, WorkbenchError
+from workbench.jsonable import jsonable
 from workbench.session import Session
 from workbench.states import SessionEvent
 

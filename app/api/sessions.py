@@ -20,7 +20,9 @@ def create_session(registry: Registry, body: Annotated[SessionCreate | None, Bod
     """A new session (every field optional: the server's default model, planner config, simulated cell)."""
     body = body or SessionCreate()
     source = None if body.source is None else body.source.model_dump(exclude_none=True)
-    session = registry.create(body.model, body.config, body.seed, source=source, faults=body.faults, planner=body.planner)
+    session = registry.create(
+        body.model, body.config, body.seed, source=source, faults=body.faults, planner=body.planner
+    )
     return {"id": session.id}
 
 

@@ -44,7 +44,9 @@ def viewer(request: Request, settings: Settings) -> dict[str, Any]:
 
 
 @router.post("/viewer", response_model=ViewerTicketOut, status_code=201)
-def open_viewer(request: Request, settings: Settings, scene: Scene, registry: Registry, body: ViewerRequest) -> dict[str, Any]:
+def open_viewer(
+    request: Request, settings: Settings, scene: Scene, registry: Registry, body: ViewerRequest
+) -> dict[str, Any]:
     """A viewer of ``session`` for one tab: its URL carries a single-use, short-lived ticket that binds the
     viewer's websocket to this session (the viewer's Origin is checked too)."""
     wb = registry.get(body.session)

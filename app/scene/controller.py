@@ -35,7 +35,9 @@ from workbench.states import SessionEvent
 
 log = logging.getLogger(__name__)
 
-REDRAW_EVENTS = frozenset({SessionEvent.PLANNED, SessionEvent.CAPTURED, SessionEvent.SELECTION, SessionEvent.CUSTOM_POSE})
+REDRAW_EVENTS = frozenset(
+    {SessionEvent.PLANNED, SessionEvent.CAPTURED, SessionEvent.SELECTION, SessionEvent.CUSTOM_POSE}
+)
 """Session events after which a viewer's scene may change (state and progress changes draw nothing)."""
 
 
@@ -205,7 +207,9 @@ class SceneController:
                 "nodes": [] if d is None else d.node_names(),
                 "colormap": [list(c) for c in VIRIDIS],
                 "score_range": list(lo_hi),
-                "colors": {k: list(COLORS[k]) for k in ("occupied", "frontier", "unknown", "empty", "cloud", "nbv", "selected")},
+                "colors": {
+                    k: list(COLORS[k]) for k in ("occupied", "frontier", "unknown", "empty", "cloud", "nbv", "selected")
+                },
                 "scale": f"F of eligible candidates, {SCALE_PERCENTILES[0]:g}th to {SCALE_PERCENTILES[1]:g}th percentile",
             }
 

@@ -29,7 +29,9 @@ def open_viewer(client: TestClient, sid: str, origin: str | None = "same") -> tu
     body = v.json()
     port = body["port"]
     ticket = body["url"].split("ticket%3D")[1]
-    raw = RawViewer(f"ws://127.0.0.1:{port}/?ticket={ticket}", f"http://127.0.0.1:{port}" if origin == "same" else origin)
+    raw = RawViewer(
+        f"ws://127.0.0.1:{port}/?ticket={ticket}", f"http://127.0.0.1:{port}" if origin == "same" else origin
+    )
     return body, raw
 
 
@@ -64,7 +66,9 @@ def test_a_viewer_draws_its_session_under_stable_names(scene_client: TestClient,
                      "/ellipsoids/occupied/0", "/ellipsoids/frontier/0", "/context/sectors/lines"):  # fmt: skip
             assert name in nodes, name
         # hidden heavy layers are not sent at all until shown
-        assert "/map/empty" not in nodes and "/context/mesh" not in nodes and not any(n.startswith("/gmm/") for n in nodes)
+        assert (
+            "/map/empty" not in nodes and "/context/mesh" not in nodes and not any(n.startswith("/gmm/") for n in nodes)
+        )
         wb = scene_client.app.state.registry.get(sid)  # type: ignore[attr-defined]
         n_ell = {k: sum(e.kind == k for e in wb.pending.plan.ellipsoids) for k in ("occupied", "frontier")}
         for kind, n in n_ell.items():
@@ -82,7 +86,9 @@ def test_a_viewer_draws_its_session_under_stable_names(scene_client: TestClient,
 
         # approve: the plan's layers are not re-sent, view 2 and new cloud points are appended
         mark = raw.mark()
-        r = scene_client.post(f"/api/sessions/{sid}/approve", json={"plan_id": plan["plan_id"], "index": plan["best"]["index"]})
+        r = scene_client.post(
+            f"/api/sessions/{sid}/approve", json={"plan_id": plan["plan_id"], "index": plan["best"]["index"]}
+        )
         assert r.status_code == 200
         wait_for(lambda: "/views/2/frustum" in session_nodes(raw.messages()[-200:]))
         nodes = drawn(scene_client, vid)
@@ -158,7 +164,9 @@ def test_without_a_ticket_or_from_a_foreign_origin_nothing_is_received_and_click
         finally:
             good.close()
         # a used ticket binds nothing a second time
-        again = RawViewer(f"ws://127.0.0.1:{port}/?ticket={body['url'].split('ticket%3D')[1]}", f"http://127.0.0.1:{port}")
+        again = RawViewer(
+            f"ws://127.0.0.1:{port}/?ticket={body['url'].split('ticket%3D')[1]}", f"http://127.0.0.1:{port}"
+        )
         try:
             for owner in ("", "0", "1", "2", "3", "4", "5"):
                 again.send(click_message("/candidates", best, owner))

@@ -31,7 +31,7 @@ def test_status_is_pushed_after_every_change(client: TestClient, new_session) ->
         assert first["type"] == "status" and first["status"]["id"] == sid and first["status"]["state"] == "new"
         assert client.post(f"/api/sessions/{sid}/capture").status_code == 200
         seen = _until(ws, lambda m: m.get("event") == "captured")
-        assert [m["status"]["state"] for m in seen][0] == "capturing"
+        assert seen[0]["status"]["state"] == "capturing"
         assert seen[-1]["status"]["iteration"] == 1 and seen[-1]["status"]["state"] == "ready"
         plan = client.post(f"/api/sessions/{sid}/plan").json()
         seen = _until(ws, lambda m: m.get("event") == "planned")
@@ -55,18 +55,19 @@ def test_an_unknown_session_is_closed_with_4404(client: TestClient) -> None:
 
 
 def test_a_foreign_origin_is_refused(client: TestClient) -> None:
-    with pytest.raises(WebSocketDisconnect) as exc:
-        with client.websocket_connect("/api/events", headers={"Origin": "http://evil.example"}) as ws:
-            ws.receive_json()
+    with (
+        pytest.raises(WebSocketDisconnect) as exc,
+        client.websocket_connect("/api/events", headers={"Origin": "http://evil.example"}) as ws,
+    ):
+        ws.receive_json()
     assert exc.value.code == 4403
 
 
 def test_with_a_token_the_stream_needs_it(settings: AppSettings) -> None:
     token = "s" * 32
     with TestClient(create_app(settings.replace(token=token)), base_url=BASE_URL) as c:
-        with pytest.raises(WebSocketDisconnect) as exc:
-            with c.websocket_connect("/api/events") as ws:
-                ws.receive_json()
+        with pytest.raises(WebSocketDisconnect) as exc, c.websocket_connect("/api/events") as ws:
+            ws.receive_json()
         assert exc.value.code == 4401
         sid = c.post("/api/sessions", json={}, headers={"Authorization": f"Bearer {token}"}).json()["id"]
         with c.websocket_connect(f"/api/events?session={sid}&token={token}") as ws:

@@ -68,7 +68,8 @@ def test_discard_last_view_rebuilds_without_it(client: TestClient, planned_sessi
     # journaled; a plan again gives the same plan as before the discarded view
     events = read_journal(Path(wb.journal.directory)).events
     assert [e["kind"] for e in events if e["kind"] == "discard"] == ["discard"]
-    assert last_capture(events)["iteration"] == 1
+    last = last_capture(events)
+    assert last is not None and last["iteration"] == 1
     assert client.post(f"/api/sessions/{sid}/plan").json()["best"] == plan["best"]
     # discard down to nothing, then nothing more to discard
     assert client.post(f"/api/sessions/{sid}/discard").json()["session"]["state"] == "new"

@@ -71,7 +71,13 @@ def test_two_tabs_show_only_their_own_session(live_server: LiveServer, browser_c
     expect(tb.page.locator("#picker")).to_be_visible()
     expect(tb.page.locator(f"#picker a[data-session='{a}']")).to_be_visible()
     tb.page.select_option("#model", "two-boxes")
-    for field, value in (("p-resolution", "0.02"), ("p-count", "60"), ("p-parallels", "4"), ("p-tmin", "2"), ("p-tmax", "6")):
+    for field, value in (
+        ("p-resolution", "0.02"),
+        ("p-count", "60"),
+        ("p-parallels", "4"),
+        ("p-tmin", "2"),
+        ("p-tmax", "6"),
+    ):
         tb.page.fill(f"#{field}", value)
     tb.page.click("#create")
     tb.page.wait_for_url(re.compile(r"\?session=[0-9a-f]{8}"))
@@ -134,7 +140,9 @@ def test_the_page_is_pushed_every_step_of_auto_without_polling(
 
 def test_the_loop_helpers(live_server: LiveServer, browser_context: BrowserContext) -> None:
     api = httpx.Client(base_url=live_server.url, timeout=120)
-    sid = api.post("/api/sessions", json={"model": "l-block", "config": {**SMALL, "termination": {"max_views": 3}}}).json()["id"]
+    sid = api.post(
+        "/api/sessions", json={"model": "l-block", "config": {**SMALL, "termination": {"max_views": 3}}}
+    ).json()["id"]
     api.post(f"/api/sessions/{sid}/capture")
     api.post(f"/api/sessions/{sid}/plan")
     tab = Tab(browser_context, f"{live_server.url}/?session={sid}")
@@ -179,7 +187,9 @@ def test_the_loop_helpers(live_server: LiveServer, browser_context: BrowserConte
     page.click("#approve")
     expect(page.locator("#iteration")).to_have_text("3", timeout=60_000)
     expect(page.locator("#auto")).to_be_disabled()
-    expect(page.locator("#auto-why")).to_contain_text("max_views" if "max_views" in api.get(f"/api/sessions/{sid}").json()["terminated"] else "stopped")
+    expect(page.locator("#auto-why")).to_contain_text(
+        "max_views" if "max_views" in api.get(f"/api/sessions/{sid}").json()["terminated"] else "stopped"
+    )
     # delete, confirmed: back to the picker, the session is gone
     page.once("dialog", lambda d: d.accept())
     page.click("#delete")
