@@ -14,7 +14,9 @@ GUI callbacks (a click on a candidate, a gizmo release) call the bound session, 
 from __future__ import annotations
 
 import logging
+import math
 import threading
+import time
 from collections.abc import Collection
 from dataclasses import dataclass, field
 from typing import Any
@@ -47,6 +49,8 @@ class Viewer:
 
     id: str
     session_id: str
+    expires: float = math.inf
+    """time.monotonic() after which a viewer whose client never connected is forgotten (its ticket expired)."""
     layers: dict[str, bool] = field(default_factory=lambda: dict(DEFAULT_LAYERS))
     client: viser.ClientHandle | None = None
     drawing: SessionDrawing | None = None
@@ -90,8 +94,11 @@ class SceneController:
     def open_viewer(self, wb: Session) -> Ticket:
         """A ticket for a new viewer of ``wb`` (the viewer exists from now on, drawn once it connects)."""
         ticket = self.tickets.issue(wb.id)
+        now = time.monotonic()
         with self._lock:
-            self._viewers[ticket.viewer] = Viewer(ticket.viewer, wb.id)
+            for key in [k for k, v in self._viewers.items() if v.client is None and v.expires < now]:
+                del self._viewers[key]
+            self._viewers[ticket.viewer] = Viewer(ticket.viewer, wb.id, expires=ticket.expires + 5.0)
         return ticket
 
     def viewer(self, viewer_id: str) -> Viewer:

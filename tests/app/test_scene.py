@@ -256,3 +256,18 @@ def test_default_model_may_be_a_file_path(settings: AppSettings, models_dir) -> 
         assert path in [m["name"] for m in c.get("/api/models").json()]
         sid = c.post("/api/sessions", json={}).json()["id"]
         assert c.get(f"/api/sessions/{sid}").json()["model"] == path
+
+
+def test_tickets_are_single_use_and_expire() -> None:
+    import time
+
+    from app.scene.tickets import TicketBook
+
+    book = TicketBook(ttl=0.2)
+    t = book.issue("abcd1234")
+    assert book.redeem(t.secret) == t and book.redeem(t.secret) is None
+    late = book.issue("abcd1234")
+    time.sleep(0.3)
+    assert book.redeem(late.secret) is None
+    with pytest.raises(ValueError, match="ttl"):
+        TicketBook(ttl=0)

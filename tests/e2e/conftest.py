@@ -65,12 +65,12 @@ def browser_page() -> Iterator:
 
 @pytest.fixture
 def browser_context() -> Iterator:
-    """A browser context (tabs share it, like one browser window) at 1500x950."""
+    """A browser context (tabs share it, like one browser window) at the smallest supported size, 1024x700."""
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=chromium_path(), args=CHROMIUM_ARGS)
-        context = browser.new_context(viewport={"width": 1500, "height": 950}, device_scale_factor=1)
+        context = browser.new_context(viewport={"width": 1024, "height": 700}, device_scale_factor=1)
         try:
             yield context
         finally:
