@@ -39,7 +39,7 @@ function lineChart(svg, series, opts) {
   while (svg.firstChild) svg.removeChild(svg.firstChild);
   const W = svg.clientWidth || 300, H = svg.clientHeight || 150;
   svg.setAttribute("viewBox", `0 0 ${W} ${H}`);
-  const m = { l: 48, r: 8, t: 6, b: opts.xLabel ? 28 : 18 };
+  const m = { l: opts.yLabel ? 58 : 46, r: 8, t: 6, b: opts.xLabel ? 28 : 18 };
   const pts = series.flatMap((s) => s.points).filter((p) => p[1] !== null && isFinite(p[1]));
   if (pts.length === 0) {
     svgEl("text", { x: W / 2, y: H / 2, "text-anchor": "middle" }, svg).textContent = "no data yet";
