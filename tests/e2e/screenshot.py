@@ -44,7 +44,7 @@ def main(out: str = "docs/workbench.png", width: int = 1600, height: int = 1000,
             api.post(f"/api/scene/{viewer}/camera", json={"position": [0.8, -0.62, 0.6], "look_at": [0.0, 0.0, 0.06]})
             close = page.frame_locator("#viewer").locator("button.mantine-Notification-closeButton")
             if close.count():
-                close.first.click()
+                close.first.dispatch_event("click")  # under the page's layer bar (a headless-only warning)
             page.wait_for_timeout(5000)  # SwiftShader: let the scene render
             Path(out).parent.mkdir(parents=True, exist_ok=True)
             page.screenshot(path=out)
