@@ -271,3 +271,22 @@ def test_tickets_are_single_use_and_expire() -> None:
     assert book.redeem(late.secret) is None
     with pytest.raises(ValueError, match="ttl"):
         TicketBook(ttl=0)
+
+
+def test_two_viewers_of_one_session_stay_in_step(scene_client: TestClient, planned_session) -> None:
+    sid, plan = planned_session(scene_client)
+    (b1, r1), (b2, r2) = open_viewer(scene_client, sid), open_viewer(scene_client, sid)
+    try:
+        for b in (b1, b2):
+            assert wait_for(lambda b=b: "/candidates" in drawn(scene_client, b["viewer"]))
+        body = {"plan_id": plan["plan_id"], "index": plan["best"]["index"]}
+        assert scene_client.post(f"/api/sessions/{sid}/approve", json=body).status_code == 200
+        for raw in (r1, r2):
+            assert wait_for(lambda raw=raw: "/views/2/frustum" in session_nodes(raw.messages()))
+        assert drawn(scene_client, b1["viewer"]) == drawn(scene_client, b2["viewer"])
+        # the other tab's approve of the same plan is refused as used
+        r = scene_client.post(f"/api/sessions/{sid}/approve", json=body)
+        assert r.status_code == 409 and "already used" in r.json()["detail"]
+    finally:
+        r1.close()
+        r2.close()
