@@ -137,6 +137,17 @@ def test_the_page_is_pushed_every_step_of_auto_without_polling(
     status_route = re.compile(rf"/api/sessions/{sid}(\?|$)")
     assert not [u for u in tab.requests if status_route.search(u)], "the page polled the status route"
 
+    # compare: a second session on the same object with another planner, side by side, each a link to its tab
+    other = api.post("/api/sessions", json={"model": "l-block", "config": LONG, "planner": "random"}).json()["id"]
+    api.post(f"/api/sessions/{other}/capture")
+    api.post(f"/api/sessions/{other}/step", json={"count": 2})
+    cmp = Tab(browser_context, f"{live_server.url}/?compare={sid},{other}")
+    expect(cmp.page.locator("#compare")).to_be_visible()
+    expect(cmp.page.locator("#compare tbody tr")).to_have_count(2)
+    expect(cmp.page.locator("#compare tbody")).to_contain_text("random")
+    expect(cmp.page.locator(f"#compare a[href*='session={other}']")).to_be_visible()
+    assert cmp.page.locator("#cmp-coverage path").count() == 2
+
 
 def test_the_loop_helpers(live_server: LiveServer, browser_context: BrowserContext) -> None:
     api = httpx.Client(base_url=live_server.url, timeout=120)
