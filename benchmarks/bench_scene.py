@@ -11,7 +11,9 @@ times plan + approve of the planner's choice. Printed per model (medians over th
 - approve->drawn: from the approve request until the last frame of its update arrived, and the part of it
   after the approve answered (the capture itself is the rest);
 - plan->drawn: from the plan request until its frames arrived, and the part after the plan answered;
-- approve->next plan drawn: approve, then plan, until the plan is drawn, minus the two requests' own time.
+- approve->next plan drawn: approve, then plan, until the plan is drawn, minus the two requests' own time;
+- status pushed: when the page's event stream (``/api/events``) delivered the ``captured`` / ``planned``
+  status, relative to the answer of the request that caused it (negative: before the answer).
 
 Budget (issue 12): median bytes per approve on the bunny at 0.01 m <= 150 kB; approve click -> next plan drawn
 <= capture time + 0.5 s (the plan's own computation aside).
@@ -23,6 +25,7 @@ import argparse
 import statistics
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -50,15 +53,43 @@ def settle(raw: RawViewer, since: int, timeout: float = 60.0) -> float:
     raise TimeoutError("the viewer received nothing")
 
 
+class EventLog:
+    """The page's event stream of one session, read in a thread: (arrival time, event) of each status."""
+
+    def __init__(self, client: TestClient, sid: str) -> None:
+        self.items: list[tuple[float, str]] = []
+        self._cm = client.websocket_connect(f"/api/events?session={sid}")
+        self.ws = self._cm.__enter__()
+        self._thread = threading.Thread(target=self._read, daemon=True)
+        self._thread.start()
+
+    def _read(self) -> None:
+        try:
+            while True:
+                m = self.ws.receive_json()
+                if m.get("type") == "status":
+                    self.items.append((time.perf_counter(), m["event"]))
+        except Exception:
+            return
+
+    def first_after(self, t0: float, event: str) -> float | None:
+        hits = [t for t, e in list(self.items) if t >= t0 and e == event]
+        return hits[0] if hits else None
+
+    def close(self) -> None:
+        self._cm.__exit__(None, None, None)
+
+
 def run(client: TestClient, model: str, steps: int) -> dict[str, list[float]]:
     config = {"voxel": {"resolution": 0.01}}
     sid = client.post("/api/sessions", json={"model": model, "config": config}).json()["id"]
+    events = EventLog(client, sid)
     v = client.post("/api/viewer", json={"session": sid}).json()
     port = v["port"]
     raw = RawViewer(f"ws://127.0.0.1:{port}/?ticket={v['url'].split('ticket%3D')[1]}", f"http://127.0.0.1:{port}")
     out: dict[str, list[float]] = {k: [] for k in ("plan_bytes", "approve_bytes", "approve_http", "approve_after",
                                                    "approve_drawn", "plan_http", "plan_after", "plan_drawn",
-                                                   "next_plan_overhead")}  # fmt: skip
+                                                   "next_plan_overhead", "push_vs_answer")}  # fmt: skip
     try:
         settle(raw, 0)
         mark = raw.mark()
@@ -71,6 +102,9 @@ def run(client: TestClient, model: str, steps: int) -> dict[str, list[float]]:
             plan = client.post(f"/api/sessions/{sid}/plan").json()
             t1 = time.perf_counter()
             drawn = settle(raw, mark)
+            pushed = events.first_after(t0, "planned")
+            if pushed is not None:
+                out["push_vs_answer"].append(pushed - t1)
             out["plan_bytes"].append(raw.bytes_since(mark))
             out["plan_http"].append(t1 - t0)
             out["plan_after"].append(max(0.0, drawn - t1))
@@ -87,6 +121,9 @@ def run(client: TestClient, model: str, steps: int) -> dict[str, list[float]]:
             t1 = time.perf_counter()
             assert r.status_code == 200, r.text
             drawn = settle(raw, mark)
+            pushed = events.first_after(t0, "captured")
+            if pushed is not None:
+                out["push_vs_answer"].append(pushed - t1)
             out["approve_bytes"].append(raw.bytes_since(mark))
             out["approve_http"].append(t1 - t0)
             out["approve_after"].append(max(0.0, drawn - t1))
@@ -94,6 +131,7 @@ def run(client: TestClient, model: str, steps: int) -> dict[str, list[float]]:
     finally:
         raw.close()
         client.delete(f"/api/sessions/{sid}")
+        events.close()
     return out
 
 
@@ -131,6 +169,7 @@ def main() -> int:
                     f"  plan -> drawn             {fmt(r['plan_drawn'], 's')}   after the answer {fmt(r['plan_after'], 's')}"
                 )
                 print(f"  approve -> next plan drawn, beyond capture + plan time {fmt(r['next_plan_overhead'], 's')}")
+                print(f"  status pushed, relative to the request's answer         {fmt(r['push_vs_answer'], 's')}")
     print(
         f"\n(frames count as drawn once the viewer got them and then nothing for {QUIET} s; that wait is not in the times)"
     )
