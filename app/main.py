@@ -3,8 +3,8 @@
 ``create_app(settings)`` builds the app; nothing starts until its lifespan runs
 (uvicorn, or ``with TestClient(create_app(settings)) as client``). The lifespan
 starts one viser server on ``settings.viser_port`` (viser moves to the next free
-port when it is taken; ``GET /api/viewer`` reports the real one), wires the scene
-to the session registry (which lists the journaled sessions of earlier runs), and
+port when it is taken; ``GET /api/viewer`` reports the real one), gives each
+browser tab's viewer its own scene of one session (app/scene/controller.py), and
 on shutdown stops auto modes and viser.
 
 ``create_app`` refuses (ValueError) a non-loopback host without a token. Every
@@ -34,25 +34,9 @@ from app.serialize import SafeJSONResponse
 from app.settings import AppSettings, check_exposure, viewer_host
 from workbench.errors import WorkbenchError
 from workbench.registry import SessionRegistry
-from workbench.session import Session
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 log = logging.getLogger(__name__)
-
-
-def _wire_scene(registry: SessionRegistry, scene: SceneController) -> None:
-    """The scene shows the first session created until the page focuses another; a deleted one leaves it."""
-
-    def created(wb: Session) -> None:
-        if scene.session is None:
-            scene.focus(wb)
-
-    def deleted(wb: Session) -> None:
-        if scene.session is wb:
-            scene.focus(None)
-
-    registry.on_create.append(created)
-    registry.on_delete.append(deleted)
 
 
 def create_app(settings: AppSettings | None = None) -> FastAPI:
@@ -71,8 +55,7 @@ def create_app(settings: AppSettings | None = None) -> FastAPI:
             server = viser.ViserServer(
                 host=viewer_host(settings), port=settings.viser_port, verbose=settings.viser_verbose
             )
-            scene = SceneController(server)
-            _wire_scene(registry, scene)
+            scene = SceneController(server, registry, allowed_origins=settings.cors_origins)
             log.info("viser on port %d", server.get_port())
         app.state.registry = registry
         app.state.viser = server

@@ -99,6 +99,12 @@ class SessionCreate(BaseModel):
         description='any subset of the planner config, e.g. {"voxel": {"resolution": 0.02}, "cluster": {"t_max": 10}}',
     )
     seed: int = Field(default=0, ge=0, le=2**32 - 1, description="seeds the planner's fits and the simulated noise")
+    planner: str = Field(
+        default="projection",
+        max_length=40,
+        description="the view evaluator: projection (the paper's), a ray-casting baseline, or random "
+        "(GET /api/planners lists them)",
+    )
 
 
 class SessionCreated(BaseModel):
@@ -145,6 +151,7 @@ class SessionOut(BaseModel):
     auto_remaining: int
     moves: int
     seed: int
+    planner: str = Field(default="projection", description="the view evaluator this session plans with")
 
 
 class CandidateOut(BaseModel):
@@ -158,6 +165,9 @@ class CandidateOut(BaseModel):
     elevation_deg: float
     azimuth_deg: float
     best: bool
+    reason: str = Field(
+        description='why it is not eligible: "sector locked", "unreachable", "near a taken view"; "" when eligible'
+    )
 
 
 class EllipsoidTerm(BaseModel):
@@ -224,11 +234,6 @@ class CustomPoseRequest(BaseModel):
     pose: PoseModel
 
 
-class FocusRequest(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-    session: str | None = Field(description="the session the 3D view shows (null: none)")
-
-
 class CameraRequest(BaseModel):
     """Either ``candidate`` (look at that candidate from outside the hemisphere) or ``position`` + ``look_at``."""
 
@@ -254,6 +259,25 @@ class ModelOut(BaseModel):
 class ViewerOut(BaseModel):
     url: str
     port: int
+    note: str | None = None
+
+
+class ViewerRequest(BaseModel):
+    """Open a 3D viewer of one session (one per browser tab)."""
+
+    model_config = ConfigDict(extra="forbid")
+    session: str = Field(min_length=1, max_length=64, description="the session this tab's viewer shows")
+
+
+class ViewerTicketOut(BaseModel):
+    """A viewer of one session: ``url`` carries a single-use ticket (valid ``ttl`` seconds until the viewer
+    connects); ``viewer`` names it in ``/api/scene/{viewer}`` calls."""
+
+    viewer: str
+    session: str
+    url: str
+    port: int
+    ttl: float
     note: str | None = None
 
 

@@ -33,6 +33,7 @@ def candidate_json(plan: PlanResult, i: int) -> dict[str, Any]:
         "elevation_deg": math.degrees(c.elevation),
         "azimuth_deg": math.degrees(c.azimuth),
         "best": plan.best_index == i,
+        "reason": plan.ineligible_reasons[i] if plan.ineligible_reasons else ("" if s.eligible else "ineligible"),
     }
 
 

@@ -122,6 +122,11 @@ def check_exposure(settings: AppSettings) -> None:
             f"refusing to listen on {settings.host}: any machine that reaches it could drive the robot. "
             "Set a token (--token or the NBV_TOKEN environment variable) or bind 127.0.0.1"
         )
+    if settings.scene and not is_loopback(viewer_host(settings)) and not settings.token:
+        raise ValueError(
+            f"refusing to serve the 3D viewer on {viewer_host(settings)} without a token: its tickets come from "
+            "the REST API, which needs one off loopback. Set a token or viser_host = 127.0.0.1"
+        )
 
 
 _TABLES = {"server", "planner", "devices", "faults"}

@@ -220,10 +220,14 @@ class Planner:
         )
         if leave is not None:
             allowed = allowed - {leave}
-        eligible = np.array([c.sector in allowed for c in candidates], dtype=bool)
+        in_sector = np.array([c.sector in allowed for c in candidates], dtype=bool)
+        reach = np.ones(len(candidates), dtype=bool)
         if reachable is not None:
-            eligible &= np.array([bool(reachable(c.T_world_camera)) for c in candidates], dtype=bool)
-        eligible &= self._not_revisited(candidates, center, eligible)
+            reach = np.array([bool(reachable(c.T_world_camera)) for c in candidates], dtype=bool)
+        eligible = in_sector & reach
+        fresh = self._not_revisited(candidates, center, eligible)
+        eligible &= fresh
+        reasons = ineligible_reasons(in_sector, reach, fresh)
         timings["select"] = time.perf_counter() - t0
 
         evaluation = self.evaluator.evaluate(
@@ -259,6 +263,23 @@ class Planner:
             timings=timings,
             terminated=self.terminated,
             move_costs=move_costs,
+            ineligible_reasons=reasons,
         )
         self.last_plan = plan
         return plan
+
+
+def ineligible_reasons(
+    in_sector: NDArray[np.bool_], reach: NDArray[np.bool_], fresh: NDArray[np.bool_]
+) -> tuple[str, ...]:
+    """Why each candidate is not eligible, "" for an eligible one; the first rule that fails wins.
+
+    in_sector, reach, fresh: (C,) bool, the candidate's sector is eligible / the cell can reach it / it is
+    not near a view already taken.
+    """
+    out = []
+    for s, r, f in zip(in_sector, reach, fresh, strict=True):
+        out.append(
+            "" if s and r and f else "sector locked" if not s else "unreachable" if not r else "near a taken view"
+        )
+    return tuple(out)

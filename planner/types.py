@@ -469,6 +469,7 @@ class PlanResult:
     scores[i] belongs to candidates[i]. best_index is None when no candidate is eligible.
     sector_edges: (beta,) float64 longitudes (rad) where sectors start.
     timings: seconds per stage ("cluster", "ellipsoids", "candidates", "score", "select").
+    ineligible_reasons: (C,) str, see the field.
     """
 
     iteration: int
@@ -489,6 +490,9 @@ class PlanResult:
     move_costs: NDArray[np.float64] | None = None
     """(C,) seconds the move to each candidate would take (inf = unknown or unreachable), when the selection
     traded F against move time (``selection.move_cost_weight`` > 0); None otherwise."""
+    ineligible_reasons: tuple[str, ...] = ()
+    """Per candidate, why it is not eligible ("sector locked", "unreachable", "near a taken view"), "" when it
+    is; empty for a PlanResult built without them (e.g. an older caller)."""
 
     @property
     def best(self) -> Candidate | None:

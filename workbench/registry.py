@@ -17,6 +17,7 @@ from devices.config import DeviceConfig
 from devices.faults import FaultConfig
 from planner import PlannerConfig
 from planner.config import from_dict
+from planner.evaluators import evaluator_names
 from workbench.errors import Conflict, Invalid, NotFound, StorageFault
 from workbench.factory import SURFACE_SAMPLES, SessionParts, build_parts, session_devices
 from workbench.journal.rebuild import Rebuilt, rebuild
@@ -27,6 +28,7 @@ from workbench.session import Session
 from workbench.settings import WorkbenchSettings
 from workbench.states import State
 from workbench.summaries import session_status
+from workbench.trash import empty_trash, move_to_trash
 
 __all__ = ["SURFACE_SAMPLES", "DormantSession", "SessionRegistry"]
 log = logging.getLogger(__name__)
@@ -41,9 +43,11 @@ class DormantSession:
     record: SessionRecord
     """Derived from the journal's events (no frame is read)."""
     stopped: float
+    planner: str = "projection"
+    """The header's planner (journals without one: projection)."""
 
     def status(self) -> dict[str, Any]:
-        return session_status(
+        return {"planner": self.planner} | session_status(
             self.record,
             state=State.INTERRUPTED,
             source="journal",
@@ -59,7 +63,8 @@ def _dormant(directory: Path) -> DormantSession | None:
     for event in journal.events:
         record.apply(event)
     stopped = journal.events[-1]["time"] if journal.events else journal.header["time"]
-    return DormantSession(journal.session_id, directory, record, float(stopped))
+    planner = str(journal.header.get("planner", "projection"))
+    return DormantSession(journal.session_id, directory, record, float(stopped), planner)
 
 
 class SessionRegistry:
@@ -74,6 +79,7 @@ class SessionRegistry:
         self.on_create: list[Callable[[Session], None]] = []
         self.on_delete: list[Callable[[Session], None]] = []
         if settings.journal:
+            empty_trash(settings.data_dir)  # deleted in an earlier run: kept until now
             for directory in list_journals(settings.data_dir):
                 if in_use(directory):  # live in another server on the same data directory
                     continue
@@ -117,9 +123,15 @@ class SessionRegistry:
         seed: int = 0,
         source: dict[str, Any] | None = None,
         faults: dict[str, Any] | None = None,
+        planner: str = "projection",
     ) -> Session:
-        """A new session. 422 for a bad config, model, source or fault setting; 404 for an unknown recording."""
+        """A new session. 422 for a bad config, model, source, fault setting or planner; 404 for an unknown recording.
+
+        planner: the view evaluator (``planner.evaluators.evaluator_names()``), journaled in the header.
+        """
         planner_config = self.planner_config(config, seed)
+        if planner not in evaluator_names():
+            raise Invalid(f"planner: unknown {planner!r} (known: {', '.join(evaluator_names())})")
         try:
             fault_config = self.settings.faults if faults is None else FaultConfig.from_dict(faults)
         except ValueError as exc:
@@ -138,6 +150,7 @@ class SessionRegistry:
                     "source": parts.source,
                     "config": planner_config.to_dict(),
                     "seed": seed,
+                    "planner": planner,
                     "devices": dataclasses.asdict(devices),
                     "faults": fault_config.to_dict(),
                 }
@@ -145,7 +158,7 @@ class SessionRegistry:
                     journal = JournalWriter.create(self.settings.data_dir, session_id, header)
                 except OSError as exc:
                     raise StorageFault(f"cannot journal the session in the data directory ({exc.strerror})") from None
-            wb = self._session(session_id, parts, planner_config, devices, seed, journal)
+            wb = self._session(session_id, parts, planner_config, devices, seed, journal, planner)
             with self._lock:
                 self._sessions[session_id] = wb
         finally:
@@ -156,7 +169,14 @@ class SessionRegistry:
         return wb
 
     def _session(
-        self, sid: str, parts: SessionParts, config: PlannerConfig, devices: DeviceConfig, seed: int, journal: Any
+        self,
+        sid: str,
+        parts: SessionParts,
+        config: PlannerConfig,
+        devices: DeviceConfig,
+        seed: int,
+        journal: Any,
+        evaluator: str = "projection",
     ) -> Session:
         s = self.settings
         return Session(
@@ -168,6 +188,7 @@ class SessionRegistry:
             journal=journal,
             capture_timeout=s.capture_timeout,
             move_timeout=s.move_timeout,
+            evaluator=evaluator,
         )
 
     # ------------------------------------------------------------------ find
@@ -247,7 +268,7 @@ class SessionRegistry:
             writer = JournalWriter.reopen(journal)  # first: it locks the journal against a second resumer
         except JournalBusyError as exc:
             raise Conflict(str(exc)) from None
-        wb = self._session(dormant.id, parts, config, devices, seed, None)
+        wb = self._session(dormant.id, parts, config, devices, seed, None, str(header.get("planner", "projection")))
         try:
             rebuilt = rebuild(
                 journal, wb.cell.is_reachable, None if samples is None else lambda c: coverage(samples, c)
@@ -267,7 +288,8 @@ class SessionRegistry:
     # ------------------------------------------------------------------ delete and close
 
     def delete(self, session_id: str) -> None:
-        """Forget a session (live or interrupted). Its journal stays on disk, marked deleted."""
+        """Forget a session (live or interrupted). Its journal, marked deleted, moves to the trash folder
+        (workbench/trash.py) until the server restarts."""
         with self._lock:
             wb = self._sessions.pop(session_id, None)
             dormant = self._dormant.pop(session_id, None) if wb is None else None
@@ -278,6 +300,8 @@ class SessionRegistry:
                 with contextlib.suppress(OSError):
                     wb.journal.append("deleted")
             wb.close()
+            if wb.journal is not None:
+                self._trash(wb.journal.directory)
             for hook in list(self.on_delete):
                 hook(wb)
         elif dormant is not None:
@@ -289,6 +313,13 @@ class SessionRegistry:
                 raise Conflict(str(exc)) from None
             writer.append("deleted")
             writer.close()
+            self._trash(dormant.directory)
+
+    def _trash(self, directory: Path) -> None:
+        try:
+            move_to_trash(self.settings.data_dir, directory)
+        except OSError as exc:  # the journal stays where it was, marked deleted
+            log.warning("session %s: cannot move to the trash (%s)", directory.name, exc)
 
     def close(self) -> None:
         """Stop every session's auto mode (shutdown)."""

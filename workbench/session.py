@@ -83,6 +83,7 @@ class Session:
         journal: JournalWriter | None = None,
         capture_timeout: float = 30.0,
         move_timeout: float = 120.0,
+        evaluator: str = "projection",
     ) -> None:
         self.id = session_id
         self.model = parts.model
@@ -94,7 +95,9 @@ class Session:
         self.config = config
         self.devices = devices
         self.seed = seed
-        self.planner = Planner(config)
+        self.evaluator = evaluator
+        """The planner's view evaluator (planner/evaluators.py EVALUATORS): "projection", a baseline, "random"."""
+        self.planner = Planner(config, evaluator=evaluator)
         self.journal = journal
         self.step_runner = ViewStep(self.cell, journal, parts.surface_samples, capture_timeout, move_timeout)
         self.record = SessionRecord(session_id, parts.model, config.to_dict(), seed, time.time())
@@ -131,7 +134,7 @@ class Session:
         """The session summary of ``GET /api/sessions/{id}``."""
         with self._lock:
             failed = self._failed
-            return session_status(
+            return {"planner": self.evaluator} | session_status(
                 self.record,
                 state=self._state,
                 source=str(self.source.get("kind", "sim")),
@@ -386,6 +389,12 @@ class Session:
                 with contextlib.suppress(ValueError):  # a device that cannot restore just draws fresh noise
                     self.cell.restore_device_state(rebuilt.device_state)
             self._state = State.NEW if self.planner.iteration == 0 else self.settle()
+
+    def discard_last_view(self) -> dict[str, Any]:
+        """Rebuild this session from its journal without its last view (workbench/discard.py)."""
+        from workbench.discard import discard_last_view
+
+        return discard_last_view(self)
 
     def close(self, timeout: float = 30.0) -> None:
         """Stop auto mode and wait for it (on delete and at shutdown); release hanging devices; close the journal."""

@@ -20,8 +20,24 @@ def create_session(registry: Registry, body: Annotated[SessionCreate | None, Bod
     """A new session (every field optional: the server's default model, planner config, simulated cell)."""
     body = body or SessionCreate()
     source = None if body.source is None else body.source.model_dump(exclude_none=True)
-    session = registry.create(body.model, body.config, body.seed, source=source, faults=body.faults)
+    session = registry.create(
+        body.model, body.config, body.seed, source=source, faults=body.faults, planner=body.planner
+    )
     return {"id": session.id}
+
+
+@router.post("/sessions/{session_id}/discard")
+def discard_last_view(session: SessionDep) -> dict[str, Any]:
+    """Undo the last view: the session is rebuilt from its journal without that frame (journaled as a discard)."""
+    return session.discard_last_view() | {"session": session.status()}
+
+
+@router.get("/planners")
+def planners() -> list[str]:
+    """The view evaluators a session may plan with (``planner`` of ``POST /api/sessions``)."""
+    from planner.evaluators import evaluator_names
+
+    return evaluator_names()
 
 
 @router.get("/sessions", response_model=list[SessionOut])

@@ -1,4 +1,4 @@
-"""The server's own routes: health, and where the browser finds the 3D viewer."""
+"""The server's own routes: health, and the 3D viewer of a tab (a single-use ticket bound to one session)."""
 
 from __future__ import annotations
 
@@ -6,9 +6,10 @@ from typing import Any
 
 from fastapi import APIRouter, Request
 
-from app.api.deps import Settings
-from app.schemas import ViewerOut
-from app.settings import is_loopback, viewer_host
+from app.api.deps import Registry, Scene, Settings
+from app.scene.guard import viewer_url
+from app.schemas import ViewerOut, ViewerRequest, ViewerTicketOut
+from app.settings import AppSettings, is_loopback, viewer_host
 from workbench.errors import Conflict
 
 router = APIRouter()
@@ -19,13 +20,8 @@ def health() -> dict[str, str]:
     return {"status": "ok"}
 
 
-@router.get("/viewer", response_model=ViewerOut)
-def viewer(request: Request, settings: Settings) -> dict[str, Any]:
-    """Where the browser finds the viser client: the host the page was loaded from, viser's actual port.
-
-    With a token the URL carries it too (``?token=``), but viser itself checks nothing: on an exposed
-    server it listens on 127.0.0.1 only (unless ``viser_public``), see docs/security.md.
-    """
+def _where(request: Request, settings: AppSettings) -> tuple[str, int, str | None]:
+    """(host, port, note): the viser server as the browser reaches it (the host the page was loaded from)."""
     server = request.app.state.viser
     if server is None:
         raise Conflict("the 3D viewer is disabled on this server")
@@ -34,8 +30,33 @@ def viewer(request: Request, settings: Settings) -> dict[str, Any]:
     note = None
     if is_loopback(viewer_host(settings)) and not is_loopback(host):
         host = "127.0.0.1"
-        note = "the 3D viewer has no authentication, so it listens on 127.0.0.1 only: reach it through an SSH tunnel"
+        note = "the 3D viewer listens on 127.0.0.1 only on this server: reach it through an SSH tunnel"
     if ":" in host:
         host = f"[{host}]"
-    query = f"?token={settings.token}" if settings.token else ""
-    return {"url": f"{request.url.scheme}://{host}:{port}/{query}", "port": port, "note": note}
+    return host, port, note
+
+
+@router.get("/viewer", response_model=ViewerOut)
+def viewer(request: Request, settings: Settings) -> dict[str, Any]:
+    """Where the viser client is served. Without a ticket (``POST /api/viewer``) it shows an empty scene."""
+    host, port, note = _where(request, settings)
+    return {"url": viewer_url(request.url.scheme, host, port, None), "port": port, "note": note}
+
+
+@router.post("/viewer", response_model=ViewerTicketOut, status_code=201)
+def open_viewer(
+    request: Request, settings: Settings, scene: Scene, registry: Registry, body: ViewerRequest
+) -> dict[str, Any]:
+    """A viewer of ``session`` for one tab: its URL carries a single-use, short-lived ticket that binds the
+    viewer's websocket to this session (the viewer's Origin is checked too)."""
+    wb = registry.get(body.session)
+    host, port, note = _where(request, settings)
+    ticket = scene.open_viewer(wb)
+    return {
+        "viewer": ticket.viewer,
+        "session": wb.id,
+        "url": viewer_url(request.url.scheme, host, port, ticket.secret),
+        "port": port,
+        "ttl": scene.tickets.ttl,
+        "note": note,
+    }

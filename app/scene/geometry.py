@@ -111,15 +111,24 @@ def colormap(values: NDArray[np.float64], lo: float | None = None, hi: float | N
     return np.round(stops[i] * (1 - f) + stops[i + 1] * f).astype(np.uint8)
 
 
-def candidate_colors(scores: Sequence[float], eligible: Sequence[bool]) -> tuple[NDArray[np.uint8], float, float]:
-    """Colours of the candidate markers: viridis over the eligible scores, grey for ineligible.
+SCALE_PERCENTILES = (5.0, 95.0)
+"""The candidate colour scale runs from the 5th to the 95th percentile of the eligible scores: one outlier
+cannot flatten the rest (scores beyond either end take the end colour)."""
 
-    Returns (colours (N, 3) uint8, lo, hi) with [lo, hi] the range the colour bar shows.
+
+def candidate_colors(scores: Sequence[float], eligible: Sequence[bool]) -> tuple[NDArray[np.uint8], float, float]:
+    """Colours of the candidate markers: viridis over the eligible scores' 5th..95th percentile, grey for
+    ineligible ones.
+
+    Returns (colours (N, 3) uint8, lo, hi) with [lo, hi] the percentile range the colour bar shows.
     """
     s = np.asarray(scores, dtype=np.float64)
     e = np.asarray(eligible, dtype=bool)
     ref = s[e & np.isfinite(s)] if np.any(e) else s[np.isfinite(s)]
-    lo, hi = (float(ref.min()), float(ref.max())) if ref.size else (0.0, 1.0)
+    if ref.size:
+        lo, hi = (float(v) for v in np.percentile(ref, SCALE_PERCENTILES))
+    else:
+        lo, hi = 0.0, 1.0
     colors = colormap(s, lo, hi)
     colors[~e] = INELIGIBLE
     return colors, lo, hi

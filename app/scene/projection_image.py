@@ -2,7 +2,7 @@
 
 Frontier ellipses are red, occupied ones blue; the fill is stronger for a larger
 depth-rank weight ``w = 0.5**rank``, and nearer ellipses are drawn over farther
-ones. Each ellipse is labelled with its kind, index and weight. Ellipsoids behind
+ones. The TOP_LABELS nearest-ranked ellipses are labelled with their name (kind + index). Ellipsoids behind
 the camera are skipped; one that straddles the image plane or contains the camera
 is listed in the footer (it has no ellipse outline).
 """
@@ -31,6 +31,11 @@ def ellipse_polygon(center: NDArray[np.float64], shape: NDArray[np.float64], n: 
     t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
     pts = center[None, :] + np.stack([np.cos(t), np.sin(t)], axis=1) @ L.T
     return [(float(x), float(y)) for x, y in pts]
+
+
+TOP_LABELS = 8
+"""Only the nearest-ranked ellipses are labelled (by name; weights are in the page's table), so many
+ellipsoids stay legible."""
 
 
 def _label(
@@ -82,11 +87,12 @@ def render_projection(plan: PlanResult, index: int, intrinsics: Intrinsics) -> b
                 poly = ellipse_polygon(proj.ellipse_center[0, i], proj.ellipse_shape[0, i])
                 alpha = int(40 + 150 * float(np.clip(weights[i], 0.0, 1.0)))
                 draw.polygon(poly, fill=(*rgb, alpha), outline=(*rgb, 255))
-                tags.append((int(i), f"{labels[i]} w={weights[i]:.3g}"))
+                tags.append((int(i), str(labels[i])))
             elif status in (STRADDLE, INSIDE):
                 what = "contains the camera" if status == INSIDE else "crosses the image plane"
                 notes.append(f"{labels[i]} (rank {int(ranks[i])}, w={weights[i]:.3g}) {what}")
-        _label(draw, font, proj.ellipse_center[0], sorted(tags, key=lambda t: ranks[t[0]]), W, H)
+        top = sorted(tags, key=lambda t: ranks[t[0]])[:TOP_LABELS]  # the rest: the page's table
+        _label(draw, font, proj.ellipse_center[0], top, W, H)
     image.paste(overlay, (0, 0), overlay)
     text = ImageDraw.Draw(image)
     header = (

@@ -1,25 +1,40 @@
-// The workbench page: plain JS over the REST API (see /docs). It polls the session and redraws.
+// The workbench page: one session per tab (?session=ID), live from pushed events (/api/events), no polling.
+// The 3D view is an iframe of the viser client bound to this tab's session by a single-use ticket
+// (POST /api/viewer). Panels that only read live in panels.js.
 "use strict";
 
-const $ = (id) => document.getElementById(id);
+const P = window.Panels;
+const QUERY = new URLSearchParams(location.search);
+// A server started with a token is opened as http://host:port/?token=...: every API call carries it.
+const TOKEN = QUERY.get("token");
 const S = {
-  session: null, // id of the session shown
-  status: null, // last GET /api/sessions/{id}
-  planId: null, // plan_id whose candidates are listed
-  selectedShown: undefined, // selection the inspector shows
-  metricsKey: null, // iteration/plan the charts show
+  session: QUERY.get("session"), // the one session this tab shows (null: the picker)
+  status: null, // last pushed status of it
+  planId: null, // plan whose candidates are listed
+  selectedShown: undefined, // the selection the table and inspector show (what Approve sends)
+  metricsKey: null,
   inFlight: false,
-  viewerSet: false,
+  viewer: null, // this tab's viewer id (layers, camera)
+  layers: null,
+  autoTotal: 0,
+  events: null,
+  chain: Promise.resolve(), // pushed messages are handled one after the other
 };
+const FORM_KEY = "nbv-form";
+const LAYER_KEY = "nbv-layers";
 
 // ------------------------------------------------------------------ helpers
-
-// A server started with a token is opened as http://host:port/?token=...: every API call carries it.
-const TOKEN = new URLSearchParams(location.search).get("token");
 
 function withToken(url) {
   if (!TOKEN) return url;
   return url + (url.includes("?") ? "&" : "?") + "token=" + encodeURIComponent(TOKEN);
+}
+
+function pageUrl(params) {
+  const q = new URLSearchParams(params);
+  if (TOKEN) q.set("token", TOKEN);
+  const s = q.toString();
+  return "/" + (s ? "?" + s : "");
 }
 
 async function api(method, path, body) {
@@ -41,17 +56,14 @@ async function api(method, path, body) {
   return data;
 }
 
-function num(v, digits) {
-  if (v === null || v === undefined || !isFinite(v)) return "–";
-  const a = Math.abs(v);
-  if (a !== 0 && (a >= 1e5 || a < 1e-3)) return v.toExponential(2);
-  return (+v.toFixed(digits === undefined ? 1 : digits)).toString();
+function showError(msg) {
+  $("error").textContent = msg;
+  $("error").hidden = !msg;
 }
 
-function showError(msg) {
-  const el = $("error");
-  el.textContent = msg;
-  el.hidden = !msg;
+function showNotice(msg) {
+  $("notice").textContent = msg;
+  $("notice").hidden = !msg;
 }
 
 async function action(label, fn) {
@@ -61,53 +73,34 @@ async function action(label, fn) {
   updateButtons();
   try {
     showError("");
+    showNotice("");
     await fn();
   } catch (e) {
-    showError(e.message);
+    const stale = e.message.startsWith("409") && /stale|already used|not the pending plan/.test(e.message);
+    if (stale) showNotice("The plan changed (another tab planned or approved): " + e.message.slice(5) + ". The new state is shown; check it and approve again.");
+    else showError(e.message);
   } finally {
     S.inFlight = false;
     $("busy").textContent = "";
-    await refresh();
+    updateButtons();
   }
 }
 
-// ------------------------------------------------------------------ models and sessions
+// ------------------------------------------------------------------ form (restored on reload)
 
-async function loadModels(select) {
-  const models = await api("GET", "/api/models");
-  const sel = $("model");
-  const keep = select || sel.value;
-  sel.innerHTML = "";
-  const groups = { builtin: "built-in", file: "models directory", upload: "uploads" };
-  for (const [kind, title] of Object.entries(groups)) {
-    const items = models.filter((m) => m.kind === kind);
-    if (!items.length) continue;
-    const og = document.createElement("optgroup");
-    og.label = title;
-    for (const m of items) {
-      const o = document.createElement("option");
-      o.value = m.name;
-      o.textContent = m.name;
-      o.title = m.description;
-      og.appendChild(o);
-    }
-    sel.appendChild(og);
-  }
-  if (keep) sel.value = keep;
+const FORM_IDS = ["model", "planner", "p-resolution", "p-parallels", "p-count", "p-sectors", "p-revisit", "p-gamma",
+  "p-dc", "p-tmin", "p-tmax", "p-views", "p-seed", "auto-count"];
+
+function saveForm() {
+  const v = {};
+  for (const id of FORM_IDS) v[id] = $(id).value;
+  localStorage.setItem(FORM_KEY, JSON.stringify(v));
 }
 
-async function loadSessions() {
-  const list = await api("GET", "/api/sessions");
-  const sel = $("session-select");
-  sel.innerHTML = '<option value="">(none)</option>';
-  for (const s of list) {
-    const o = document.createElement("option");
-    o.value = s.id;
-    o.textContent = `${s.id} · ${s.model} · ${s.state} · ${s.iteration} views`;
-    sel.appendChild(o);
-  }
-  sel.value = S.session || "";
-  return list;
+function restoreForm() {
+  let v = {};
+  try { v = JSON.parse(localStorage.getItem(FORM_KEY) || "{}"); } catch (e) { v = {}; }
+  for (const id of FORM_IDS) if (v[id] !== undefined && v[id] !== "") $(id).value = v[id];
 }
 
 function paramConfig() {
@@ -121,16 +114,131 @@ function paramConfig() {
   };
 }
 
-async function showSession(id) {
-  S.session = id || null;
-  S.planId = null;
-  S.selectedShown = undefined;
-  S.metricsKey = null;
-  $("session-select").value = id || "";
-  if (id) await api("PUT", "/api/scene", { session: id }).catch(() => null); // no 3D view, or not resumed yet
-  $("export-ply").href = id ? withToken(`/api/sessions/${id}/cloud.ply`) : "#";
-  $("export-json").href = id ? withToken(`/api/sessions/${id}/export`) : "#";
-  await refresh();
+// ------------------------------------------------------------------ models, planners, sessions
+
+async function loadModels(select) {
+  const models = await api("GET", "/api/models");
+  const sel = $("model");
+  const keep = select || sel.value || (JSON.parse(localStorage.getItem(FORM_KEY) || "{}").model);
+  sel.innerHTML = "";
+  const groups = { builtin: "built-in", file: "models directory", upload: "uploads" };
+  for (const [kind, title] of Object.entries(groups)) {
+    const items = models.filter((m) => m.kind === kind);
+    if (!items.length) continue;
+    const og = document.createElement("optgroup");
+    og.label = title;
+    for (const m of items) {
+      const o = document.createElement("option");
+      o.value = m.name;
+      o.textContent = P.shortModel(m.name);
+      o.title = m.description;
+      og.appendChild(o);
+    }
+    sel.appendChild(og);
+  }
+  if (keep) sel.value = keep;
+}
+
+async function loadPlanners() {
+  const names = await api("GET", "/api/planners");
+  const sel = $("planner");
+  const keep = sel.value || JSON.parse(localStorage.getItem(FORM_KEY) || "{}").planner || "projection";
+  sel.innerHTML = names.map((n) => `<option value="${P.esc(n)}">${P.esc(n)}${n === "projection" ? " (the paper's)" : ""}</option>`).join("");
+  sel.value = names.includes(keep) ? keep : "projection";
+}
+
+async function loadSessions() {
+  const list = await api("GET", "/api/sessions");
+  const sel = $("session-select");
+  sel.innerHTML = '<option value="">(choose)</option>';
+  for (const s of list) {
+    const o = document.createElement("option");
+    o.value = s.id;
+    o.textContent = `${s.id} · ${P.shortModel(s.model)} · ${s.planner || "projection"} · ${s.state} · ${s.iteration} views`;
+    o.title = s.model;
+    sel.appendChild(o);
+  }
+  sel.value = S.session || "";
+  if (!S.session && !QUERY.get("compare")) P.renderPicker(list, (id) => pageUrl({ session: id }));
+  return list;
+}
+
+// ------------------------------------------------------------------ this tab's session: viewer and events
+
+async function openViewer() {
+  try {
+    const v = await api("POST", "/api/viewer", { session: S.session });
+    S.viewer = v.viewer;
+    $("viewer").src = v.url;
+    if (v.note) showNotice(v.note);
+    let saved = {};
+    try { saved = JSON.parse(localStorage.getItem(LAYER_KEY) || "{}"); } catch (e) { saved = {}; }
+    const scene = await api("GET", `/api/scene/${S.viewer}`);
+    const known = Object.fromEntries(Object.entries(saved).filter(([k]) => k in scene.layers));
+    S.layers = Object.keys(known).length ? await api("PUT", `/api/scene/${S.viewer}/layers`, known) : scene.layers;
+    P.renderLayers(S.layers, toggleLayer);
+    P.renderLegend(scene);
+  } catch (e) {
+    showError("3D viewer unavailable: " + e.message);
+  }
+}
+
+function connectEvents(delay) {
+  const proto = location.protocol === "https:" ? "wss" : "ws";
+  const ws = new WebSocket(`${proto}://${location.host}` + withToken(`/api/events?session=${encodeURIComponent(S.session)}`));
+  S.events = ws;
+  let opened = false;
+  ws.onopen = () => {
+    opened = true;
+    $("health").textContent = "live";
+    $("health").className = "ok";
+  };
+  ws.onmessage = (ev) => {
+    const m = JSON.parse(ev.data);
+    S.chain = S.chain.then(() => onMessage(m)).catch((e) => console.warn(e));
+  };
+  ws.onclose = (ev) => {
+    $("health").textContent = "live updates lost: reconnecting…";
+    $("health").className = "bad";
+    if (ev.code === 4404) { showError(`session ${S.session} is unknown (deleted, or the server forgot it)`); return; }
+    const next = Math.min(5000, (delay || 500) * 2);
+    setTimeout(async () => {
+      connectEvents(opened ? 500 : next);
+      if (opened) await openViewer(); // the server may have restarted: a new ticket
+    }, opened ? 500 : next);
+  };
+}
+
+async function onMessage(m) {
+  if (m.type === "status") await onStatus(m.status, m.event);
+  else if (m.type === "sessions") await loadSessions();
+  else if (m.type === "deleted") {
+    showError(`session ${S.session} was deleted`);
+    S.status = null;
+    renderStatus(null);
+  } else if (m.type === "error") showError(m.detail);
+}
+
+async function onStatus(st, event) {
+  S.status = st;
+  renderStatus(st);
+  const planId = st.pending_plan ? st.pending_plan.plan_id : null;
+  if (planId !== S.planId || event === "captured") {
+    S.planId = planId;
+    S.selectedShown = undefined;
+    await loadCandidates();
+  }
+  if (st.selected !== S.selectedShown) {
+    S.selectedShown = st.selected;
+    if (st.selected !== null) P.pageOf(st.selected);
+    P.renderTable(st.selected, pick);
+    await loadInspector(st.selected);
+  }
+  const key = `${st.iteration}/${planId}`;
+  if (key !== S.metricsKey && !["capturing", "planning", "moving", "interrupted"].includes(st.state)) {
+    S.metricsKey = key;
+    P.renderCharts(await api("GET", `/api/sessions/${S.session}/metrics`));
+  }
 }
 
 // ------------------------------------------------------------------ rendering
@@ -143,7 +251,11 @@ function updateButtons() {
   $("capture").disabled = busy || !st || !(state === "new" || (state === "error" && it === 0));
   $("plan").disabled = busy || !st || it === 0 || !["ready", "planned", "done", "error"].includes(state);
   $("approve").disabled = busy || !st || state !== "planned" || st.selected === null;
-  $("auto").disabled = busy || !st || it === 0 || !["ready", "planned", "done"].includes(state);
+  const terminated = st && st.terminated;
+  $("auto").disabled = busy || !st || it === 0 || !!terminated || !["ready", "planned"].includes(state);
+  $("auto-why").textContent = terminated ? `Auto is off: the planner stopped (${terminated}). Plan and approve by hand to go on.` :
+    (st && it === 0 ? "Auto needs a first view: capture first." : "");
+  $("discard").disabled = busy || !st || it === 0 || state === "interrupted";
   $("stop").hidden = state !== "auto";
   $("resume").hidden = state !== "interrupted";
   $("resume").disabled = S.inFlight;
@@ -152,6 +264,7 @@ function updateButtons() {
   const custom = st && st.custom_pose;
   $("approve-custom").disabled = busy || !custom || !custom.reachable || state !== "planned";
   $("create").disabled = S.inFlight;
+  $("delete").disabled = S.inFlight || !S.session;
   for (const id of ["export-ply", "export-json"]) $(id).classList.toggle("disabled", !st);
 }
 
@@ -160,12 +273,15 @@ function renderStatus(st) {
   $("iteration").textContent = st ? st.iteration : 0;
   $("coverage").textContent = st && st.coverage !== null ? (100 * st.coverage).toFixed(1) + " %" : "–";
   $("points").textContent = st ? st.points : 0;
+  $("session-info").textContent = st ? `${st.id} · ${P.shortModel(st.model)} · planner ${st.planner || "projection"} · seed ${st.seed}` : "";
   if (st && st.error) showError(st.error);
   const term = $("terminated");
   term.hidden = !(st && st.terminated);
   if (st && st.terminated) term.textContent = `The planner would stop here (${st.terminated}); you may still plan and approve more views.`;
-  if (st && st.state === "auto") $("busy").textContent = `auto mode: ${st.auto_remaining} step(s) left`;
-  else if (!S.inFlight) $("busy").textContent = "";
+  if (st && st.state === "auto") {
+    const total = Math.max(S.autoTotal, st.auto_remaining);
+    $("busy").textContent = `auto: step ${total - st.auto_remaining + 1} of ${total}`;
+  } else if (!S.inFlight) $("busy").textContent = "";
   const custom = st && st.custom_pose;
   $("custom").textContent = custom
     ? `custom pose at (${custom.pose.position.map((v) => v.toFixed(3)).join(", ")}): ${custom.reason}`
@@ -175,151 +291,59 @@ function renderStatus(st) {
 }
 
 async function loadCandidates() {
-  const tbody = $("candidates").querySelector("tbody");
-  tbody.innerHTML = "";
   $("plan-id").textContent = S.planId ? `plan ${S.planId}` : "";
-  if (!S.planId) return;
-  const items = await api("GET", `/api/sessions/${S.session}/candidates?sort=score&limit=12`);
-  for (const c of items) {
-    const tr = document.createElement("tr");
-    tr.dataset.index = c.index;
-    tr.className = (c.best ? "best " : "") + (c.eligible ? "" : "ineligible");
-    tr.innerHTML = `<td>${c.index}</td><td>${num(c.score)}</td><td>${num(c.frontier)}</td><td>${num(c.occupied)}</td><td>${c.sector}</td>`;
-    tr.addEventListener("click", () => action("selecting", () => api("PUT", `/api/sessions/${S.session}/selection`, { index: c.index })));
-    tbody.appendChild(tr);
-  }
-  const scene = await api("GET", "/api/scene").catch(() => null);
-  if (scene) renderColorbar(scene);
-}
-
-function markSelectedRow(selected) {
-  for (const tr of $("candidates").querySelectorAll("tbody tr")) {
-    tr.classList.toggle("selected", Number(tr.dataset.index) === selected);
-  }
+  P.Table.items = S.planId ? await api("GET", `/api/sessions/${S.session}/candidates`) : [];
+  P.renderTable(S.status ? S.status.selected : null, pick);
+  if (S.viewer) P.renderLegend(await api("GET", `/api/scene/${S.viewer}`));
 }
 
 async function loadInspector(selected) {
-  const img = $("projection");
-  const tbody = $("breakdown").querySelector("tbody");
-  tbody.innerHTML = "";
-  if (selected === null || selected === undefined || !S.planId) {
-    $("selected-label").textContent = "no selection";
-    img.hidden = true;
-    return;
-  }
+  if (selected === null || selected === undefined || !S.planId) { P.renderInspector(null); return; }
   const d = await api("GET", `/api/sessions/${S.session}/candidates/${selected}`);
-  $("selected-label").textContent =
-    `candidate ${d.index}${d.best ? " (planner's choice)" : ""}: F = ${num(d.score)} ` +
-    `(${num(d.frontier)} − ${num(d.occupied)})${d.eligible ? "" : ", ineligible"}`;
-  const rows = d.ellipsoids.filter((e) => e.rank >= 0).sort((a, b) => a.rank - b.rank);
-  for (const e of rows) {
-    const tr = document.createElement("tr");
-    tr.innerHTML = `<td style="color:${e.kind === "frontier" ? "#d0312d" : "#2e63d8"}">${e.label}</td>` +
-      `<td>${e.rank}</td><td>${num(e.weight, 3)}</td><td>${num(e.pixels, 0)}</td><td>${num(e.weighted, 0)}</td>`;
-    tbody.appendChild(tr);
-  }
-  img.src = withToken(`/api/sessions/${S.session}/candidates/${selected}/projection.png?plan=${S.planId}`);
-  img.hidden = false;
+  P.renderInspector(d, withToken(`/api/sessions/${S.session}/candidates/${selected}/projection.png?plan=${S.planId}`));
 }
 
-function renderColorbar(scene) {
-  const stops = scene.colormap.map((c, i, a) => `rgb(${c.join(",")}) ${(100 * i) / (a.length - 1)}%`);
-  $("cb-grad").style.background = `linear-gradient(to right, ${stops.join(",")})`;
-  $("cb-lo").textContent = "F " + num(scene.score_range[0]);
-  $("cb-hi").textContent = num(scene.score_range[1]);
+// ------------------------------------------------------------------ actions
+
+function pick(index) {
+  return action("selecting", () => api("PUT", `/api/sessions/${S.session}/selection`, { index }));
 }
 
-async function loadLayers() {
-  const scene = await api("GET", "/api/scene").catch(() => null);
-  const box = $("layers");
-  box.innerHTML = "";
-  if (!scene) return;
-  renderColorbar(scene);
-  for (const [name, on] of Object.entries(scene.layers)) {
-    if (name === "gizmo") { $("gizmo").checked = on; continue; }
-    const label = document.createElement("label");
-    const cb = document.createElement("input");
-    cb.type = "checkbox";
-    cb.checked = on;
-    cb.dataset.layer = name;
-    cb.addEventListener("change", () => api("PUT", "/api/scene/layers", { [name]: cb.checked }).catch((e) => showError(e.message)));
-    label.append(cb, name);
-    box.appendChild(label);
-  }
+function toggleLayer(name, on) {
+  return api("PUT", `/api/scene/${S.viewer}/layers`, { [name]: on }).then((layers) => {
+    S.layers = layers;
+    localStorage.setItem(LAYER_KEY, JSON.stringify(layers));
+    P.renderLayers(layers, toggleLayer);
+  }).catch((e) => showError(e.message));
 }
 
-async function loadMetrics() {
-  const m = await api("GET", `/api/sessions/${S.session}/metrics`);
-  const it = m.iterations;
-  lineChart($("chart-coverage"), [{ points: it.map((r) => [r.iteration, r.coverage === null ? null : 100 * r.coverage]), color: "#15894a", label: "%" }], { xInteger: true, yMin: 0, yMax: 100 });
-  lineChart($("chart-points"), [{ points: it.map((r) => [r.iteration, r.points]), color: "#2e63d8" }], { xInteger: true, yMin: 0 });
-  lineChart($("chart-time"), [{ points: it.map((r) => [r.iteration, r.plan_seconds]), color: "#8a4fd8" }], { xInteger: true, yMin: 0 });
-  const colors = { occupied: "#2e63d8", frontier: "#d0312d" };
-  lineChart($("chart-bic"), m.fits.map((f) => {
-    const chosen = f.bic.find((p) => p[0] === f.t_chosen);
-    return { points: f.bic, color: colors[f.kind] || "#444", marker: chosen || null };
-  }), { xInteger: true });
-  $("bic-legend").innerHTML = m.fits.map((f) => `<span style="color:${colors[f.kind]}">${f.kind} T=${f.t_chosen}</span>`).join(" · ") +
-    (m.fit_iteration ? ` <span class="muted">(view ${m.fit_iteration})</span>` : "");
+function approveShown() {
+  const st = S.status;
+  const index = S.selectedShown; // exactly what the table and the inspector show
+  if (!st || !st.pending_plan || index === null || index === undefined) return;
+  const c = P.candidateOf(index);
+  if (c && !c.eligible && !confirm(`Candidate ${index} is not eligible (${c.reason || "ineligible"}).\n` +
+    "Approve it anyway? It is recorded as an override.")) return;
+  return action("moving and capturing", () => api("POST", `/api/sessions/${S.session}/approve`, { plan_id: st.pending_plan.plan_id, index }));
 }
 
-// ------------------------------------------------------------------ polling
-
-async function refresh() {
-  if (!S.session) {
-    S.status = null;
-    renderStatus(null);
-    return;
-  }
-  let st;
-  try {
-    st = await api("GET", `/api/sessions/${S.session}`);
-  } catch (e) {
-    if (e.message.startsWith("404")) { await showSession(null); await loadSessions(); }
-    return;
-  }
-  S.status = st;
-  renderStatus(st);
-  const opt = $("session-select").querySelector(`option[value="${st.id}"]`);
-  if (opt) opt.textContent = `${st.id} · ${st.model} · ${st.state} · ${st.iteration} views`;
-  const planId = st.pending_plan ? st.pending_plan.plan_id : null;
-  if (planId !== S.planId) {
-    S.planId = planId;
-    S.selectedShown = undefined;
-    await loadCandidates();
-  }
-  if (st.selected !== S.selectedShown) {
-    S.selectedShown = st.selected;
-    markSelectedRow(st.selected);
-    await loadInspector(st.selected);
-  }
-  const key = `${st.iteration}/${planId}`;
-  if (key !== S.metricsKey && !["capturing", "planning", "moving", "interrupted"].includes(st.state)) {
-    S.metricsKey = key;
-    await loadMetrics();
-  }
+function step(delta) {
+  const rows = P.Table.items.length ? Array.from($("candidates").querySelectorAll("tbody tr")).map((tr) => Number(tr.dataset.index)) : [];
+  if (!rows.length || !S.status || !S.status.pending_plan) return;
+  const at = rows.indexOf(S.selectedShown);
+  const next = rows[Math.min(rows.length - 1, Math.max(0, at + delta))];
+  if (next !== undefined) pick(next);
 }
-
-async function poll() {
-  try {
-    await refresh();
-  } catch (e) {
-    console.warn(e);
-  }
-  setTimeout(poll, 1000);
-}
-
-// ------------------------------------------------------------------ wiring
 
 function wire() {
+  for (const id of FORM_IDS) $(id).addEventListener("change", saveForm);
   $("create").addEventListener("click", () => action("creating the session", async () => {
-    const body = { model: $("model").value || null, config: paramConfig(), seed: Number($("p-seed").value) };
+    saveForm();
+    const body = { model: $("model").value || null, planner: $("planner").value, config: paramConfig(), seed: Number($("p-seed").value) };
     const r = await api("POST", "/api/sessions", body);
-    S.session = r.id;
-    await loadSessions();
-    await showSession(r.id);
+    location.href = pageUrl({ session: r.id });
   }));
-  $("session-select").addEventListener("change", (e) => showSession(e.target.value));
+  $("session-select").addEventListener("change", (e) => { location.href = pageUrl(e.target.value ? { session: e.target.value } : {}); });
   $("upload").addEventListener("change", (e) => action("uploading", async () => {
     const f = e.target.files[0];
     if (!f) return;
@@ -328,49 +352,120 @@ function wire() {
     const m = await api("POST", "/api/models", form);
     await loadModels(m.name);
   }));
-  $("capture").addEventListener("click", () => action("capturing the first view", () => api("POST", `/api/sessions/${S.session}/capture`)));
-  $("plan").addEventListener("click", () => action("planning", () => api("POST", `/api/sessions/${S.session}/plan`)));
-  $("approve").addEventListener("click", () => action("moving and capturing", () => {
-    const st = S.status;
-    return api("POST", `/api/sessions/${S.session}/approve`, { plan_id: st.pending_plan.plan_id, index: st.selected });
-  }));
+  const post = (label, path) => () => action(label, () => api("POST", `/api/sessions/${S.session}/${path}`));
+  $("capture").addEventListener("click", post("capturing the first view", "capture"));
+  $("plan").addEventListener("click", post("planning", "plan"));
+  $("approve").addEventListener("click", approveShown);
   $("approve-custom").addEventListener("click", () => action("moving to the custom pose", () => {
     const st = S.status;
     return api("POST", `/api/sessions/${S.session}/approve`, { plan_id: st.pending_plan.plan_id, pose: st.custom_pose.pose });
   }));
-  $("auto").addEventListener("click", () => action("starting auto mode", () => api("POST", `/api/sessions/${S.session}/auto`, { count: Number($("auto-count").value) })));
+  $("auto").addEventListener("click", () => action("starting auto mode", () => {
+    S.autoTotal = Number($("auto-count").value);
+    return api("POST", `/api/sessions/${S.session}/auto`, { count: S.autoTotal });
+  }));
   $("stop").addEventListener("click", () => api("POST", `/api/sessions/${S.session}/stop`).catch((e) => showError(e.message)));
   $("resume").addEventListener("click", () => action("rebuilding the session from its journal", async () => {
     const r = await api("POST", `/api/sessions/${S.session}/resume`);
     if (!r.verified) showError("resumed with differences: " + r.mismatches.join("; "));
-    await loadSessions();
-    await showSession(S.session);
+    location.reload();
   }));
-  $("retry").addEventListener("click", () => action("retrying the failed step", () => api("POST", `/api/sessions/${S.session}/retry`)));
-  $("gizmo").addEventListener("change", (e) => api("PUT", "/api/scene/layers", { gizmo: e.target.checked }).catch((err) => showError(err.message)));
+  $("retry").addEventListener("click", post("retrying the failed step", "retry"));
+  $("discard").addEventListener("click", () => {
+    if (!S.status || !confirm(`Discard view ${S.status.iteration}? The session is rebuilt from its journal without it.`)) return;
+    action("rebuilding without the last view", () => api("POST", `/api/sessions/${S.session}/discard`));
+  });
+  $("delete").addEventListener("click", () => {
+    if (!confirm(`Delete session ${S.session}? Its journal goes to the trash folder until the server restarts.`)) return;
+    action("deleting", async () => {
+      await api("DELETE", `/api/sessions/${S.session}`);
+      location.href = pageUrl({});
+    });
+  });
+  $("compare-open").addEventListener("click", () => {
+    const ids = prompt("Sessions to compare (ids, comma-separated; the same object):", S.session || "");
+    if (ids) window.open(pageUrl({ compare: ids.replace(/\s+/g, "") }), "_blank");
+  });
+  $("gizmo").addEventListener("change", (e) => toggleLayer("gizmo", e.target.checked));
+  for (const th of $("candidates").querySelectorAll("th[data-sort]")) {
+    th.addEventListener("click", () => {
+      const key = th.dataset.sort;
+      P.Table.sort = { key, dir: P.Table.sort.key === key ? -P.Table.sort.dir : (key === "index" || key === "sector" || key === "reason" ? 1 : -1) };
+      P.Table.page = 0;
+      P.renderTable(S.selectedShown, pick);
+    });
+  }
+  $("page-prev").addEventListener("click", () => { P.Table.page -= 1; P.renderTable(S.selectedShown, pick); });
+  $("page-next").addEventListener("click", () => { P.Table.page += 1; P.renderTable(S.selectedShown, pick); });
+  $("help-open").addEventListener("click", () => { $("help").hidden = false; });
+  $("help-close").addEventListener("click", () => { $("help").hidden = true; });
+  document.addEventListener("keydown", onKey);
+}
+
+function onKey(e) {
+  if (e.ctrlKey || e.metaKey || e.altKey) return;
+  if (["INPUT", "SELECT", "TEXTAREA"].includes(document.activeElement.tagName)) return;
+  const click = (id) => { if (!$(id).disabled && !$(id).hidden) $(id).click(); };
+  const keys = {
+    c: () => click("capture"), p: () => click("plan"), a: () => click("approve"), u: () => click("auto"),
+    s: () => click("stop"), d: () => click("discard"), n: () => step(1), j: () => step(1), k: () => step(-1),
+    g: () => $("gizmo").click(), "?": () => { $("help").hidden = !$("help").hidden; }, Escape: () => { $("help").hidden = true; },
+  };
+  if (keys[e.key]) { e.preventDefault(); keys[e.key](); return; }
+  if (/^[1-9]$/.test(e.key) && S.layers) {
+    const names = Object.keys(S.layers).filter((n) => n !== "gizmo");
+    const name = names[Number(e.key) - 1];
+    if (name) toggleLayer(name, !S.layers[name]);
+  }
+}
+
+// ------------------------------------------------------------------ compare mode
+
+async function showCompare(ids) {
+  $("compare").hidden = false;
+  $("viewer").hidden = true;
+  $("legend").hidden = true;
+  const draw = async () => {
+    const sessions = [];
+    for (const id of ids) {
+      try {
+        sessions.push({ status: await api("GET", `/api/sessions/${id}`), metrics: await api("GET", `/api/sessions/${id}/metrics`) });
+      } catch (e) { showError(`${id}: ${e.message}`); }
+    }
+    P.renderCompare(sessions, (id) => pageUrl({ session: id }));
+  };
+  await draw();
+  const proto = location.protocol === "https:" ? "wss" : "ws";
+  for (const id of ids) { // live: redraw when a compared session takes a view
+    const ws = new WebSocket(`${proto}://${location.host}` + withToken(`/api/events?session=${encodeURIComponent(id)}`));
+    ws.onmessage = (ev) => { if (JSON.parse(ev.data).event === "captured") draw(); };
+  }
 }
 
 async function init() {
+  P.renderHelp();
   wire();
-  try {
-    await api("GET", "/api/health");
-    $("health").textContent = "server ok";
-  } catch (e) {
-    $("health").textContent = "server unreachable";
+  restoreForm();
+  await Promise.all([loadModels(), loadPlanners()]);
+  await loadSessions();
+  const compare = QUERY.get("compare");
+  if (compare) {
+    $("health").textContent = "compare";
+    await showCompare(compare.split(",").filter(Boolean));
+  } else if (S.session) {
+    document.title = `${S.session} · NBV workbench`;
+    $("export-ply").href = withToken(`/api/sessions/${S.session}/cloud.ply`);
+    $("export-json").href = withToken(`/api/sessions/${S.session}/export`);
+    connectEvents(500);
+    await openViewer();
+  } else {
+    $("picker").hidden = false;
+    $("viewer").hidden = true;
+    $("legend").hidden = true;
+    $("health").textContent = "choose a session";
+    $("create-box").open = true;
   }
-  try {
-    const v = await api("GET", "/api/viewer");
-    $("viewer").src = v.url;
-    S.viewerSet = true;
-    if (v.note) showError(v.note);
-  } catch (e) {
-    showError("3D viewer unavailable: " + e.message);
-  }
-  await loadModels();
-  const list = await loadSessions();
-  await loadLayers();
-  if (list.length) await showSession(list[list.length - 1].id);
-  poll();
+  updateButtons();
 }
 
 init();

@@ -30,22 +30,25 @@ function fmt(v) {
 }
 
 /**
- * Draw series [{points: [[x, y], ...], color, label, marker: [x, y] | null}] into an <svg>.
- * opts: {yMin, yMax, xInteger}
+ * Draw series [{points: [[x, y], ...], color, label, marker: [x, y] | null, hover: [text per point]}] into an <svg>.
+ * opts: {yMin, yMax, xInteger, xLabel, yLabel, hline: y of a dashed reference line (null: none)}
+ * Every point has a hover text (its series' hover, else "x, y").
  */
 function lineChart(svg, series, opts) {
   opts = opts || {};
   while (svg.firstChild) svg.removeChild(svg.firstChild);
   const W = svg.clientWidth || 300, H = svg.clientHeight || 150;
   svg.setAttribute("viewBox", `0 0 ${W} ${H}`);
-  const m = { l: 44, r: 8, t: 6, b: 18 };
+  const m = { l: opts.yLabel ? 58 : 46, r: 8, t: 6, b: opts.xLabel ? 28 : 18 };
   const pts = series.flatMap((s) => s.points).filter((p) => p[1] !== null && isFinite(p[1]));
   if (pts.length === 0) {
     svgEl("text", { x: W / 2, y: H / 2, "text-anchor": "middle" }, svg).textContent = "no data yet";
     return;
   }
-  let xs = pts.map((p) => p[0]), ys = pts.map((p) => p[1]);
+  const xs = pts.map((p) => p[0]);
+  let ys = pts.map((p) => p[1]);
   let x0 = Math.min(...xs), x1 = Math.max(...xs);
+  if (opts.hline !== undefined && opts.hline !== null) ys = ys.concat([opts.hline]);
   let y0 = opts.yMin !== undefined ? opts.yMin : Math.min(...ys);
   let y1 = opts.yMax !== undefined ? opts.yMax : Math.max(...ys);
   if (x1 === x0) { x0 -= 1; x1 += 1; }
@@ -59,7 +62,12 @@ function lineChart(svg, series, opts) {
   let xt = niceTicks(x0, x1, 6);
   if (opts.xInteger) xt = xt.filter((t) => Number.isInteger(t));
   for (const t of xt) {
-    svgEl("text", { x: X(t), y: H - 4, "text-anchor": "middle" }, svg).textContent = fmt(t);
+    svgEl("text", { x: X(t), y: H - m.b + 12, "text-anchor": "middle" }, svg).textContent = fmt(t);
+  }
+  if (opts.xLabel) svgEl("text", { x: (m.l + W - m.r) / 2, y: H - 3, "text-anchor": "middle", class: "axis" }, svg).textContent = opts.xLabel;
+  if (opts.yLabel) svgEl("text", { x: 10, y: (m.t + H - m.b) / 2, "text-anchor": "middle", class: "axis", transform: `rotate(-90 10 ${(m.t + H - m.b) / 2})` }, svg).textContent = opts.yLabel;
+  if (opts.hline !== undefined && opts.hline !== null) {
+    svgEl("line", { x1: m.l, x2: W - m.r, y1: Y(opts.hline), y2: Y(opts.hline), stroke: "#15894a", "stroke-dasharray": "5 4", class: "ceiling" }, svg);
   }
   svgEl("line", { x1: m.l, x2: m.l, y1: m.t, y2: H - m.b, stroke: "#b9bfca" }, svg);
   svgEl("line", { x1: m.l, x2: W - m.r, y1: H - m.b, y2: H - m.b, stroke: "#b9bfca" }, svg);
@@ -69,7 +77,11 @@ function lineChart(svg, series, opts) {
     if (good.length === 0) continue;
     const d = good.map((p, i) => `${i ? "L" : "M"}${X(p[0]).toFixed(1)},${Y(p[1]).toFixed(1)}`).join("");
     svgEl("path", { d, fill: "none", stroke: s.color, "stroke-width": 1.8 }, svg);
-    for (const p of good) svgEl("circle", { cx: X(p[0]), cy: Y(p[1]), r: 2.2, fill: s.color }, svg);
+    s.points.forEach((p, i) => {
+      if (p[1] === null || !isFinite(p[1])) return;
+      const dot = svgEl("circle", { cx: X(p[0]), cy: Y(p[1]), r: 2.6, fill: s.color }, svg);
+      svgEl("title", {}, dot).textContent = s.hover ? s.hover[i] : `${fmt(p[0])}, ${fmt(p[1])}`;
+    });
     if (s.marker) {
       svgEl("circle", { cx: X(s.marker[0]), cy: Y(s.marker[1]), r: 5, fill: "none", stroke: s.color, "stroke-width": 2 }, svg);
     }

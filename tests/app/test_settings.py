@@ -65,9 +65,13 @@ def test_colormap_and_candidate_colors() -> None:
     c = colormap(np.array([0.0, 0.5, 1.0]))
     assert c[0].tolist() == list(VIRIDIS[0]) and c[2].tolist() == list(VIRIDIS[-1])
     colors, lo, hi = candidate_colors([5.0, -2.0, 100.0], [True, True, False])
-    assert (lo, hi) == (-2.0, 5.0)  # the range of the eligible scores
+    assert np.allclose((lo, hi), np.percentile([5.0, -2.0], [5, 95]))  # percentiles of the eligible scores
     assert colors[0].tolist() == list(VIRIDIS[-1]) and colors[1].tolist() == list(VIRIDIS[0])
     assert colors[2].tolist() == [175, 175, 175]
+    # one outlier does not flatten the rest: 99 scores spread over the scale, one far above
+    scores = [float(k) for k in range(99)] + [1e6]
+    colors, lo, hi = candidate_colors(scores, [True] * 100)
+    assert hi < 100 and len({tuple(c) for c in colors[:99].tolist()}) >= 60
 
 
 def test_box_and_sector_segments() -> None:

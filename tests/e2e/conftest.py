@@ -14,12 +14,12 @@ from tests.helpers import free_port
 from tests.servers import LiveServer, running_server
 
 CHROMIUM_ARGS = [
-    "--headless",
+    "--headless=new",
     "--no-sandbox",
-    "--disable-gpu",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
     "--disable-background-networking",
     "--disable-component-update",
-    "--disable-quic",
     "--no-first-run",
     "--disable-sync",
 ]
@@ -59,5 +59,19 @@ def browser_page() -> Iterator:
         page = browser.new_page(viewport={"width": 1500, "height": 950}, device_scale_factor=1)
         try:
             yield page
+        finally:
+            browser.close()
+
+
+@pytest.fixture
+def browser_context() -> Iterator:
+    """A browser context (tabs share it, like one browser window) at the smallest supported size, 1024x700."""
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=chromium_path(), args=CHROMIUM_ARGS)
+        context = browser.new_context(viewport={"width": 1024, "height": 700}, device_scale_factor=1)
+        try:
+            yield context
         finally:
             browser.close()

@@ -1,219 +1,205 @@
-"""The supervised loop in real headless Chromium: create, capture, plan, click a candidate in the 3D view, approve.
+"""The workbench page in real Chromium tabs against a live server (uvicorn + viser, real planner, simulated cell).
 
-The click is a real mouse click on the viser canvas inside the page's iframe: the
-test points the viewer's camera at a chosen candidate (``POST /api/scene/camera``),
-reads back the camera the browser reports (pose, fov, canvas size), projects the
-candidate into it, and clicks that pixel. The scene is kept small (2 cm voxels,
-60 candidates, T in [2, 6]) because SwiftShader renders on the CPU.
+- two tabs on two sessions: each tab's viewer websocket frames (decoded msgpack) carry only its own session's
+  nodes, through create, capture, plan, approve and auto in the other tab; reload keeps a tab on its session;
+  a tab without a session shows the picker;
+- the page is live from pushed events: no request to the status route during a 10-step auto run, every step
+  shown;
+- the loop's helpers: keyboard help, the full sortable candidate table, the confirmation of an ineligible
+  approve (recorded as an override), discard, Auto disabled with its reason, delete with confirmation.
 """
 
 from __future__ import annotations
 
-import time
-from pathlib import Path
-from typing import TYPE_CHECKING, Any
+import re
+from typing import Any
 
 import httpx
-import numpy as np
-import pytest
-from playwright.sync_api import Page, expect
+from playwright.sync_api import BrowserContext, Page, expect
 
-from devices.protocols import CaptureError
-from planner import Pose
+from tests.helpers import SMALL
+from tests.servers import LiveServer
+from tests.viewer_wire import decode_frame, session_labels, session_nodes
 
-if TYPE_CHECKING:
-    from tests.e2e.conftest import LiveServer
-from tests.helpers import wait_until
-
-pytestmark = [pytest.mark.e2e, pytest.mark.slow]
-
-SMALL_PARAMS = {
-    "p-resolution": "0.02",
-    "p-count": "60",
-    "p-parallels": "4",
-    "p-tmin": "2",
-    "p-tmax": "6",
-    "p-revisit": "20",
-}
+LONG = {**SMALL, "termination": {"max_views": 30, "stop_without_frontier": False}}
 
 
-def wait_for(fn, timeout: float = 30.0) -> Any:
-    """Until ``fn`` returns something truthy (the server sends these tests no event); fail after ``timeout``."""
-    return wait_until(fn, timeout, getattr(fn, "__name__", str(fn)))
+class Tab:
+    """A page of ``context`` at ``url`` that records the viewer's websocket frames and every request."""
+
+    def __init__(self, context: BrowserContext, url: str) -> None:
+        self.page: Page = context.new_page()
+        self.frames: list[bytes] = []
+        self.requests: list[str] = []
+        self.page.on("websocket", self._socket)
+        self.page.on("request", lambda r: self.requests.append(r.url))
+        self.page.goto(url)
+
+    def _socket(self, ws: Any) -> None:
+        if "/api/events" in ws.url:
+            return
+        ws.on("framereceived", lambda payload: self.frames.append(payload) if isinstance(payload, bytes) else None)
+
+    def messages(self, start: int = 0) -> list[dict[str, Any]]:
+        return [m for data in self.frames[start:] for m in decode_frame(data)]
+
+    def wait(self, predicate: Any, timeout_ms: int = 30_000) -> None:
+        """Wait for ``predicate()`` while the page keeps receiving events (never time.sleep)."""
+        for _ in range(timeout_ms // 100):
+            if predicate():
+                return
+            self.page.wait_for_timeout(100)
+        raise AssertionError("timed out")
 
 
-def project(camera: dict[str, Any], point: np.ndarray) -> tuple[float, float]:
-    """Pixel (u, v) of a world point in a viser client camera (OpenCV axes, vertical fov, square pixels)."""
-    T = Pose.from_wxyz(camera["wxyz"], camera["position"])
-    x, y, z = T.inverse().apply(point[None, :])[0]
-    assert z > 0, "the point is behind the viewer's camera"
-    W, H = camera["image_width"], camera["image_height"]
-    f = (H / 2.0) / np.tan(camera["fov"] / 2.0)
-    return W / 2.0 + f * x / z, H / 2.0 + f * y / z
+def _state(tab: Tab, text: str, timeout: int = 60_000) -> None:
+    expect(tab.page.locator("#state")).to_have_text(text, timeout=timeout)
 
 
-def viewer_canvas_box(page: Page) -> dict[str, float]:
-    """Bounding box (page coordinates) of the largest canvas inside the viser iframe."""
-    canvases = page.frame_locator("#viewer").locator("canvas")
-    wait_for(lambda: canvases.count() > 0)
-    boxes = [canvases.nth(i).bounding_box() for i in range(canvases.count())]
-    boxes = [b for b in boxes if b is not None]
-    return max(boxes, key=lambda b: b["width"] * b["height"])
+def test_two_tabs_show_only_their_own_session(live_server: LiveServer, browser_context: BrowserContext) -> None:
+    api = httpx.Client(base_url=live_server.url, timeout=120)
+    a = api.post("/api/sessions", json={"model": "l-block", "config": SMALL}).json()["id"]
+    api.post(f"/api/sessions/{a}/capture")
+    api.post(f"/api/sessions/{a}/plan")
+    ta = Tab(browser_context, f"{live_server.url}/?session={a}")
+    _state(ta, "planned")
+    ta.wait(lambda: session_labels(ta.messages()) == {f"session {a}"} and "/candidates" in session_nodes(ta.messages()))
+    mark = len(ta.frames)
+
+    # tab B: no id -> the picker; create a session there (it lists A), then scan it through B's page
+    tb = Tab(browser_context, f"{live_server.url}/")
+    expect(tb.page.locator("#picker")).to_be_visible()
+    expect(tb.page.locator(f"#picker a[data-session='{a}']")).to_be_visible()
+    tb.page.select_option("#model", "two-boxes")
+    for field, value in (
+        ("p-resolution", "0.02"),
+        ("p-count", "60"),
+        ("p-parallels", "4"),
+        ("p-tmin", "2"),
+        ("p-tmax", "6"),
+    ):
+        tb.page.fill(f"#{field}", value)
+    tb.page.click("#create")
+    tb.page.wait_for_url(re.compile(r"\?session=[0-9a-f]{8}"))
+    b = re.search(r"session=([0-9a-f]{8})", tb.page.url).group(1)  # type: ignore[union-attr]
+    _state(tb, "new")
+    tb.page.click("#capture")
+    _state(tb, "ready")
+    tb.page.click("#plan")
+    _state(tb, "planned")
+    tb.page.click("#approve")
+    expect(tb.page.locator("#iteration")).to_have_text("2", timeout=60_000)
+    tb.page.fill("#auto-count", "2")
+    tb.page.click("#auto")
+    expect(tb.page.locator("#iteration")).to_have_text("4", timeout=60_000)
+    tb.wait(lambda: "/views/4/frustum" in session_nodes(tb.messages()))
+
+    # A's viewer received nothing of it; each tab's scene names only its own session; A's panels are A's
+    ta.page.wait_for_timeout(500)
+    assert session_nodes(ta.messages(mark)) == set()
+    assert session_labels(ta.messages()) == {f"session {a}"}
+    assert session_labels(tb.messages()) == {f"session {b}"}
+    expect(ta.page.locator("#session-info")).to_contain_text(a)
+    expect(ta.page.locator("#iteration")).to_have_text("1")
+    _state(ta, "planned")
+
+    # reload: A stays on A, its new viewer is bound to A again
+    ta.frames.clear()
+    ta.page.reload()
+    _state(ta, "planned")
+    expect(ta.page.locator("#session-info")).to_contain_text(a)
+    ta.wait(lambda: "/candidates" in session_nodes(ta.messages()))
+    assert session_labels(ta.messages()) == {f"session {a}"}
 
 
-def test_supervised_loop_in_the_browser(live_server: LiveServer, browser_page: Page, output_dir: Path) -> None:
-    t_start = time.perf_counter()
-    page, base = browser_page, live_server.url
-    api = httpx.Client(base_url=base, timeout=60)
-    page.goto(base + "/")
-    expect(page.locator("#health")).to_have_text("server ok", timeout=20_000)
-    viewer_url = api.get("/api/viewer").json()["url"]
-    expect(page.locator("#viewer")).to_have_attribute("src", viewer_url)
+def test_the_page_is_pushed_every_step_of_auto_without_polling(
+    live_server: LiveServer, browser_context: BrowserContext
+) -> None:
+    api = httpx.Client(base_url=live_server.url, timeout=120)
+    sid = api.post("/api/sessions", json={"model": "l-block", "config": LONG}).json()["id"]
+    api.post(f"/api/sessions/{sid}/capture")
+    tab = Tab(browser_context, f"{live_server.url}/?session={sid}")
+    _state(tab, "ready")
+    tab.page.evaluate(
+        """() => { window.__steps = [];
+        new MutationObserver(() => window.__steps.push(document.getElementById('iteration').textContent))
+          .observe(document.getElementById('iteration'), {childList: true, characterData: true, subtree: true}); }"""
+    )
+    tab.requests.clear()
+    tab.page.fill("#auto-count", "10")
+    tab.page.click("#auto")
+    expect(tab.page.locator("#busy")).to_contain_text("auto: step", timeout=10_000)
+    expect(tab.page.locator("#iteration")).to_have_text("11", timeout=120_000)
+    expect(tab.page.locator("#state")).not_to_have_text("auto", timeout=30_000)
+    steps = tab.page.evaluate("window.__steps")
+    shown = [s for i, s in enumerate(steps) if (i == 0 or s != steps[i - 1]) and s != "1"]
+    assert shown == [str(k) for k in range(2, 12)]  # every step, in order
+    status_route = re.compile(rf"/api/sessions/{sid}(\?|$)")
+    assert not [u for u in tab.requests if status_route.search(u)], "the page polled the status route"
 
-    # 1. create a session with small parameters, 2. capture
-    page.select_option("#model", "l-block")
-    for field, value in SMALL_PARAMS.items():
-        page.fill(f"#{field}", value)
-    page.click("#create")
-    expect(page.locator("#state")).to_have_text("new", timeout=20_000)
-    sid = page.locator("#session-select").input_value()
-    assert api.get(f"/api/sessions/{sid}").json()["model"] == "l-block"
-    config = api.get(f"/api/sessions/{sid}/export").json()["config"]
-    assert config["partitions"]["revisit_deg"] == 20 and config["voxel"]["resolution"] == 0.02
-    page.click("#capture")
-    expect(page.locator("#state")).to_have_text("ready", timeout=30_000)
+    # compare: a second session on the same object with another planner, side by side, each a link to its tab
+    other = api.post("/api/sessions", json={"model": "l-block", "config": LONG, "planner": "random"}).json()["id"]
+    api.post(f"/api/sessions/{other}/capture")
+    api.post(f"/api/sessions/{other}/step", json={"count": 2})
+    cmp = Tab(browser_context, f"{live_server.url}/?compare={sid},{other}")
+    expect(cmp.page.locator("#compare")).to_be_visible()
+    expect(cmp.page.locator("#compare tbody tr")).to_have_count(2)
+    expect(cmp.page.locator("#compare tbody")).to_contain_text("random")
+    expect(cmp.page.locator(f"#compare a[href*='session={other}']")).to_be_visible()
+    assert cmp.page.locator("#cmp-coverage path").count() == 2
+
+
+def test_the_loop_helpers(live_server: LiveServer, browser_context: BrowserContext) -> None:
+    api = httpx.Client(base_url=live_server.url, timeout=120)
+    sid = api.post(
+        "/api/sessions", json={"model": "l-block", "config": {**SMALL, "termination": {"max_views": 2}}}
+    ).json()["id"]
+    api.post(f"/api/sessions/{sid}/capture")
+    api.post(f"/api/sessions/{sid}/plan")
+    tab = Tab(browser_context, f"{live_server.url}/?session={sid}")
+    page = tab.page
+    _state(tab, "planned")
+    # help overlay from the keyboard
+    page.keyboard.press("?")
+    expect(page.locator("#help")).to_be_visible()
+    expect(page.locator("#help-keys")).to_contain_text("approve")
+    page.keyboard.press("Escape")
+    expect(page.locator("#help")).to_be_hidden()
+    # every candidate, paged, with the reason an ineligible one is not eligible
+    expect(page.locator("#page-info")).to_contain_text("60 candidates")
+    page.click("#candidates th[data-sort='reason']")
+    page.click("#candidates th[data-sort='reason']")  # descending: the ineligible ones first
+    expect(page.locator("#candidates tbody tr").first).to_have_class(re.compile("ineligible"))
+    # a selection made elsewhere (a sphere in 3D, another tab) turns the table to its row
+    index = next(
+        c["index"] for c in api.get(f"/api/sessions/{sid}/candidates").json() if c["reason"] == "sector locked"
+    )
+    api.put(f"/api/sessions/{sid}/selection", json={"index": index})
+    row = page.locator(f"#candidates tbody tr[data-index='{index}']")
+    expect(row).to_have_class(re.compile("selected"))
+    expect(row.locator("td.why")).to_have_text("sector locked")
+    expect(page.locator("#selected-label")).to_contain_text(f"candidate {index}")
+    # an ineligible approve asks first: dismissed, nothing moves; accepted, an override is recorded
+    page.once("dialog", lambda d: d.dismiss())
+    page.keyboard.press("a")
+    page.wait_for_timeout(500)
     expect(page.locator("#iteration")).to_have_text("1")
-
-    # 3. plan: the candidate list fills
-    page.click("#plan")
-    expect(page.locator("#state")).to_have_text("planned", timeout=60_000)
-    expect(page.locator("#candidates tbody tr").first).to_be_visible()
-    status = api.get(f"/api/sessions/{sid}").json()
-    plan_id, best = status["pending_plan"]["plan_id"], status["pending_plan"]["best"]["index"]
-    assert status["selected"] == best
-
-    # 4. click another eligible candidate in the 3D scene
-    cands = api.get(f"/api/sessions/{sid}/candidates").json()
-    target = next(c for c in sorted(cands, key=lambda c: -c["score"]) if c["eligible"] and c["index"] != best)
-    k = target["index"]
-    position = np.array(target["pose"]["position"])
-    wait_for(lambda: api.get("/api/scene/cameras").json(), timeout=60)  # the viser client connected
-    assert api.post("/api/scene/camera", json={"candidate": k, "distance": 0.3}).json()["clients"] >= 1
-
-    def camera_on_target() -> dict[str, Any] | None:
-        for cam in api.get("/api/scene/cameras").json():
-            if (
-                np.allclose(cam["look_at"], position, atol=1e-3)
-                and abs(np.linalg.norm(np.subtract(cam["position"], position)) - 0.3) < 1e-3
-            ):
-                return cam
-        return None
-
-    camera = wait_for(camera_on_target, timeout=30)
-    page.wait_for_timeout(1000)  # let SwiftShader render the new view before clicking (page events keep flowing)
-    u, v = project(camera, position)
-    box = viewer_canvas_box(page)
-    x = box["x"] + u * box["width"] / camera["image_width"]
-    y = box["y"] + v * box["height"] / camera["image_height"]
-    page.mouse.click(x, y)
-    wait_for(lambda: api.get(f"/api/sessions/{sid}").json()["selected"] == k, timeout=30)
-    expect(page.locator("#selected-label")).to_contain_text(f"candidate {k}", timeout=10_000)
-    expect(page.locator("#projection")).to_be_visible()
-    expect(page.locator(f"#candidates tr.selected[data-index='{k}']")).to_have_count(1)
-
-    # 5. approve: the robot moves to the clicked candidate
+    page.once("dialog", lambda d: d.accept())
     page.click("#approve")
     expect(page.locator("#iteration")).to_have_text("2", timeout=60_000)
-    expect(page.locator("#state")).to_have_text("ready", timeout=30_000)
-    doc = api.get(f"/api/sessions/{sid}/export").json()
-    decision = doc["decisions"][-1]
-    assert (decision["plan_id"], decision["index"], decision["kind"]) == (plan_id, k, "override")
-    assert np.allclose(doc["iterations"][-1]["pose"]["position"], position, atol=1e-6)
-
-    # the scene holds ellipsoids and candidates drawn from the plan
-    nodes = api.get("/api/scene").json()["nodes"]
-    assert any(n.startswith("/ellipsoids/occupied/") for n in nodes)
-    assert any(n.startswith("/ellipsoids/frontier/") for n in nodes)
-    assert "/candidates" in nodes and "/views/2/frustum" in nodes
-
-    shot = output_dir / "workbench.png"
-    page.screenshot(path=str(shot))
-    assert shot.stat().st_size > 10_000
-    print(f"e2e loop took {time.perf_counter() - t_start:.1f} s; screenshot {shot}")
-
-
-def test_api_docs_render_offline(live_server: LiveServer, browser_page: Page, output_dir: Path) -> None:
-    """Swagger UI renders the API with every request outside this server blocked (as on a machine offline)."""
-    page = browser_page
-    outside: list[str] = []
-
-    def only_local(route, request) -> None:
-        if request.url.startswith(live_server.url):
-            route.continue_()
-        else:
-            outside.append(request.url)
-            route.abort()
-
-    page.route("**/*", only_local)
-    page.goto(f"{live_server.url}/docs")
-    ops = page.locator(".opblock")
-    expect(ops.first).to_be_visible(timeout=30_000)
-    assert ops.count() >= 25
-    expect(page.locator(".swagger-ui .title").first).to_contain_text("NBV workbench")
-    assert outside == []
-    page.screenshot(path=str(output_dir / "api-docs.png"))
-
-
-def test_the_page_carries_the_token(tmp_path: Path, browser_page: Page) -> None:
-    """A server with a token: the page opened with ``?token=`` sends it on every call; opened without it, the
-    API refuses it. (The viewer link's token is checked in tests/app/test_security.py; no 3D scene here.)"""
-    from app.settings import AppSettings
-    from tests.e2e.conftest import free_port, running_server
-
-    token = "browser-test-token-123"
-    settings = AppSettings(port=free_port(), data_dir=tmp_path / "data", models_dir=tmp_path, token=token, scene=False)
-    page = browser_page
-    with running_server(settings) as server:
-        page.goto(f"{server.url}/")
-        expect(page.locator("#health")).to_have_text("server unreachable", timeout=30_000)
-        page.goto(f"{server.url}/?token={token}")
-        expect(page.locator("#health")).to_have_text("server ok", timeout=30_000)
-        expect(page.locator("#model option")).not_to_have_count(0)
-        page.get_by_test_id("create").click()
-        expect(page.get_by_test_id("state")).to_have_text("new", timeout=30_000)
-        assert len(server.app.state.registry.list()) == 1
-
-
-def test_resume_and_retry_from_the_page(tmp_path: Path, browser_page: Page) -> None:
-    """A session journaled by an earlier server shows as interrupted with a Resume button; after a fault, Retry."""
-    from app.settings import AppSettings
-    from tests.e2e.conftest import free_port, running_server
-
-    small = {
-        "voxel": {"resolution": 0.02},
-        "candidates": {"count": 60, "parallels": 4},
-        "cluster": {"t_min": 2, "t_max": 6},
-    }
-    settings = AppSettings(data_dir=tmp_path / "data", models_dir=tmp_path, scene=False)
-    faults = {"schedule": [{"kind": "capture_failure", "at": 2}]}
-    with running_server(settings.replace(port=free_port())) as first:
-        api = httpx.Client(base_url=first.url, timeout=60)
-        sid = api.post("/api/sessions", json={"config": small, "faults": faults}).json()["id"]
-        api.post(f"/api/sessions/{sid}/capture")
-        api.post(f"/api/sessions/{sid}/plan")
-    page = browser_page
-    with running_server(settings.replace(port=free_port())) as second:
-        page.goto(f"{second.url}/")
-        expect(page.get_by_test_id("state")).to_have_text("interrupted", timeout=30_000)
-        expect(page.get_by_test_id("plan")).to_be_disabled()
-        page.get_by_test_id("resume").click()
-        expect(page.get_by_test_id("state")).to_have_text("planned", timeout=30_000)
-        expect(page.get_by_test_id("resume")).to_be_hidden()
-        second.app.state.registry.get(sid).cell.camera.fail_next = CaptureError("lens cap on")
-        page.get_by_test_id("approve").click()
-        expect(page.get_by_test_id("state")).to_have_text("error", timeout=30_000)
-        expect(page.locator("#error")).to_contain_text("lens cap on")
-        page.get_by_test_id("retry").click()
-        expect(page.get_by_test_id("iteration")).to_have_text("2", timeout=30_000)
-        expect(page.get_by_test_id("state")).to_have_text("ready")
-        expect(page.get_by_test_id("retry")).to_be_hidden()
+    decisions = api.get(f"/api/sessions/{sid}/export").json()["decisions"]
+    assert decisions[-1]["kind"] == "override" and decisions[-1]["index"] == index
+    # the planner's stop (max_views 2): Auto is off and says why
+    expect(page.locator("#auto")).to_be_disabled()
+    expect(page.locator("#auto-why")).to_contain_text("the planner stopped")
+    # discard the last view (confirmed): back to one view, Auto possible again
+    expect(page.locator("#discard")).to_be_enabled(timeout=30_000)
+    page.once("dialog", lambda d: d.accept())
+    page.keyboard.press("d")
+    expect(page.locator("#iteration")).to_have_text("1", timeout=60_000)
+    expect(page.locator("#auto")).to_be_enabled(timeout=30_000)
+    # delete, confirmed: back to the picker, the session is gone
+    page.once("dialog", lambda d: d.accept())
+    page.click("#delete")
+    expect(page.locator("#picker")).to_be_visible(timeout=20_000)
+    assert api.get(f"/api/sessions/{sid}").status_code == 404

@@ -4,7 +4,7 @@ The planner's state after a frame depends on every earlier integrate *and plan*
 (the fits are warm-started, the fits' RNG advances), so the events are replayed
 in their journaled order: ``capture`` -> ``Planner.integrate`` of the stored frame,
 ``plan`` -> ``Planner.plan`` with the cell's reachability, ``config`` -> the same
-change. Every step is checked against what the journal recorded (points, voxel
+change; a discarded view (workbench/journal/discard.py) is left out. Every step is checked against what the journal recorded (points, voxel
 counts, iteration, coverage, best view and its score); differences are listed
 in ``Rebuilt.mismatches``. Used by ``POST /api/sessions/{id}/resume`` and ``nbv replay``.
 """
@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from planner import Planner, PlannerConfig, PlanResult, Pose
 from planner.planner import IntegrationReport
+from workbench.journal.discard import without_discarded
 from workbench.journal.store import Journal
 from workbench.record import SessionRecord
 from workbench.states import PendingPlan
@@ -81,7 +82,7 @@ def rebuild(
     """
     header = journal.header
     config = PlannerConfig.from_dict(header["config"])
-    planner = Planner(config)
+    planner = Planner(config, evaluator=str(header.get("planner", "projection")))
     record = SessionRecord.from_header(header)
     captures: list[ReplayedCapture] = []
     mismatches: list[str] = []
@@ -95,7 +96,7 @@ def rebuild(
     def differ(what: str, recorded: Any, replayed: Any) -> None:
         mismatches.append(f"{what}: journal {recorded!r}, replay {replayed!r}")
 
-    for ev in journal.events:
+    for ev in without_discarded(journal.events):
         kind = ev["kind"]
         if kind == "config":
             config = config.replace(**ev["changes"])

@@ -1,0 +1,136 @@
+"""Pushed events: a websocket per tab (``/api/events?session=ID``) instead of polling.
+
+Messages (JSON):
+
+- ``{"type": "status", "event": "state"|"planned"|"captured"|"selection"|"custom_pose", "status": {...}}``:
+  the session's status (the shape of ``GET /api/sessions/{id}``) after each change, first on connect;
+- ``{"type": "sessions", "change": "created"|"deleted", "id": ...}``: the session list changed;
+- ``{"type": "deleted"}``: this tab's session was deleted.
+
+Browsers cannot set headers on a websocket, so the token (when the server has one) comes as ``?token=``;
+the Origin must be the page's own or one of ``cors_origins`` (app/security.py checks plain HTTP only).
+A refused socket is closed with 4401 (token) or 4403 (origin), an unknown session with 4404.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import hmac
+import json
+import logging
+from typing import Any
+from urllib.parse import urlsplit
+
+from fastapi import APIRouter, WebSocket, WebSocketDisconnect
+
+from app.settings import AppSettings
+from workbench.errors import Conflict, WorkbenchError
+from workbench.jsonable import jsonable
+from workbench.session import Session
+from workbench.states import SessionEvent
+
+router = APIRouter()
+log = logging.getLogger(__name__)
+
+
+def refusal(ws: WebSocket, settings: AppSettings) -> tuple[int, str] | None:
+    """(close code, reason) when this websocket may not subscribe, else None."""
+    origin = ws.headers.get("origin")
+    host = ws.headers.get("host", "")
+    if origin is not None:
+        same = urlsplit(origin).netloc.lower() == host.lower() and origin != "null"
+        if not same and origin.rstrip("/") not in {o.rstrip("/") for o in settings.cors_origins}:
+            return 4403, f"cross-origin event stream from {origin!r} refused"
+    if settings.token:
+        given = ws.query_params.get("token", "")
+        if not hmac.compare_digest(given.encode("utf-8"), settings.token.encode("utf-8")):
+            return 4401, "missing or wrong token"
+    return None
+
+
+def _dump(message: dict[str, Any]) -> str:
+    """JSON text the way the REST answers are encoded (NaN-safe)."""
+    return json.dumps(jsonable(message), separators=(",", ":"))
+
+
+@router.websocket("/events")
+async def events(ws: WebSocket, session: str | None = None) -> None:
+    """Push the session's status after every change and the session list's changes (see the module docstring)."""
+    settings: AppSettings = ws.app.state.settings
+    registry = ws.app.state.registry
+    refused = refusal(ws, settings)
+    if refused is not None:
+        await ws.close(code=refused[0], reason=refused[1])
+        return
+    wb: Session | None = None
+    first: dict[str, Any] | None = None
+    if session is not None:
+        try:
+            first = registry.status(session)  # an interrupted session has a status too (state "interrupted")
+            wb = registry.get(session)
+        except Conflict:
+            wb = None  # interrupted: followed once it is resumed
+        except WorkbenchError as exc:
+            await ws.accept()
+            await ws.send_text(json.dumps({"type": "error", "detail": exc.detail}))
+            await ws.close(code=4404, reason="unknown session")
+            return
+    await ws.accept()
+    loop = asyncio.get_running_loop()
+    queue: asyncio.Queue[dict[str, Any]] = asyncio.Queue()
+
+    def push(message: dict[str, Any]) -> None:
+        loop.call_soon_threadsafe(queue.put_nowait, message)
+
+    def on_session(s: Session, event: SessionEvent) -> None:
+        push({"type": "status", "event": str(event), "status": s.status()})
+
+    def on_create(s: Session) -> None:
+        nonlocal wb
+        push({"type": "sessions", "change": "created", "id": s.id})
+        if s.id == session and wb is None:  # resumed: follow it from now on
+            wb = s
+            s.listeners.append(on_session)
+            push({"type": "status", "event": "state", "status": s.status()})
+
+    def on_delete(s: Session) -> None:
+        push({"type": "sessions", "change": "deleted", "id": s.id})
+        if wb is not None and s.id == wb.id:
+            push({"type": "deleted"})
+
+    if wb is not None:
+        wb.listeners.append(on_session)
+    registry.on_create.append(on_create)
+    registry.on_delete.append(on_delete)
+    reader = asyncio.create_task(_drain(ws))
+    try:
+        if first is not None:
+            await ws.send_text(_dump({"type": "status", "event": "state", "status": first}))
+        while not reader.done():
+            getter = asyncio.ensure_future(queue.get())
+            done, _ = await asyncio.wait({getter, reader}, return_when=asyncio.FIRST_COMPLETED)
+            if getter not in done:
+                getter.cancel()
+                break
+            await ws.send_text(_dump(getter.result()))
+    except (WebSocketDisconnect, RuntimeError):
+        pass
+    finally:
+        reader.cancel()
+        with contextlib.suppress(ValueError):
+            registry.on_create.remove(on_create)
+        with contextlib.suppress(ValueError):
+            registry.on_delete.remove(on_delete)
+        if wb is not None:
+            with contextlib.suppress(ValueError):
+                wb.listeners.remove(on_session)
+
+
+async def _drain(ws: WebSocket) -> None:
+    """Read (and ignore) what the page sends until it disconnects."""
+    with contextlib.suppress(WebSocketDisconnect, RuntimeError):
+        while True:
+            message = await ws.receive()
+            if message["type"] == "websocket.disconnect":
+                return

@@ -1,0 +1,221 @@
+// The page's panels that only read: the candidate table, the inspector, the legend and layers, the charts,
+// the session picker and the compare view. app.js owns the state (S) and calls these.
+"use strict";
+
+const $ = (id) => document.getElementById(id);
+const PAGE_SIZE = 15;
+const KIND_COLORS = { occupied: "#2e63d8", frontier: "#d0312d" };
+
+function num(v, digits) {
+  if (v === null || v === undefined || !isFinite(v)) return "–";
+  const a = Math.abs(v);
+  if (a !== 0 && (a >= 1e5 || a < 1e-3)) return v.toExponential(2);
+  return (+v.toFixed(digits === undefined ? 1 : digits)).toString();
+}
+
+function esc(s) {
+  return String(s).replace(/[&<>"']/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;" })[c]);
+}
+
+// "bunny" for "/work/shared/models/bunny.ply", "upload:abc/mug.obj" -> "mug"
+function shortModel(name) {
+  if (!name) return "–";
+  const base = String(name).split(/[\\/]/).pop();
+  return base.replace(/\.(ply|obj|stl|off|glb|gltf)$/i, "");
+}
+
+// ------------------------------------------------------------------ candidate table (every candidate, paged)
+
+const Table = { items: [], sort: { key: "score", dir: -1 }, page: 0 };
+
+function sortedCandidates() {
+  const { key, dir } = Table.sort;
+  const val = (c) => (key === "reason" ? (c.eligible ? "" : c.reason) : c[key]);
+  return Table.items.slice().sort((a, b) => {
+    if (key === "score" && a.eligible !== b.eligible) return a.eligible ? -1 : 1; // eligible first by F
+    const x = val(a), y = val(b);
+    return (x < y ? -1 : x > y ? 1 : 0) * dir || a.index - b.index;
+  });
+}
+
+function renderTable(selected, onPick) {
+  const tbody = $("candidates").querySelector("tbody");
+  tbody.innerHTML = "";
+  const rows = sortedCandidates();
+  const pages = Math.max(1, Math.ceil(rows.length / PAGE_SIZE));
+  Table.page = Math.min(Math.max(0, Table.page), pages - 1);
+  for (const c of rows.slice(Table.page * PAGE_SIZE, (Table.page + 1) * PAGE_SIZE)) {
+    const tr = document.createElement("tr");
+    tr.dataset.index = c.index;
+    tr.className = (c.best ? "best " : "") + (c.eligible ? "" : "ineligible ") + (c.index === selected ? "selected" : "");
+    const why = c.eligible ? "yes" : esc(c.reason || "no");
+    tr.innerHTML = `<td>${c.index}</td><td>${num(c.score)}</td><td>${num(c.frontier)}</td><td>${num(c.occupied)}</td>` +
+      `<td>S${c.sector}</td><td class="why">${why}</td>`;
+    tr.addEventListener("click", () => onPick(c.index));
+    tbody.appendChild(tr);
+  }
+  $("page-info").textContent = rows.length ? `page ${Table.page + 1} / ${pages} · ${rows.length} candidates` : "no plan";
+  for (const th of $("candidates").querySelectorAll("th[data-sort]")) {
+    th.classList.toggle("sorted", th.dataset.sort === Table.sort.key);
+    th.dataset.dir = th.dataset.sort === Table.sort.key ? (Table.sort.dir > 0 ? "▲" : "▼") : "";
+  }
+}
+
+// Show the page holding candidate `index` (a click on a sphere selects a row that may be on another page).
+function pageOf(index) {
+  const at = sortedCandidates().findIndex((c) => c.index === index);
+  if (at >= 0) Table.page = Math.floor(at / PAGE_SIZE);
+}
+
+function candidateOf(index) {
+  return Table.items.find((c) => c.index === index) || null;
+}
+
+// ------------------------------------------------------------------ inspector
+
+function renderInspector(d, imgUrl) {
+  const img = $("projection");
+  const tbody = $("breakdown").querySelector("tbody");
+  tbody.innerHTML = "";
+  if (!d) {
+    $("selected-label").textContent = "no selection";
+    img.hidden = true;
+    return;
+  }
+  $("selected-label").textContent =
+    `candidate ${d.index}${d.best ? " (planner's choice)" : ""}: F = ${num(d.score)} ` +
+    `(${num(d.frontier)} − ${num(d.occupied)})${d.eligible ? "" : ", not eligible: " + (d.reason || "?")}`;
+  const rows = d.ellipsoids.filter((e) => e.rank >= 0).sort((a, b) => a.rank - b.rank);
+  for (const e of rows) {
+    const tr = document.createElement("tr");
+    tr.innerHTML = `<td style="color:${KIND_COLORS[e.kind] || "#444"}">${esc(e.label)}</td>` +
+      `<td>${e.rank}</td><td>${num(e.weight, 3)}</td><td>${num(e.pixels, 0)}</td><td>${num(e.weighted, 0)}</td>`;
+    tbody.appendChild(tr);
+  }
+  img.src = imgUrl;
+  img.hidden = false;
+}
+
+// ------------------------------------------------------------------ legend and layers
+
+const SECTOR_HELP = "Sectors S0…Sβ-1 split the hemisphere by longitude. 'scanned': a view was taken there; " +
+  "'eligible': the next view may come from it; 'locked': not before every sector has been scanned.";
+
+function renderLegend(scene) {
+  const stops = scene.colormap.map((c, i, a) => `rgb(${c.join(",")}) ${(100 * i) / (a.length - 1)}%`);
+  $("cb-grad").style.background = `linear-gradient(to right, ${stops.join(",")})`;
+  $("cb-what").textContent = "F";
+  $("colorbar").title = `candidate colour: ${scene.scale}; beyond either end the end colour; grey: not eligible`;
+  $("cb-lo").textContent = "p5 " + num(scene.score_range[0]);
+  $("cb-hi").textContent = num(scene.score_range[1]) + " p95";
+  const box = $("voxel-legend");
+  box.innerHTML = "";
+  for (const name of ["occupied", "frontier", "unknown", "empty"]) {
+    const c = scene.colors[name];
+    const s = document.createElement("span");
+    s.innerHTML = `<i class="swatch" style="background:rgb(${c.join(",")})"></i>${name}`;
+    box.appendChild(s);
+  }
+  const sec = document.createElement("span");
+  sec.className = "help-tip";
+  sec.title = SECTOR_HELP;
+  sec.textContent = "sectors (?)";
+  box.appendChild(sec);
+}
+
+function renderLayers(layers, onToggle) {
+  const box = $("layers");
+  box.innerHTML = "";
+  let k = 0;
+  for (const [name, on] of Object.entries(layers)) {
+    if (name === "gizmo") { $("gizmo").checked = on; continue; }
+    k += 1;
+    const label = document.createElement("label");
+    label.title = k <= 9 ? `toggle with ${k}` : "";
+    const cb = document.createElement("input");
+    cb.type = "checkbox";
+    cb.checked = on;
+    cb.dataset.layer = name;
+    cb.addEventListener("change", () => onToggle(name, cb.checked));
+    label.append(cb, name);
+    box.appendChild(label);
+  }
+}
+
+// ------------------------------------------------------------------ charts
+
+function renderCharts(m) {
+  const it = m.iterations;
+  const cov = [{ points: it.map((r) => [r.iteration, r.coverage === null ? null : 100 * r.coverage]), color: "#15894a", label: "coverage" }];
+  const ceiling = m.ceiling === undefined || m.ceiling === null ? null : 100 * m.ceiling;
+  $("ceiling-note").textContent = ceiling === null ? "" : `(dashed: reachable ceiling ${num(ceiling)} %)`;
+  lineChart($("chart-coverage"), cov, { xInteger: true, yMin: 0, yMax: 100, xLabel: "view", yLabel: "%", hline: ceiling });
+  lineChart($("chart-points"), [{ points: it.map((r) => [r.iteration, r.points]), color: "#2e63d8" }], { xInteger: true, yMin: 0, xLabel: "view", yLabel: "points" });
+  lineChart($("chart-time"), [{ points: it.map((r) => [r.iteration, r.plan_seconds]), color: "#8a4fd8" }], { xInteger: true, yMin: 0, xLabel: "view", yLabel: "s" });
+  // BIC: each kind normalised to [0, 1] (their magnitudes differ by orders), real values on hover
+  const series = m.fits.map((f) => {
+    const ys = f.bic.map((p) => p[1]);
+    const lo = Math.min(...ys), hi = Math.max(...ys);
+    const norm = (y) => (hi > lo ? (y - lo) / (hi - lo) : 0.5);
+    const chosen = f.bic.find((p) => p[0] === f.t_chosen);
+    return {
+      points: f.bic.map((p) => [p[0], norm(p[1])]),
+      hover: f.bic.map((p) => `${f.kind}: T=${p[0]}, BIC=${num(p[1], 0)}`),
+      color: KIND_COLORS[f.kind] || "#444", label: f.kind,
+      marker: chosen ? [chosen[0], norm(chosen[1])] : null,
+    };
+  });
+  lineChart($("chart-bic"), series, { xInteger: true, yMin: 0, yMax: 1, xLabel: "T (components)", yLabel: "norm. BIC" });
+  $("bic-legend").innerHTML = m.fits.map((f) => `<span style="color:${KIND_COLORS[f.kind]}">${f.kind} T=${f.t_chosen}</span>`).join(" · ") +
+    (m.fit_iteration ? ` <span class="muted">(view ${m.fit_iteration})</span>` : "");
+}
+
+// ------------------------------------------------------------------ picker and compare
+
+function renderPicker(list, hrefOf) {
+  const tbody = $("picker-table").querySelector("tbody");
+  tbody.innerHTML = "";
+  for (const s of list) {
+    const tr = document.createElement("tr");
+    tr.innerHTML = `<td><a href="${hrefOf(s.id)}" data-session="${esc(s.id)}">${esc(s.id)}</a></td>` +
+      `<td title="${esc(s.model)}">${esc(shortModel(s.model))}</td><td>${esc(s.planner || "projection")}</td>` +
+      `<td>${esc(s.state)}</td><td>${s.iteration}</td><td>${s.coverage === null ? "–" : (100 * s.coverage).toFixed(1) + " %"}</td>`;
+    tbody.appendChild(tr);
+  }
+  $("picker-empty").hidden = list.length > 0;
+}
+
+const PALETTE = ["#2e63d8", "#d0312d", "#15894a", "#8a4fd8", "#e08a00", "#0a8ea0"];
+
+// sessions: [{status, metrics}] of sessions on the same object, drawn over each other.
+function renderCompare(sessions, hrefOf) {
+  const box = $("compare");
+  const rows = sessions.map((s, i) => `<tr><td><i class="swatch" style="background:${PALETTE[i % PALETTE.length]}"></i>` +
+    `<a href="${hrefOf(s.status.id)}" target="_blank" rel="noopener">${esc(s.status.id)}</a></td><td>${esc(s.status.planner || "projection")}</td>` +
+    `<td>${s.status.iteration}</td><td>${s.status.coverage === null ? "–" : (100 * s.status.coverage).toFixed(1) + " %"}</td>` +
+    `<td>${num(s.metrics.iterations.reduce((a, r) => a + (r.plan_seconds || 0), 0), 2)}</td></tr>`).join("");
+  const model = sessions.length ? shortModel(sessions[0].status.model) : "";
+  box.innerHTML = `<h2>Compare · ${esc(model)}</h2><table class="small"><thead><tr><th>session (opens in a tab)</th><th>planner</th>` +
+    `<th>views</th><th>coverage</th><th>plan time (s)</th></tr></thead><tbody>${rows}</tbody></table>` +
+    `<div class="compare-charts"><figure><figcaption>coverage (%) vs view</figcaption><svg id="cmp-coverage"></svg></figure>` +
+    `<figure><figcaption>plan time (s) vs view</figcaption><svg id="cmp-time"></svg></figure></div>`;
+  const series = (f) => sessions.map((s, i) => ({ points: s.metrics.iterations.map(f), color: PALETTE[i % PALETTE.length], label: s.status.id }));
+  lineChart($("cmp-coverage"), series((r) => [r.iteration, r.coverage === null ? null : 100 * r.coverage]), { xInteger: true, yMin: 0, yMax: 100, xLabel: "view", yLabel: "%" });
+  lineChart($("cmp-time"), series((r) => [r.iteration, r.plan_seconds]), { xInteger: true, yMin: 0, xLabel: "view", yLabel: "s" });
+}
+
+// ------------------------------------------------------------------ keyboard shortcuts and help
+
+const SHORTCUTS = [
+  ["c", "capture the first view"], ["p", "plan"], ["a", "approve the selected candidate"],
+  ["n / j", "select the next candidate (table order)"], ["k", "select the previous candidate"],
+  ["u", "run auto"], ["s", "stop auto"], ["d", "discard the last view"], ["g", "toggle the override gizmo"],
+  ["1 … 9", "toggle the layers in the 3D view's layer bar"], ["?", "this help"], ["Esc", "close the help"],
+];
+
+function renderHelp() {
+  $("help-keys").innerHTML = SHORTCUTS.map(([k, what]) => `<tr><td><kbd>${esc(k)}</kbd></td><td>${esc(what)}</td></tr>`).join("");
+}
+
+window.Panels = { Table, renderTable, pageOf, candidateOf, renderInspector, renderLegend, renderLayers, renderCharts,
+  renderPicker, renderCompare, renderHelp, shortModel, num, esc };
