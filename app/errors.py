@@ -1,49 +1,33 @@
-"""Errors of the workbench that map to HTTP statuses (the REST layer turns them into ``{"detail": ...}``)."""
+"""HTTP statuses of the workbench's domain errors (workbench/errors.py): the one place types meet codes."""
 
 from __future__ import annotations
 
+from workbench.errors import (
+    Conflict,
+    DeviceFault,
+    Invalid,
+    NotFound,
+    StorageFault,
+    TooLarge,
+    Unreachable,
+    WorkbenchError,
+)
 
-class WorkbenchError(Exception):
-    """Base class: a request the workbench refused, with a one-line reason. Nothing changed."""
-
-    status = 400
-
-    def __init__(self, detail: str) -> None:
-        super().__init__(detail)
-        self.detail = detail
-
-
-class NotFoundError(WorkbenchError):
-    """Unknown session, candidate or model (404)."""
-
-    status = 404
-
-
-class ConflictError(WorkbenchError):
-    """The session is in the wrong state for this request, or the plan_id is stale or used (409)."""
-
-    status = 409
-
-
-class UnprocessableError(WorkbenchError):
-    """Bad parameters: out of range, an unreachable pose, a model that cannot be loaded (422)."""
-
-    status = 422
+STATUS: dict[type[WorkbenchError], int] = {
+    NotFound: 404,
+    Conflict: 409,
+    TooLarge: 413,
+    Unreachable: 422,
+    Invalid: 422,
+    StorageFault: 503,
+    DeviceFault: 503,
+}
+"""The status of each error type (the most derived type listed wins)."""
 
 
-class TooLargeError(WorkbenchError):
-    """An upload over the size limit (413)."""
-
-    status = 413
-
-
-class StorageError(WorkbenchError):
-    """The data directory cannot be written (the session could not be journaled) (503)."""
-
-    status = 503
-
-
-class DeviceFaultError(WorkbenchError):
-    """A device failed while moving or capturing; the session is now in its error state (503)."""
-
-    status = 503
+def status_of(error: WorkbenchError) -> int:
+    """The HTTP status of ``error``: its type's, else its nearest listed base's, else 400."""
+    for cls in type(error).__mro__:
+        if cls in STATUS:
+            return STATUS[cls]
+    return 400

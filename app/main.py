@@ -27,13 +27,14 @@ from fastapi.staticfiles import StaticFiles
 
 from app.api import router
 from app.docs_ui import install_docs
-from app.errors import WorkbenchError
-from app.scene import SceneController
+from app.errors import status_of
+from app.scene.controller import SceneController
 from app.security import SecurityMiddleware, openapi_security
 from app.serialize import SafeJSONResponse
-from app.sessions import SessionRegistry
-from app.settings import AppSettings, check_exposure, is_loopback
-from app.workbench import Workbench
+from app.settings import AppSettings, check_exposure, viewer_host
+from workbench.errors import WorkbenchError
+from workbench.registry import SessionRegistry
+from workbench.session import Session
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 log = logging.getLogger(__name__)
@@ -42,24 +43,16 @@ log = logging.getLogger(__name__)
 def _wire_scene(registry: SessionRegistry, scene: SceneController) -> None:
     """The scene shows the first session created until the page focuses another; a deleted one leaves it."""
 
-    def created(wb: Workbench) -> None:
+    def created(wb: Session) -> None:
         if scene.session is None:
             scene.focus(wb)
 
-    def deleted(wb: Workbench) -> None:
+    def deleted(wb: Session) -> None:
         if scene.session is wb:
             scene.focus(None)
 
     registry.on_create.append(created)
     registry.on_delete.append(deleted)
-
-
-def viewer_host(settings: AppSettings) -> str:
-    """Where viser listens: ``viser_host``, but 127.0.0.1 when the API is exposed (viser has no authentication)
-    unless ``viser_public`` says otherwise."""
-    if is_loopback(settings.host) or settings.viser_public:
-        return settings.viser_host
-    return "127.0.0.1"
 
 
 def create_app(settings: AppSettings | None = None) -> FastAPI:
@@ -107,7 +100,7 @@ def create_app(settings: AppSettings | None = None) -> FastAPI:
 
     @app.exception_handler(WorkbenchError)
     async def _workbench_error(request: Request, exc: WorkbenchError) -> JSONResponse:
-        return JSONResponse({"detail": exc.detail}, status_code=exc.status)
+        return JSONResponse({"detail": exc.detail}, status_code=status_of(exc))
 
     @app.exception_handler(RequestValidationError)
     async def _validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:

@@ -6,32 +6,17 @@ import json
 import math
 from typing import Any
 
-import numpy as np
 from fastapi.responses import JSONResponse
 
 from planner import PlanResult
-
-
-def clean(value: Any) -> Any:
-    """``value`` with numpy scalars/arrays made plain and non-finite floats replaced by None."""
-    if isinstance(value, dict):
-        return {str(k): clean(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [clean(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return clean(value.tolist())
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
+from workbench.jsonable import jsonable
 
 
 class SafeJSONResponse(JSONResponse):
     """JSON where NaN / inf become null (the standard encoder would refuse them with a 500)."""
 
     def render(self, content: Any) -> bytes:
-        return json.dumps(clean(content), ensure_ascii=False, separators=(",", ":")).encode("utf-8")
+        return json.dumps(jsonable(content), ensure_ascii=False, separators=(",", ":")).encode("utf-8")
 
 
 def candidate_json(plan: PlanResult, i: int) -> dict[str, Any]:

@@ -28,27 +28,23 @@ from __future__ import annotations
 import dataclasses
 import ipaddress
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from devices.config import DeviceConfig
 from devices.faults import FaultConfig
-from planner.config import PlannerConfig, merge
-from planner.validate import finite, integer
+from planner.config import merge
+from planner.validate import integer
+from workbench.settings import WorkbenchSettings
 
 MIN_TOKEN_LENGTH = 12
 
 
-def default_models_dir() -> Path:
-    """``../shared/models`` when it exists (the team's test meshes), else ``./models``."""
-    shared = Path("../shared/models")
-    return shared if shared.is_dir() else Path("models")
-
-
 @dataclass(frozen=True)
-class AppSettings:
-    """Everything the server needs at start-up. Paths are resolved when used, not here."""
+class AppSettings(WorkbenchSettings):
+    """Everything the server needs at start-up: the sessions' settings (:class:`WorkbenchSettings`: models_dir,
+    data_dir, max_upload_bytes, capture_timeout, move_timeout, journal, faults, planner, devices) and where
+    and how the server listens."""
 
     host: str = "127.0.0.1"
     """Interface uvicorn binds (127.0.0.1 unless you mean to expose the workbench)."""
@@ -58,15 +54,8 @@ class AppSettings:
     """Interface the viser server binds. Follows ``host`` when built by ``load_settings``."""
     viser_port: int = 8080
     """Preferred viser port; viser moves to the next free one when it is taken (0 = any free port)."""
-    models_dir: Path = field(default_factory=default_models_dir)
-    """Directory of mesh files offered as models (.obj, .ply, .stl, .off, .glb)."""
-    data_dir: Path = Path("nbv-data")
-    """Where uploads (``uploads/``), session journals (``sessions/``) and replay recordings
-    (``recordings/``) live. See docs/journal.md."""
-    max_upload_bytes: int = 50 * 1024 * 1024
-    """Uploads larger than this are refused (413)."""
     max_body_bytes: int = 1024 * 1024
-    """Any other request body larger than this is refused (413) before it is read."""
+    """Any request body other than an upload larger than this is refused (413) before it is read."""
     token: str | None = None
     """When set, every ``/api`` request must carry it (``Authorization: Bearer`` or ``?token=``).
     Required to bind a non-loopback host."""
@@ -78,41 +67,21 @@ class AppSettings:
     viser_public: bool = False
     """Bind the 3D viewer to ``viser_host`` even when the API is exposed with a token (viser has no
     authentication; by default it then listens on 127.0.0.1 only)."""
-    capture_timeout: float = 30.0
-    """A capture that takes longer fails with a timeout (the session goes to state error), seconds."""
-    move_timeout: float = 120.0
-    """A cell move (turntable + arm) that takes longer fails with a timeout, seconds."""
-    journal: bool = True
-    """Journal every session under ``data_dir/sessions`` (resume after a crash, ``nbv replay``)."""
-    faults: FaultConfig = field(default_factory=FaultConfig)
-    """Faults injected into every new session's devices (a session's own ``faults`` replace these)."""
     fault_api: bool = False
     """Enable the test-only route ``POST /api/sessions/{id}/faults`` that injects a fault now."""
-    planner: PlannerConfig = field(default_factory=PlannerConfig)
-    """Default planner configuration; a session's ``config`` overrides any subset of it."""
-    devices: DeviceConfig = field(default_factory=DeviceConfig)
-    """The simulated devices. ``devices.model`` is the default model (a built-in name or a file
-    in models_dir), ``devices.size`` / ``devices.up`` apply to every model file."""
     scene: bool = True
     """Start the viser server (tests of the REST API alone may turn it off)."""
     viser_verbose: bool = False
     """Let viser print its banner."""
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         for name in ("port", "viser_port"):
             value = getattr(self, name)
             if not isinstance(value, int) or not 0 <= value <= 65535:
                 raise ValueError(f"server.{name}: must be an integer in [0, 65535], got {value!r}")
-        for name in ("max_upload_bytes", "max_body_bytes"):
-            value = getattr(self, name)
-            if not integer(value) or value < 1:
-                raise ValueError(f"server.{name}: must be a positive integer, got {value!r}")
-        for name in ("capture_timeout", "move_timeout"):
-            value = getattr(self, name)
-            if not finite(value):
-                raise ValueError(f"server.{name}: must be a number of seconds (0: no limit), got {value!r}")
-            if value < 0:
-                raise ValueError(f"server.{name}: must be >= 0 (0: no limit), got {value!r}")
+        if not integer(self.max_body_bytes) or self.max_body_bytes < 1:
+            raise ValueError(f"server.max_body_bytes: must be a positive integer, got {self.max_body_bytes!r}")
         if self.token is not None and (not isinstance(self.token, str) or len(self.token) < MIN_TOKEN_LENGTH):
             raise ValueError(f"server.token: must be a string of at least {MIN_TOKEN_LENGTH} characters")
         for name in ("cors_origins", "allowed_hosts"):
@@ -120,11 +89,7 @@ class AppSettings:
             if isinstance(value, str) or not all(isinstance(o, str) for o in value):
                 raise ValueError(f"server.{name}: must be a list of strings, got {value!r}")
         object.__setattr__(self, "allowed_hosts", tuple(h.lower() for h in self.allowed_hosts))
-        if not isinstance(self.faults, FaultConfig):
-            raise ValueError("faults: must be a FaultConfig")
         object.__setattr__(self, "cors_origins", tuple(o.rstrip("/") for o in self.cors_origins))
-        object.__setattr__(self, "models_dir", Path(self.models_dir))
-        object.__setattr__(self, "data_dir", Path(self.data_dir))
 
     def replace(self, **changes: Any) -> AppSettings:
         """A copy with some fields changed."""
@@ -139,6 +104,14 @@ def is_loopback(host: str) -> bool:
         return ipaddress.ip_address(host.strip("[]")).is_loopback
     except ValueError:
         return False
+
+
+def viewer_host(settings: AppSettings) -> str:
+    """Where viser listens: ``viser_host``, but 127.0.0.1 when the API is exposed (viser has no authentication)
+    unless ``viser_public`` says otherwise."""
+    if is_loopback(settings.host) or settings.viser_public:
+        return settings.viser_host
+    return "127.0.0.1"
 
 
 def check_exposure(settings: AppSettings) -> None:

@@ -10,27 +10,42 @@ Frames (all z-up, metres, radians):
   ``T_table_camera = Rz(-theta) @ T_base_camera``.
 - camera: OpenCV axes (+z forward, +x right, +y down).
 
-A planned view ``T_table_camera`` is reached by turning the plate so the
-camera's azimuth about the turntable axis equals the azimuth of the arm base
-(the arm then works in its own vertical plane through the axis) and moving the
-arm to ``T_base_camera = Rz(theta) @ T_table_camera``.
+Two kinds of arm (``CellConfig.kinematics``):
 
+- ``urdf`` (default): a robot model (:class:`devices.arm.kinematics.ArmKinematics`, the UR5 by default) and a
+  :class:`devices.protocols.JointArm`. A view is reachable when some plate angle gives an IK solution inside
+  the joint limits and free of collisions (plate, table, the object's box, the arm itself); the move takes the
+  one with the shortest move, turns the plate, then runs a collision-free joint trajectory. The camera pose is
+  the forward kinematics of the arm's reported joints.
+- ``reach_sphere``: an :class:`devices.protocols.Arm` that goes to a camera pose; the plate turns the camera's
+  azimuth onto the arm base's azimuth and the camera must be within the reach sphere. Kept for comparison.
+
+In both, the arm moves the camera to ``T_base_camera = Rz(theta) @ T_table_camera``.
 ``devices.sim.make_sim_cell`` builds a Cell of simulated devices.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from devices.config import CellConfig
-from devices.protocols import Arm, Camera, Turntable, UnreachableError
-from planner.types import DepthFrame, Intrinsics, Pose
+from devices.protocols import Arm, Camera, JointArm, Turntable, UnreachableError
+from devices.trajectory import JointTrajectory
+from planner.types import BoundingBox, DepthFrame, Intrinsics, Pose
+
+if TYPE_CHECKING:
+    from devices.arm.kinematics import ArmKinematics
+
+
+SPHERE_CAMERA_SPEED = 0.25
+"""Reach sphere: the camera's straight-line speed assumed for a move's duration estimate, m/s."""
 
 
 def rz(theta: float) -> Pose:
@@ -47,17 +62,47 @@ def wrap_angle(angle: float) -> float:
 
 @dataclass(frozen=True, eq=False)
 class Motion:
-    """How the cell reaches a view: turntable ``angle`` (rad, in (-pi, pi]) and the arm's ``T_base_camera``."""
+    """How the cell reaches a view: turntable ``angle`` (rad, in (-pi, pi]) and the arm's ``T_base_camera``.
+
+    With a URDF arm also: ``q`` (n,) the joint target, ``trajectory`` the timed joint trajectory from the
+    current configuration, ``duration`` seconds of the whole move (plate turn + trajectory; for the reach
+    sphere: the plate turn plus the camera's straight travel at ``SPHERE_CAMERA_SPEED``), ``path_method``
+    ('straight' or 'rrt_connect') and ``planning_seconds``.
+    """
 
     angle: float
     T_base_camera: Pose
+    q: np.ndarray | None = None
+    trajectory: JointTrajectory | None = None
+    duration: float = 0.0
+    path_method: str = ""
+    planning_seconds: float = 0.0
+
+    @property
+    def path_length(self) -> float:
+        """Length of the joint path, radians (0 without a trajectory)."""
+        return self.trajectory.path_length() if self.trajectory is not None else 0.0
+
+    def to_json(self) -> dict[str, Any]:
+        """The metrics of a move: plate angle, joints, ``T_base_camera``, joint path length and duration."""
+        return {
+            "plate_angle": float(self.angle),
+            "joints": None if self.q is None else [float(v) for v in self.q],
+            "T_base_camera": self.T_base_camera.to_dict(),
+            "path_length": self.path_length,
+            "move_duration": float(self.duration),
+            "path_method": self.path_method or None,
+            "motion_planning_seconds": float(self.planning_seconds),
+        }
 
 
 class Cell:
     """A camera, an arm and a turntable working together in the table frame.
 
-    camera, arm, turntable: any objects satisfying the protocols in ``devices.protocols``.
+    camera, arm, turntable: any objects satisfying the protocols in ``devices.protocols`` (the arm a
+    ``JointArm`` when ``kinematics`` is given, else an ``Arm``).
     config: the cell geometry (arm base, reach, plate).
+    kinematics: the arm model that plans the moves of a ``JointArm`` (None = the reach sphere of ``config``).
     pose_noise_translation: std of the error of the reported camera position, per axis, metres.
     pose_noise_rotation_deg: std of the error of the reported orientation, per rotation-vector component, degrees.
     seed: seeds the pose noise.
@@ -66,10 +111,11 @@ class Cell:
     def __init__(
         self,
         camera: Camera,
-        arm: Arm,
+        arm: Arm | JointArm,
         turntable: Turntable,
         config: CellConfig | None = None,
         *,
+        kinematics: ArmKinematics | None = None,
         pose_noise_translation: float = 0.0,
         pose_noise_rotation_deg: float = 0.0,
         seed: int = 0,
@@ -80,8 +126,11 @@ class Cell:
         ):
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name}: must be >= 0, got {value!r}")
+        if kinematics is not None and not isinstance(arm, JointArm):
+            raise ValueError(f"arm: a cell with kinematics needs a JointArm, got {type(arm).__name__}")
         self.camera = camera
-        self.arm = arm
+        self.arm: Any = arm
+        self.kinematics = kinematics
         self.turntable = turntable
         self.config = config if config is not None else CellConfig()
         self.pose_noise_translation = float(pose_noise_translation)
@@ -101,20 +150,48 @@ class Cell:
         return self.turntable.angle
 
     @property
+    def T_base_camera(self) -> Pose:
+        """The true camera pose in the base frame: forward kinematics of the arm's joints, or the arm's pose."""
+        if self.kinematics is not None:
+            return self.kinematics.camera_pose(self.arm.joint_positions())
+        return self.arm.pose
+
+    @property
     def pose(self) -> Pose:
-        """The true (noise-free) ``T_table_camera`` from the arm pose and the turntable angle."""
-        return rz(-self.turntable.angle) @ self.arm.pose
+        """The true (noise-free) ``T_table_camera`` from the arm and the turntable angle."""
+        return rz(-self.turntable.angle) @ self.T_base_camera
+
+    def joint_positions(self) -> np.ndarray | None:
+        """(n,) the arm's joints, radians (None for the reach-sphere arm)."""
+        return self.arm.joint_positions() if self.kinematics is not None else None
+
+    def set_object_box(self, bbox: BoundingBox | None) -> None:
+        """The object's box B (table frame) the arm keeps clear of (padded by ``arm.object_padding``); None = none.
+        The session calls it with the map's box before planning. No effect on the reach-sphere cell."""
+        if self.kinematics is not None:
+            if bbox is None:
+                self.kinematics.set_object_box(None, None)
+            else:
+                self.kinematics.set_object_box(bbox.lower, bbox.upper)
 
     def plan_motion(self, T_table_camera: Pose) -> Motion:
-        """The turntable angle and arm pose that put the camera at ``T_table_camera``.
+        """The turntable angle and arm motion that put the camera at ``T_table_camera``.
 
-        theta turns the camera's azimuth onto the arm base's azimuth; a camera on
+        URDF arm: the reachable, collision-free plate angle and IK solution with the shortest move, and its
+        timed trajectory (:meth:`ArmKinematics.plan`); UnreachableError with ``reason`` otherwise.
+        Reach sphere: theta turns the camera's azimuth onto the arm base's azimuth; a camera on
         the turntable axis keeps the current angle. Raises UnreachableError (with
         the numbers) when the camera would be below ``min_height`` above the plate
         top, or farther than ``arm_reach`` / nearer than ``arm_min_reach`` from the arm base.
         """
         if not isinstance(T_table_camera, Pose):
             raise ValueError(f"T_table_camera: expected a Pose, got {type(T_table_camera).__name__}")
+        if self.kinematics is not None:
+            move = self.kinematics.plan(T_table_camera, self.arm.joint_positions(), self.turntable.angle)
+            t = move.target
+            return Motion(
+                t.angle, t.T_base_camera, t.q, move.trajectory, move.duration, move.path_method, move.planning_seconds
+            )
         x, y, z = T_table_camera.translation
         cfg = self.config
         if z < cfg.min_height:
@@ -137,14 +214,57 @@ class Cell:
                 f"unreachable: camera {distance:.3f} m from the arm base, "
                 f"nearer than arm_min_reach {cfg.arm_min_reach:.3f} m"
             )
-        return Motion(theta, T_base_camera)
+        turn = abs(wrap_angle(theta - self.turntable.angle)) / math.radians(cfg.arm.turntable_speed_deg)
+        travel = float(np.linalg.norm(T_base_camera.translation - self.arm.pose.translation))
+        return Motion(theta, T_base_camera, duration=turn + travel / SPHERE_CAMERA_SPEED)
+
+    def reachability(self, T_table_camera: Pose) -> tuple[bool, str | None]:
+        """(reachable, reason): IK + joint limits + collisions at some plate angle for a URDF arm (reason
+        ``no_ik``, ``joint_limit`` or ``collision:<link>:<obstacle>``); the reach test for the sphere (``reach``).
+        The path itself is planned only on a move (``no_path`` then)."""
+        if self.kinematics is not None:
+            return self.kinematics.reachability(T_table_camera, self.arm.joint_positions(), self.turntable.angle)
+        ok = self.is_reachable(T_table_camera)
+        return ok, None if ok else "reach"
+
+    def reachability_many(self, poses: list[Pose]) -> list[tuple[bool, str | None]]:
+        """:meth:`reachability` of many views (e.g. all candidates of a plan, in their order: neighbours warm-start
+        each other's IK)."""
+        if self.kinematics is None:
+            return [self.reachability(T) for T in poses]
+        q, angle = self.arm.joint_positions(), self.turntable.angle
+        return [self.kinematics.reachability(T, q, angle) for T in poses]
+
+    def move_estimate(self, T_table_camera: Pose) -> float:
+        """Seconds the move to a view would take from the current state (inf if unreachable): plate turn plus
+        the slowest joint to the nearest target (every plate angle and IK branch; no path planned) for a URDF arm, plate turn plus the camera's straight travel at
+        ``SPHERE_CAMERA_SPEED`` for the reach sphere."""
+        if self.kinematics is not None:
+            target, _ = self.kinematics.reach.best_target(
+                T_table_camera, self.arm.joint_positions(), self.turntable.angle
+            )
+            return math.inf if target is None else target.move_estimate
+        try:
+            return self.plan_motion(T_table_camera).duration
+        except UnreachableError:
+            return math.inf
+
+    def move_costs(self, candidates: Sequence[Any], eligible: NDArray[np.bool_]) -> NDArray[np.float64]:
+        """(C,) :meth:`move_estimate` of each eligible candidate (``.T_world_camera``), inf for the others: the
+        ``move_cost`` callable of ``Planner.plan``."""
+        out = np.full(len(candidates), math.inf)
+        for i in np.flatnonzero(np.asarray(eligible, dtype=bool)):
+            out[i] = self.move_estimate(candidates[int(i)].T_world_camera)
+        return out
 
     def is_reachable(self, T_table_camera: Pose) -> bool:
-        """Whether :meth:`plan_motion` succeeds for this view (closed form, no Pose built).
+        """Whether the view is reachable (:meth:`reachability`; for the sphere in closed form, no Pose built).
 
-        plan_motion turns the camera onto the arm base's azimuth, so its distance to
+        The reach sphere turns the camera onto the arm base's azimuth, so its distance to
         the base is that of two points in one vertical half-plane.
         """
+        if self.kinematics is not None:
+            return self.reachability(T_table_camera)[0]
         x, y, z = T_table_camera.translation
         cfg = self.config
         if z < cfg.min_height:
@@ -170,13 +290,16 @@ class Cell:
     def move_to(self, T_table_camera: Pose) -> Motion:
         """Turn the plate, then move the arm, so the camera is at ``T_table_camera``.
 
-        Checks reachability first: an unreachable view raises UnreachableError and
-        moves nothing. A device fault (DeviceError) after the turntable moved leaves
-        the plate at its new angle.
+        Plans first: an unreachable view raises UnreachableError and moves nothing.
+        A device fault (DeviceError) after the turntable moved leaves the plate at its
+        new angle; a fault during the trajectory leaves the arm where it stopped.
         """
         motion = self.plan_motion(T_table_camera)
         self.turntable.rotate_to(motion.angle)
-        self.arm.move_to(motion.T_base_camera)
+        if motion.trajectory is not None:
+            self.arm.execute(motion.trajectory)
+        else:
+            self.arm.move_to(motion.T_base_camera)
         return motion
 
     def capture(self) -> DepthFrame:

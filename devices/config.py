@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
+from devices.arm.config import ArmConfig
 from planner.types import Intrinsics
 from planner.validate import finite, integer, require
 
@@ -65,12 +66,18 @@ class CameraConfig(Intrinsics):
 class CellConfig:
     """Geometry of the robot cell, in the base frame (lab frame, z-up, origin at the centre of the plate top)."""
 
+    kinematics: Literal["urdf", "reach_sphere"] = "urdf"
+    """'urdf': the arm of ``arm`` (the UR5 by default) with IK, collision checks and joint trajectories;
+    'reach_sphere': the camera goes wherever it is within ``arm_reach`` of ``arm_base`` (for comparison)."""
+    arm: ArmConfig = field(default_factory=ArmConfig)
+    """The arm model (used when ``kinematics`` is 'urdf')."""
     arm_base: tuple[float, float, float] = (-0.45, 0.0, 0.0)
-    """Position of the arm base (shoulder) in the base frame, metres. Its azimuth is where cameras are turned to."""
+    """Reach sphere: position of the arm base (shoulder) in the base frame, metres. Its azimuth is where cameras
+    are turned to. (The URDF arm's mount is ``arm.base``.)"""
     arm_reach: float = 0.8
-    """The camera can be at most this far from the arm base, metres."""
+    """Reach sphere: the camera can be at most this far from the arm base, metres."""
     arm_min_reach: float = 0.15
-    """The camera must be at least this far from the arm base, metres."""
+    """Reach sphere: the camera must be at least this far from the arm base, metres."""
     min_height: float = 0.01
     """The camera must be at least this high above the plate top (z = 0), metres."""
     plate_radius: float = 0.2
@@ -87,6 +94,11 @@ class CellConfig:
     """First view: the camera looks at the point this high above the plate centre, metres."""
 
     def __post_init__(self) -> None:
+        require(
+            self.kinematics in ("urdf", "reach_sphere"),
+            f"cell.kinematics: 'urdf' or 'reach_sphere', got {self.kinematics!r}",
+        )
+        require(isinstance(self.arm, ArmConfig), "cell.arm: must be an ArmConfig")
         try:
             base = tuple(float(v) for v in self.arm_base)
         except (TypeError, ValueError):
@@ -107,6 +119,13 @@ class CellConfig:
         for name in ("plate_radius", "plate_thickness", "initial_distance"):
             v = getattr(self, name)
             require(finite(v) and v > 0, f"cell.{name}: must be > 0, got {v!r}")
+        if self.kinematics == "urdf":
+            x, y, _ = self.arm.base
+            require(
+                (x * x + y * y) ** 0.5 >= self.plate_radius,
+                f"cell.arm.base: {self.arm.base} is inside the plate (radius {self.plate_radius} m); "
+                "put the arm beside the turntable",
+            )
         require(
             finite(self.initial_elevation_deg) and -90 < self.initial_elevation_deg <= 90,
             f"cell.initial_elevation_deg: must be in (-90, 90], got {self.initial_elevation_deg!r}",

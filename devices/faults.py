@@ -15,7 +15,8 @@ capture_failure    camera     CaptureError at once, no image
 nan_frame          camera     the image has NaN depths: building its DepthFrame
                               raises ValueError (what a validating driver does)
 empty_frame        camera     an image with no return at all (all zeros)
-arm_halfway        arm        the arm stops halfway (pose interpolated between the
+arm_halfway        arm        the arm stops halfway (a joint arm: half-way through its
+                              trajectory; a pose arm: pose interpolated between the
                               current and the target pose) and raises DeviceError
 turntable_error    turntable  DeviceError before the plate moves
 =================  =========  =====================================================
@@ -34,7 +35,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from devices.cell import Cell
-from devices.protocols import Arm, Camera, CaptureError, DeviceError, Turntable
+from devices.protocols import Arm, Camera, CaptureError, DeviceError, JointArm, Turntable
+from devices.trajectory import JointTrajectory
 from planner.types import DepthFrame, Intrinsics, Pose
 from planner.validate import finite, integer
 
@@ -237,9 +239,9 @@ def interpolate(a: Pose, b: Pose, t: float) -> Pose:
 
 
 class FaultyArm(_Wrapper):
-    """An arm that may stop halfway to its target (and then raises DeviceError)."""
+    """An arm (pose arm or joint arm) that may stop halfway to its target (and then raises DeviceError)."""
 
-    def __init__(self, inner: Arm, injector: FaultInjector) -> None:
+    def __init__(self, inner: Arm | JointArm, injector: FaultInjector) -> None:
         self.inner = inner
         self.injector = injector
 
@@ -252,6 +254,14 @@ class FaultyArm(_Wrapper):
             self.inner.move_to(interpolate(self.inner.pose, T_base_camera, 0.5))
             raise DeviceError("arm: stopped halfway to the target (simulated fault); the camera is between poses")
         self.inner.move_to(T_base_camera)
+
+    def execute(self, trajectory: JointTrajectory) -> None:
+        if self.injector.draw("arm") == "arm_halfway":
+            self.inner.execute(trajectory.truncated(0.5 * trajectory.duration))
+            raise DeviceError(
+                "arm: stopped halfway through its trajectory (simulated fault); the arm is between configurations"
+            )
+        self.inner.execute(trajectory)
 
 
 class FaultyTurntable(_Wrapper):

@@ -25,7 +25,19 @@ class DeviceError(Exception):
 
 
 class UnreachableError(DeviceError):
-    """The arm cannot put the camera at the requested pose (too far, too close, below the plate)."""
+    """The arm cannot put the camera at the requested pose.
+
+    ``reason`` is a short code: ``no_ik`` (out of the workspace), ``joint_limit``, ``collision:<link>:<obstacle>``,
+    ``no_path`` (no collision-free motion in the planning time), or ``reach`` (the reach-sphere cell's
+    distance and height test).
+    """
+
+    def __init__(self, message: str, reason: str = "reach") -> None:
+        super().__init__(message)
+        self.reason = reason
+
+    def __reduce__(self) -> tuple[type, tuple[str, str]]:  # keeps the reason across worker processes
+        return (type(self), (str(self), self.reason))
 
 
 class CaptureError(DeviceError):

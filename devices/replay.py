@@ -30,7 +30,7 @@ from devices.config import CellConfig
 from devices.ply import read_ply
 from devices.protocols import CaptureError
 from devices.sim import SimulatedArm, SimulatedTurntable
-from planner.types import DepthFrame, Intrinsics, Pose
+from planner.types import BoundingBox, DepthFrame, Intrinsics, Pose
 
 ReplayMode = Literal["sequence", "nearest"]
 MAX_VIEWS = 200
@@ -105,9 +105,11 @@ class ReplayCell(Cell):
     """A cell whose camera plays back recorded frames.
 
     The arm and turntable are simulated and never refuse a move (the views were
-    already taken); reachability for planning (``is_reachable``, ``plan_motion``)
-    is the geometry of ``config``, as for the simulated cell. ``capture`` keeps
-    each frame's recorded pose. The first view is the first recorded frame's pose.
+    already taken); reachability for planning (``is_reachable``, ``reachability``)
+    is that of ``config``, as for the simulated cell: the URDF arm's IK and
+    collision checks (state-independent, so a replay sees the session's answers)
+    or the reach sphere. ``capture`` keeps each frame's recorded pose. The first
+    view is the first recorded frame's pose.
     """
 
     def __init__(self, frames: Sequence[DepthFrame], config: CellConfig | None = None, mode: ReplayMode = "sequence"):
@@ -116,6 +118,23 @@ class ReplayCell(Cell):
         camera = ReplayCamera(frames, mode, pose_source=lambda: self.pose)
         super().__init__(camera, arm, turntable, config)
         self.frames = camera.frames
+        self._arm_model = None
+        if self.config.kinematics == "urdf":
+            from devices.arm.kinematics import ArmKinematics
+
+            self._arm_model = ArmKinematics(self.config.arm, self.config.plate_radius, self.config.plate_thickness)
+
+    def reachability(self, T_table_camera: Pose) -> tuple[bool, str | None]:
+        if self._arm_model is not None:
+            return self._arm_model.reachability(T_table_camera, self._arm_model.home, self.turntable.angle)
+        return super().reachability(T_table_camera)
+
+    def is_reachable(self, T_table_camera: Pose) -> bool:
+        return self.reachability(T_table_camera)[0]
+
+    def set_object_box(self, bbox: BoundingBox | None) -> None:
+        if self._arm_model is not None:
+            self._arm_model.set_object_box(*((bbox.lower, bbox.upper) if bbox is not None else (None, None)))
 
     def initial_pose(self) -> Pose:
         return self.frames[0].T_world_camera

@@ -23,6 +23,7 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
+from devices.arm.sim_arm import SimulatedJointArm
 from devices.cell import Cell, rz, wrap_angle
 from devices.config import CameraConfig, CellConfig, DeviceConfig
 from devices.protocols import CaptureError, DeviceError
@@ -189,21 +190,43 @@ def make_sim_cell(
 ) -> Cell:
     """A cell of simulated devices scanning ``mesh`` (table frame, e.g. from ``load_mesh``).
 
-    The camera starts at the cell's initial view (turntable at the angle that view needs).
-    Its pose source is ``Rz(-theta) @ arm.pose``: the true camera pose in the table frame.
+    ``cell_config.kinematics`` 'urdf' (default) builds the arm model of ``cell_config.arm`` (the UR5) and a
+    :class:`SimulatedJointArm`; 'reach_sphere' a :class:`SimulatedArm`. The camera starts at the cell's
+    initial view (turntable at the angle that view needs; the URDF arm at its IK solution nearest its home).
+    The camera's pose source is ``Rz(-theta) @ T_base_camera`` (forward kinematics of the arm's joints for
+    a URDF arm): the true camera pose in the table frame.
     ``seed`` seeds the depth noise and (independently) the pose noise.
+    ValueError naming the field for a bad arm (unloadable URDF, missing flange frame, ...).
     """
     camera_config = camera_config if camera_config is not None else CameraConfig()
     cell_config = cell_config if cell_config is not None else CellConfig()
     depth_seed, pose_seed = np.random.SeedSequence(seed).spawn(2)
-    arm = SimulatedArm()
     turntable = SimulatedTurntable()
+    kinematics = None
+    arm: SimulatedArm | SimulatedJointArm
+    if cell_config.kinematics == "urdf":
+        from devices.arm.kinematics import ArmKinematics
+
+        kinematics = ArmKinematics(cell_config.arm, cell_config.plate_radius, cell_config.plate_thickness)
+        joint_arm = SimulatedJointArm(kinematics.joint_names, kinematics.home)
+        arm = joint_arm
+
+        def pose_source() -> Pose:
+            assert kinematics is not None
+            return rz(-turntable.angle) @ kinematics.camera_pose(joint_arm.joint_positions())
+    else:
+        sphere_arm = SimulatedArm()
+        arm = sphere_arm
+
+        def pose_source() -> Pose:
+            return rz(-turntable.angle) @ sphere_arm.pose
+
     camera = SimulatedCamera(
         mesh,
         camera_config,
         plate_radius=cell_config.plate_radius,
         plate_thickness=cell_config.plate_thickness,
-        pose_source=lambda: rz(-turntable.angle) @ arm.pose,
+        pose_source=pose_source,
         seed=int(depth_seed.generate_state(1)[0]),
     )
     cell = Cell(
@@ -211,6 +234,7 @@ def make_sim_cell(
         arm,
         turntable,
         cell_config,
+        kinematics=kinematics,
         pose_noise_translation=camera_config.pose_noise_translation,
         pose_noise_rotation_deg=camera_config.pose_noise_rotation_deg,
         seed=int(pose_seed.generate_state(1)[0]),
@@ -218,9 +242,13 @@ def make_sim_cell(
     try:
         motion = cell.plan_motion(cell.initial_pose())
     except DeviceError:
-        return cell  # an unusual geometry: leave the arm at the identity until the first move
+        return cell  # an unusual geometry: leave the arm where it is until the first move
     turntable.rotate_to(motion.angle)
-    arm.move_to(motion.T_base_camera)
+    if isinstance(arm, SimulatedJointArm):
+        assert motion.q is not None
+        arm.reset(motion.q)
+    else:
+        arm.move_to(motion.T_base_camera)
     arm.moves = turntable.rotations = 0
     return cell
 

@@ -75,3 +75,15 @@ class JointTrajectory:
         """A one-point trajectory that stays at ``q`` (a move of zero length)."""
         q = np.asarray(q, dtype=np.float64).reshape(1, -1)
         return JointTrajectory(joint_names, np.zeros(1), q, np.zeros_like(q))
+
+    def truncated(self, t: float) -> JointTrajectory:
+        """The first ``t`` seconds (clamped to [0, duration]): where an arm stopped at ``t`` has been. The last
+        point is the configuration at ``t``, at rest."""
+        t = min(max(float(t), 0.0), self.duration)
+        keep = int(np.searchsorted(self.times, t, side="left"))
+        if keep == 0:
+            return JointTrajectory.hold(self.joint_names, self.positions[0])
+        times = np.append(self.times[:keep], t) if self.times[keep - 1] < t else self.times[:keep].copy()
+        positions = np.vstack([self.positions[: len(times) - 1], self.sample(t)])
+        velocities = np.vstack([self.velocities[: len(times) - 1], np.zeros(len(self.joint_names))])
+        return JointTrajectory(self.joint_names, times, positions, velocities)

@@ -40,6 +40,18 @@ def add_scan_options(p: argparse.ArgumentParser, *, model_required: bool = True)
     p.add_argument("--depth-noise", type=float, default=0.0, help="std of Gaussian depth noise, m (default 0)")
     p.add_argument("--pose-noise", type=float, default=0.0, help="std of reported-pose translation noise, m")
     p.add_argument("--config", type=Path, default=None, help="a TOML file with planner settings")
+    p.add_argument(
+        "--arm",
+        choices=["urdf", "reach_sphere"],
+        default="urdf",
+        help="the cell's arm: the UR5 model with IK, collisions and trajectories (default) or the reach sphere",
+    )
+    p.add_argument(
+        "--move-cost-weight",
+        type=float,
+        default=None,
+        help="trade F against move duration (selection.move_cost_weight, default 0 = the paper's rule)",
+    )
 
 
 def planner_config_from_args(args: argparse.Namespace) -> PlannerConfig:
@@ -63,4 +75,5 @@ def planner_config_from_args(args: argparse.Namespace) -> PlannerConfig:
     put("cluster", "t_max", args.t_max)
     put("cluster", "search", args.search)
     put("cluster", "seed", args.seed)
+    put("selection", "move_cost_weight", args.move_cost_weight)
     return config.replace(**overrides)

@@ -1,7 +1,7 @@
 """re-run a journaled session headless and check that it reproduces its metrics
 
 ``nbv replay DATA_DIR/sessions/ID`` feeds the journaled frames, in their order,
-through a fresh Planner with the journaled config and seed (app/rebuild.py),
+through a fresh Planner with the journaled config and seed (workbench/journal/replay.py),
 re-makes every journaled plan, and compares points, voxel counts, coverage and
 each plan's best view and score with the journal. It prints a table, writes
 ``metrics.json`` (the layout of ``nbv scan``'s, plus the comparison) and
@@ -13,11 +13,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import time
 from pathlib import Path
 from typing import Any
-
-from nbv.scan import PLAN_STAGES, STAGES
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -34,30 +31,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _iteration(capture: Any) -> dict[str, Any]:
-    """One row of metrics.json: the capture and the (last) plan made from it, replayed and as journaled."""
-    from app.rebuild import best_of
+    """One row of metrics.json: nbv scan's record of the capture and the (last) plan made from it, replayed,
+    and what the journal recorded."""
+    from nbv.scan import make_record
+    from workbench.summaries import best_of
 
-    report, ev = capture.report, capture.event
-    timings = dict.fromkeys(STAGES, 0.0)
+    ev = capture.event
     plan_event, plan = capture.plans[-1] if capture.plans else (None, None)
-    for source in (report.timings, {} if plan is None else plan.timings):
-        for key, value in source.items():
-            timings[key] = timings.get(key, 0.0) + float(value)
     best = None if plan is None else best_of(plan)
-    fits = {} if plan is None else {f.kind: f for f in plan.fits}
     recorded = None if plan_event is None else plan_event.get("best")
     return {
-        "index": report.iteration,
-        "pose": report.T_world_camera.to_dict(),
-        "coverage": capture.coverage,
-        "points": report.n_points_total,
-        "plan_seconds": float(sum(timings[s] for s in PLAN_STAGES)),
-        "timings": timings,
-        "n_occupied": capture.voxels["occupied"],
-        "n_frontier": capture.voxels["frontier"],
-        "t_occupied": fits["occupied"].t_chosen if "occupied" in fits else 0,
-        "t_frontier": fits["frontier"].t_chosen if "frontier" in fits else 0,
-        "next_view": None if best is None else best["index"],
+        **make_record(capture.report, plan, capture.voxels, capture.coverage).to_json(),
         "best_score": None if best is None else best["score"],
         "journal": {
             "points": ev.get("points"),
@@ -68,37 +52,6 @@ def _iteration(capture: Any) -> dict[str, Any]:
             "plan_id": None if plan_event is None else plan_event["plan_id"],
         },
     }
-
-
-def _coverage_fn(journal: Any, models_dir: Path | None) -> Any:
-    """cloud -> coverage of the session's ground truth, or None when it cannot be loaded (not a sim session)."""
-    from app.models import load_model
-    from app.settings import AppSettings, default_models_dir
-    from devices.mesh import sample_surface
-    from planner.config import from_dict
-    from workbench.metrics import coverage
-
-    header = journal.header
-    if header.get("source", {}).get("kind", "sim") != "sim":
-        return None
-    from devices.config import DeviceConfig
-
-    devices = from_dict(DeviceConfig, header["devices"])
-    settings = AppSettings(
-        models_dir=models_dir or default_models_dir(),
-        data_dir=journal.directory.parent.parent,
-        devices=devices,
-        scene=False,
-        journal=False,
-    )
-    try:
-        mesh = load_model(settings, str(header["model"]["name"]))
-    except Exception:
-        return None
-    from app.session_factory import SURFACE_SAMPLES
-
-    samples = sample_surface(mesh, SURFACE_SAMPLES, seed=int(header["seed"]))
-    return lambda cloud: coverage(samples, cloud)
 
 
 def _table(rows: list[dict[str, Any]], mismatches: list[str]) -> None:
@@ -136,22 +89,11 @@ def _pair(replayed: Any, recorded: Any) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Replay, report, write the outputs; 0 when the journal was reproduced, 1 when not."""
-    from app.journal import read_journal
-    from app.rebuild import rebuild
-    from devices.config import DeviceConfig
     from devices.ply import write_ply
-    from devices.replay import ReplayCell
-    from planner.config import from_dict
+    from workbench.journal.replay import replay_journal
 
-    journal = read_journal(args.journal)
-    captures = [e for e in journal.of_kind("capture") if e.get("frame")]
-    if not captures:
-        raise ValueError(f"{args.journal}: no journaled frame to replay")
-    devices = from_dict(DeviceConfig, journal.header["devices"])
-    cell = ReplayCell([journal.frame(e) for e in captures], devices.cell)  # reachability as in the session
-    t0 = time.perf_counter()
-    rebuilt = rebuild(journal, cell.is_reachable, _coverage_fn(journal, args.models_dir))
-    seconds = time.perf_counter() - t0
+    replay = replay_journal(args.journal, args.models_dir)
+    journal, rebuilt = replay.journal, replay.rebuilt
     rows = [_iteration(c) for c in rebuilt.captures]
     _table(rows, rebuilt.mismatches)
     out: Path = args.out
@@ -164,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
         "iterations": rows,
         "final_coverage": rows[-1]["coverage"] if rows else None,
         "terminated": rebuilt.planner.terminated,
-        "seconds": seconds,
+        "seconds": replay.seconds,
         "session": journal.session_id,
         "journal": str(args.journal),
         "plans": sum(len(c.plans) for c in rebuilt.captures),

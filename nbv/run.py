@@ -47,17 +47,24 @@ def simulate(
     reachable: bool = True,
     keep_plans: bool = False,
     console: Console | None = None,
+    mesh: Any = None,
+    arm: str = "urdf",
 ) -> SimScan:
     """Load ``model``, build the simulated cell, run Algorithm 1, measure coverage.
 
     ``yaw_deg`` turns the placed object about the turntable axis (z through the plate
-    centre) before the scan: the same object, set down another way round.
+    centre) before the scan: the same object, set down another way round. ``mesh``: the
+    placed mesh already loaded (then ``model`` is only its name; ``up`` and ``size`` are not
+    applied again). ``reachable``: also compute the reachable-coverage ceiling of the object
+    and placement (:func:`workbench.object_ceiling.object_ceiling`, independent of the run).
+    ``arm``: 'urdf' (the UR5 with IK, collision checks and joint trajectories) or 'reach_sphere'
+    (``CellConfig.kinematics``).
     """
     from devices.builtins import resolve_model
     from devices.config import CameraConfig, CellConfig
     from devices.mesh import sample_surface, turned_about_plate_axis
     from devices.sim import make_sim_cell
-    from nbv.reachable import reachable_coverage
+    from workbench.object_ceiling import object_ceiling
 
     if not (math.isfinite(size) and size > 0):
         raise ValueError(f"--size: must be > 0, got {size}")
@@ -65,11 +72,16 @@ def simulate(
         raise ValueError("--depth-noise and --pose-noise must be >= 0")
     if not math.isfinite(yaw_deg):
         raise ValueError(f"--yaw: must be finite, got {yaw_deg}")
-    name, mesh = resolve_model(model, up=up, size=size)  # type: ignore[arg-type]
+    if mesh is None:
+        name, mesh = resolve_model(model, up=up, size=size)  # type: ignore[arg-type]
+    else:
+        name = model
     if yaw_deg % 360.0 != 0.0:
         mesh = turned_about_plate_axis(mesh, yaw_deg)
     camera = CameraConfig(depth_noise_std=depth_noise, pose_noise_translation=pose_noise)
-    cell = make_sim_cell(mesh, camera, CellConfig(), seed=seed)
+    if arm not in ("urdf", "reach_sphere"):
+        raise ValueError(f"--arm: 'urdf' or 'reach_sphere', got {arm!r}")
+    cell = make_sim_cell(mesh, camera, CellConfig(kinematics=arm), seed=seed)  # type: ignore[arg-type]
     samples = sample_surface(mesh, 10_000, seed=seed)
     planner = Planner(config, evaluator=planner_name)
 
@@ -84,7 +96,7 @@ def simulate(
     ceiling = None
     if reachable:
         t0 = time.perf_counter()
-        ceiling = reachable_coverage(cell, planner, samples)
+        ceiling = object_ceiling(mesh, cell, CameraConfig(), config).coverage
         if console is not None:
             console.print(f"reachable coverage {ceiling:.4f} ({time.perf_counter() - t0:.1f} s)")
     return SimScan(name, config, result, planner, ceiling, samples, cell)
@@ -111,10 +123,12 @@ def metrics_json(scan: SimScan, planner_name: str) -> dict[str, Any]:
         "planner": planner_name,
         "config": scan.config.to_dict(),
         "reachable_coverage": scan.reachable_coverage,
+        "arm": scan.cell.config.kinematics,
         "iterations": [r.to_json() for r in records],
         "final_coverage": records[-1].coverage if records else 0.0,
         "terminated": scan.result.terminated,
         "seconds": scan.result.seconds,
+        "robot_seconds": scan.result.robot_seconds,
     }
 
 
@@ -200,6 +214,7 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
         reachable=not args.no_reachable,
         keep_plans=profile and args.fidelity,
         console=console,
+        arm=args.arm,
     )
     doc = metrics_json(scan, args.planner)
     (out / "metrics.json").write_text(json.dumps(doc, indent=2))
@@ -211,6 +226,7 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
         f"final coverage {doc['final_coverage']:.4f}"
         + (f" of reachable {scan.reachable_coverage:.4f}" if scan.reachable_coverage is not None else "")
         + f"; median plan {statistics.median(plan_s):.3f} s, max {max(plan_s):.3f} s;"
+        + f" robot time {scan.result.robot_seconds:.1f} s;"
         + f" stopped: {scan.result.terminated}; wrote {out}/metrics.json, {out}/cloud.ply"
     )
     if not profile:

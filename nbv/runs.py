@@ -1,11 +1,51 @@
-"""One run of ``nbv bench``: what a worker needs (:class:`RunTask`) and what it returns (:class:`RunOutcome`)."""
+"""One run of ``nbv bench``: what a worker needs (:class:`RunTask`, :class:`MeshPayload`) and what it
+returns (:class:`RunOutcome`)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
+
 from planner.config import PlannerConfig
+
+
+@dataclass(frozen=True, eq=False)
+class MeshPayload:
+    """A placed mesh (table frame, before any ``--yaw`` turn) as plain arrays: what travels to a worker
+    on another machine instead of a path on the client's file system.
+
+    vertices: (V, 3) float64. faces: (F, 3) int64 indices into vertices.
+    """
+
+    vertices: NDArray[np.float64]
+    faces: NDArray[np.int64]
+
+    def __post_init__(self) -> None:
+        v = np.ascontiguousarray(self.vertices, dtype=np.float64)
+        f = np.ascontiguousarray(self.faces, dtype=np.int64)
+        if v.ndim != 2 or v.shape[1] != 3 or not np.all(np.isfinite(v)):
+            raise ValueError(f"vertices: expected finite (V, 3) values, got shape {v.shape}")
+        if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0 or f.min() < 0 or f.max() >= len(v):
+            raise ValueError(f"faces: expected (F, 3) indices into {len(v)} vertices, got shape {f.shape}")
+        object.__setattr__(self, "vertices", v)
+        object.__setattr__(self, "faces", f)
+
+    @staticmethod
+    def of(mesh: Any) -> MeshPayload:
+        """The payload of a trimesh mesh."""
+        return MeshPayload(np.asarray(mesh.vertices), np.asarray(mesh.faces))
+
+    def to_trimesh(self) -> Any:
+        import trimesh
+
+        return trimesh.Trimesh(self.vertices.copy(), self.faces.copy(), process=False)
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.vertices.nbytes + self.faces.nbytes)
 
 
 @dataclass(frozen=True)
@@ -25,42 +65,47 @@ class RunTask:
     """The object's turn about the turntable axis, degrees (``--yaw``)."""
     depth_noise: float = 0.0
     pose_noise: float = 0.0
-    reachable: bool = False
-    """Compute the reachable-coverage ceiling of (model, seed) in this run."""
     threads: int | None = None
     """BLAS/OpenMP threads of the worker (None: library default)."""
+    arm: str = "urdf"
+    """The cell's arm (``--arm``): 'urdf' (the UR5) or 'reach_sphere'."""
 
 
 @dataclass
 class RunOutcome:
-    """A finished (or failed) run: CSV rows without ``reachable_coverage``, and what runs.json records."""
+    """A finished (or failed) run: its CSV rows (the ceiling columns are added by the report), and what
+    runs.json records."""
 
     label: str
     planner: str
     seed: int
+    yaw: float = 0.0
+    """The placement: the object's turn about the turntable axis, degrees."""
     rows: list[dict[str, Any]] = field(default_factory=list)
     poses: list[dict[str, list[float]]] = field(default_factory=list)
     terminated: str | None = None
     seconds: float = 0.0
-    reachable_coverage: float | None = None
-    reachable_error: str | None = None
     error: str | None = None
+
+    @property
+    def key(self) -> tuple[str, int, float]:
+        """(model, seed, yaw): what pairs runs of different planners."""
+        return (self.label, self.seed, self.yaw)
 
     @staticmethod
     def failed(task: RunTask, error: str) -> RunOutcome:
-        return RunOutcome(task.label, task.planner, task.seed, error=error)
+        return RunOutcome(task.label, task.planner, task.seed, task.yaw_deg, error=error)
 
     def to_json(self) -> dict[str, Any]:
         return {
             "model": self.label,
             "planner": self.planner,
             "seed": self.seed,
+            "yaw": self.yaw,
             "views": len(self.rows),
             "final_coverage": self.rows[-1]["coverage"] if self.rows else None,
             "terminated": self.terminated,
             "seconds": self.seconds,
-            "reachable_coverage": self.reachable_coverage,
-            "reachable_error": self.reachable_error,
             "error": self.error,
             "poses": self.poses,
         }

@@ -9,14 +9,15 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
 
-from planner import Planner, PlanResult, Pose, VoxelClass
+from planner import Planner, PlanResult, Pose
 from planner.planner import IntegrationReport
 from workbench.metrics import coverage
+from workbench.summaries import voxel_counts
 
 STAGES = ("preprocess", "register", "integrate", "cluster", "ellipsoids", "candidates", "score", "select")
 PLAN_STAGES = ("integrate", "cluster", "ellipsoids", "candidates", "score", "select")
@@ -41,6 +42,11 @@ class IterationRecord:
     registration: dict[str, Any] | None = None
     next_view: int | None = None
     bic: dict[str, list[tuple[int, float]]] = field(default_factory=dict)
+    move: dict[str, Any] | None = None
+    """How the cell reached this view (``Motion.to_json``): plate angle, joints, T_base_camera, path length,
+    move duration (None when the cell reports no motion)."""
+    capture_seconds: float = 0.0
+    """Wall time of the capture of this view."""
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -57,21 +63,37 @@ class IterationRecord:
             "registration": self.registration,
             "next_view": self.next_view,
             "bic": {k: [[t, b] for t, b in v] for k, v in self.bic.items()},
+            "move": self.move,
+            "capture_seconds": self.capture_seconds,
         }
+
+    @property
+    def robot_seconds(self) -> float:
+        """Robot time of this iteration: the move's duration, the capture, the plan and the motion planning."""
+        move = self.move or {}
+        return (
+            float(move.get("move_duration") or 0.0)
+            + self.capture_seconds
+            + self.plan_seconds
+            + float(move.get("motion_planning_seconds") or 0.0)
+        )
 
 
 def make_record(
     report: IntegrationReport,
-    plan: PlanResult,
-    planner: Planner,
+    plan: PlanResult | None,
+    voxels: dict[str, int],
     cov: float | None,
 ) -> IterationRecord:
-    """Summarise one integrate + plan into the metrics of metrics.json."""
+    """Summarise one integrate + plan (None: no plan was made after it) into the metrics of metrics.json.
+
+    voxels: the map's class counts after the integrate (:func:`workbench.summaries.voxel_counts`).
+    """
     timings = {stage: 0.0 for stage in STAGES}
-    for source in (report.timings, plan.timings):
+    for source in (report.timings, {} if plan is None else plan.timings):
         for key, value in source.items():
             timings[key] = timings.get(key, 0.0) + value
-    fits = {fit.kind: fit for fit in plan.fits}
+    fits = {} if plan is None else {fit.kind: fit for fit in plan.fits}
     reg = report.registration
     return IterationRecord(
         index=report.iteration,
@@ -80,14 +102,12 @@ def make_record(
         points=report.n_points_total,
         plan_seconds=float(sum(timings[stage] for stage in PLAN_STAGES)),
         timings=timings,
-        n_occupied=planner.voxel_map.count(VoxelClass.OCCUPIED),
-        n_frontier=planner.voxel_map.count(VoxelClass.FRONTIER),
+        n_occupied=voxels["occupied"],
+        n_frontier=voxels["frontier"],
         t_occupied=fits["occupied"].t_chosen if "occupied" in fits else 0,
         t_frontier=fits["frontier"].t_chosen if "frontier" in fits else 0,
-        registration=None
-        if reg is None
-        else {"accepted": reg.accepted, "fitness": reg.fitness, "rmse": reg.rmse, "reason": reg.reason},
-        next_view=plan.best_index,
+        registration=None if reg is None else reg.summary(),
+        next_view=None if plan is None else plan.best_index,
         bic={kind: list(fit.bic) for kind, fit in fits.items()},
     )
 
@@ -98,6 +118,34 @@ class ScanResult:
     plans: list[PlanResult]
     terminated: str | None
     seconds: float
+
+    @property
+    def robot_seconds(self) -> float:
+        """Total robot time of the scan: moves + captures + planning (the planner's and the motion planner's)."""
+        return float(sum(r.robot_seconds for r in self.records))
+
+
+MAX_MOVE_ATTEMPTS = 5
+"""A chosen view whose motion cannot be planned (``no_path``) gives way to the next best eligible view,
+at most this many times per iteration."""
+
+
+def _move(cell: Any, pose: Pose, plan: PlanResult | None) -> tuple[Pose, Any]:
+    """Move to ``pose``; if the cell refuses it (UnreachableError: e.g. no collision-free path), try the next
+    best eligible candidates of ``plan``. Returns (the pose reached, the cell's Motion or None)."""
+    from devices.protocols import UnreachableError
+
+    tries = [pose]
+    if plan is not None:
+        ranked = sorted((s for s in plan.scores if s.eligible and s.index != plan.best_index), key=lambda s: -s.score)
+        tries += [plan.candidates[s.index].T_world_camera for s in ranked[: MAX_MOVE_ATTEMPTS - 1]]
+    for i, target in enumerate(tries):
+        try:
+            return target, cell.move_to(target)
+        except UnreachableError:
+            if i == len(tries) - 1:
+                raise
+    raise AssertionError("unreachable")  # pragma: no cover
 
 
 def run_scan(
@@ -118,13 +166,23 @@ def run_scan(
     records: list[IterationRecord] = []
     plans: list[PlanResult] = []
     terminated: str | None = None
+    plan: PlanResult | None = None
+    set_box = getattr(cell, "set_object_box", None)
+    move_cost = getattr(cell, "move_costs", None)
     while True:
-        cell.move_to(pose)
+        pose, motion = _move(cell, pose, plan)
+        t0 = time.perf_counter()
         frame = cell.capture()
+        capture_seconds = time.perf_counter() - t0
         report = planner.integrate(frame)
-        plan = planner.plan(reachable=cell.is_reachable)
+        if callable(set_box):
+            set_box(planner.voxel_map.bbox)  # the arm keeps clear of the object's (padded) box
+        plan = planner.plan(reachable=cell.is_reachable, move_cost=move_cost)
         cov = coverage(surface_samples, planner.cloud) if surface_samples is not None else None
-        record = make_record(report, plan, planner, cov)
+        record = make_record(report, plan, voxel_counts(planner), cov)
+        record.capture_seconds = capture_seconds
+        to_json = getattr(motion, "to_json", None)
+        record.move = cast(dict[str, Any], to_json()) if callable(to_json) else None
         records.append(record)
         if keep_plans:
             plans.append(plan)

@@ -158,6 +158,46 @@ class ScoringConfig:
 
 
 @dataclass(frozen=True)
+class ZBufferConfig:
+    """The visible-frontier score V of the ``projection-zbuffer`` evaluator (``planner.visibility``; not the paper's)."""
+
+    width: int = 40
+    """Raster columns per candidate view (40: one raster pixel per 16 x 16 pixels of a 640 x 480 camera; 80 x 60
+    measured no better and 4x slower, docs/method.md)."""
+    height: int = 30
+    """Raster rows per candidate view."""
+    depth_tolerance_voxels: float = 0.0
+    """A pixel shows frontier when its nearest frontier ellipsoid is at most this many voxels behind the nearest
+    occupied one (0: strictly in front; 1 and 3 measured worse early, docs/method.md)."""
+    measure: Literal["pixels", "voxels"] = "pixels"
+    """What a frontier pixel is worth: 1 ("pixels"), or its ellipsoid's voxel count over the pixels the ellipsoid
+    covers in that view ("voxels": V = sum of n_points x the visible fraction of each frontier ellipsoid)."""
+    hidden_weight: float = 0.0
+    """A frontier pixel hidden behind an occupied ellipsoid counts this much (0: only frontier in view counts)."""
+    frontier_decay: float = 1.0
+    """A frontier voxel's weight is ``frontier_decay ** k`` after it stayed FRONTIER through k new frames; a frontier
+    ellipsoid weighs the mean of its voxels (1: every frontier pixel counts the same)."""
+
+    def __post_init__(self) -> None:
+        require(self.measure in ("pixels", "voxels"), f"zbuffer.measure: 'pixels' or 'voxels', got {self.measure!r}")
+        require(
+            finite(self.hidden_weight) and 0 <= self.hidden_weight <= 1,
+            f"zbuffer.hidden_weight: must be in [0, 1], got {self.hidden_weight!r}",
+        )
+        require(
+            finite(self.frontier_decay) and 0 < self.frontier_decay <= 1,
+            f"zbuffer.frontier_decay: must be in (0, 1], got {self.frontier_decay!r}",
+        )
+        for name in ("width", "height"):
+            n = getattr(self, name)
+            require(integer(n) and 1 <= n <= 1024, f"zbuffer.{name}: must be an integer in [1, 1024], got {n!r}")
+        require(
+            finite(self.depth_tolerance_voxels) and self.depth_tolerance_voxels >= 0,
+            f"zbuffer.depth_tolerance_voxels: must be >= 0, got {self.depth_tolerance_voxels!r}",
+        )
+
+
+@dataclass(frozen=True)
 class PartitionConfig:
     """Global longitude partitions (paper §III-F)."""
 
@@ -188,6 +228,22 @@ class PartitionConfig:
         require(
             finite(self.revisit_deg) and 0 <= self.revisit_deg < 180,
             f"partitions.revisit_deg: must be in [0, 180), got {self.revisit_deg!r}",
+        )
+
+
+@dataclass(frozen=True)
+class SelectionConfig:
+    """How the next view is chosen among the eligible candidates."""
+
+    move_cost_weight: float = 0.0
+    """Trades F against the move's duration: the view maximising F / max|F| - weight * t / max t (both over the
+    eligible views; t the move seconds the caller gives per candidate). 0, the default, is the paper's greedy
+    rule (largest F, no move cost asked); MA-SCVP's movement-cost variants do the same trade."""
+
+    def __post_init__(self) -> None:
+        require(
+            finite(self.move_cost_weight) and self.move_cost_weight >= 0,
+            f"selection.move_cost_weight: must be >= 0, got {self.move_cost_weight!r}",
         )
 
 
@@ -285,7 +341,9 @@ class PlannerConfig:
     cluster: ClusterConfig = field(default_factory=ClusterConfig)
     candidates: CandidateConfig = field(default_factory=CandidateConfig)
     scoring: ScoringConfig = field(default_factory=ScoringConfig)
+    zbuffer: ZBufferConfig = field(default_factory=ZBufferConfig)
     partitions: PartitionConfig = field(default_factory=PartitionConfig)
+    selection: SelectionConfig = field(default_factory=SelectionConfig)
     termination: TerminationConfig = field(default_factory=TerminationConfig)
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
     registration: RegistrationConfig = field(default_factory=RegistrationConfig)

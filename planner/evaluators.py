@@ -9,7 +9,7 @@ registered in ``EVALUATORS`` by their own modules.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Protocol
 
@@ -18,8 +18,10 @@ from numpy.typing import NDArray
 
 from planner.config import PlannerConfig
 from planner.ellipsoids import EllipsoidFitter
+from planner.frontier_age import FrontierAge, ellipsoid_weights
 from planner.scoring import score_views
 from planner.types import Candidate, ClusterFit, Ellipsoid, Intrinsics, ViewScore, VoxelClass
+from planner.visibility import score_visible_frontier
 
 if TYPE_CHECKING:
     from planner.voxel_map import VoxelMap
@@ -76,7 +78,8 @@ class ProjectionEvaluator:
         for fitter in self._fitters.values():
             fitter.reset()
 
-    def evaluate(self, ctx: EvaluationContext) -> Evaluation:
+    def fit(self, ctx: EvaluationContext) -> tuple[list[Ellipsoid], list[ClusterFit], dict[str, float]]:
+        """Ellipsoids of the occupied then the frontier voxels, their model selections, and the seconds spent."""
         timings = {"cluster": 0.0, "ellipsoids": 0.0}
         ellipsoids: list[Ellipsoid] = []
         fits: list[ClusterFit] = []
@@ -87,14 +90,61 @@ class ProjectionEvaluator:
             fits.append(fit)
             for stage in ("cluster", "ellipsoids"):
                 timings[stage] += fitter.last_timings.get(stage, 0.0)
+        return ellipsoids, fits, timings
+
+    def evaluate(self, ctx: EvaluationContext) -> Evaluation:
+        ellipsoids, fits, timings = self.fit(ctx)
         t0 = time.perf_counter()
         scores = score_views(ellipsoids, ctx.candidates, ctx.intrinsics, self.config.scoring, ctx.eligible)
         timings["score"] = time.perf_counter() - t0
         return Evaluation(tuple(scores), tuple(ellipsoids), tuple(fits), timings)
 
 
+class ZBufferEvaluator(ProjectionEvaluator):
+    """The paper's ellipsoids, scored by the frontier each view shows in front of every occupied ellipsoid.
+
+    Same fit as ``projection`` (§III-D); the score is V of ``planner.visibility`` (a rasterised
+    z-buffer of the ellipsoids per candidate) instead of the paper's rank-weighted F.
+    """
+
+    name = "projection-zbuffer"
+
+    def __init__(self, config: PlannerConfig) -> None:
+        super().__init__(config)
+        self._age = FrontierAge()
+
+    def reset(self) -> None:
+        super().reset()
+        self._age.reset()
+
+    def frontier_weights(self, ctx: EvaluationContext, ellipsoids: Sequence[Ellipsoid]) -> NDArray[np.float64]:
+        """(E,) w_e: 1, or with ``zbuffer.frontier_decay`` < 1 the mean decayed weight of each frontier ellipsoid."""
+        decay = self.config.zbuffer.frontier_decay
+        centers, ages = self._age.update_map(ctx.voxel_map)
+        if decay == 1.0:
+            return np.ones(len(ellipsoids))
+        return ellipsoid_weights(ellipsoids, centers, decay ** ages.astype(np.float64))
+
+    def evaluate(self, ctx: EvaluationContext) -> Evaluation:
+        ellipsoids, fits, timings = self.fit(ctx)
+        t0 = time.perf_counter()
+        weights = self.frontier_weights(ctx, ellipsoids)
+        scores = score_visible_frontier(
+            ellipsoids,
+            ctx.candidates,
+            ctx.intrinsics,
+            self.config.zbuffer,
+            ctx.eligible,
+            self.config.voxel.resolution,
+            weights,
+        )
+        timings["score"] = time.perf_counter() - t0
+        return Evaluation(tuple(scores), tuple(ellipsoids), tuple(fits), timings)
+
+
 EVALUATORS: dict[str, Callable[[PlannerConfig], ViewEvaluator]] = {
     "projection": ProjectionEvaluator,
+    "projection-zbuffer": ZBufferEvaluator,
 }
 
 

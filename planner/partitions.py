@@ -201,3 +201,23 @@ def select_best(scores: Sequence[ViewScore]) -> int | None:
         if s.eligible and (best is None or s.score > best_score):
             best, best_score = i, s.score
     return best
+
+
+def select_with_move_cost(scores: Sequence[ViewScore], move_seconds: NDArray[np.float64], weight: float) -> int | None:
+    """Position of the eligible view maximising ``F / max|F| - weight * t / max t`` (both maxima over the eligible
+    views with a finite t), ``move_seconds`` (C,) the move time per view (inf = unknown: not chosen while another
+    view has a finite time). ``weight`` 0 is :func:`select_best`. Ties go to the lowest position."""
+    if weight == 0:
+        return select_best(scores)
+    t = np.asarray(move_seconds, dtype=np.float64)
+    if t.shape != (len(scores),):
+        raise ValueError(f"move_seconds: expected shape ({len(scores)},), got {t.shape}")
+    eligible = np.array([s.eligible for s in scores], dtype=bool)
+    usable = eligible & np.isfinite(t)
+    if not np.any(usable):
+        return select_best(scores)
+    f = np.array([s.score for s in scores], dtype=np.float64)
+    f_scale = max(float(np.max(np.abs(f[usable]))), 1e-12)
+    t_scale = max(float(np.max(t[usable])), 1e-12)
+    utility = np.where(usable, f / f_scale - weight * np.where(usable, t, 0.0) / t_scale, -np.inf)
+    return int(np.argmax(utility))

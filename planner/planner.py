@@ -30,6 +30,7 @@ from planner.partitions import (
     not_taken,
     sector_edges,
     sector_of,
+    select_with_move_cost,
     stalled_sector,
 )
 from planner.partitions import select_best as select_best_view
@@ -187,10 +188,17 @@ class Planner:
             fresh = not_taken(candidates, self.views, spacing, center=center)
         return fresh
 
-    def plan(self, reachable: Callable[[Pose], bool] | None = None) -> PlanResult:
+    def plan(
+        self,
+        reachable: Callable[[Pose], bool] | None = None,
+        move_cost: Callable[[Sequence[Candidate], NDArray[np.bool_]], NDArray[np.float64]] | None = None,
+    ) -> PlanResult:
         """Score every candidate and pick the next best view.
 
         reachable: the cell's check; unreachable candidates are ineligible.
+        move_cost: (candidates, eligible (C,) bool) -> (C,) seconds each move would take (inf = unknown), from
+        the caller (the planner never sees the arm); asked only when ``selection.move_cost_weight`` > 0, and
+        then the choice trades F against it (:func:`planner.partitions.select_with_move_cost`).
         Raises ValueError before the first frame.
         """
         if self.iteration == 0 or self.voxel_map.bbox is None or self.intrinsics is None:
@@ -224,7 +232,14 @@ class Planner:
         timings.update(evaluation.timings)
 
         t0 = time.perf_counter()
-        best = select_best_view(evaluation.scores)
+        move_costs = None
+        weight = cfg.selection.move_cost_weight
+        if weight > 0 and move_cost is not None:
+            eligible_now = np.array([s.eligible for s in evaluation.scores], dtype=bool)
+            move_costs = np.asarray(move_cost(candidates, eligible_now), dtype=np.float64)
+            best = select_with_move_cost(evaluation.scores, move_costs, weight)
+        else:
+            best = select_best_view(evaluation.scores)
         timings["select"] += time.perf_counter() - t0
 
         plan = PlanResult(
@@ -243,6 +258,7 @@ class Planner:
             eligible_sectors=frozenset(allowed),
             timings=timings,
             terminated=self.terminated,
+            move_costs=move_costs,
         )
         self.last_plan = plan
         return plan

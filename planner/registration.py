@@ -68,6 +68,10 @@ class RegistrationResult:
     shift: float = 0.0
     unconstrained: int = 0
 
+    def summary(self) -> dict[str, bool | float | str]:
+        """``{"accepted", "fitness", "rmse", "reason"}``: what a scan's metrics and a session's journal record."""
+        return {"accepted": self.accepted, "fitness": self.fitness, "rmse": self.rmse, "reason": self.reason}
+
 
 def _rejected(
     reason: str, fitness: float = 0.0, rmse: float = 0.0, shift: float = 0.0, free: int = 0

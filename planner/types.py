@@ -486,6 +486,9 @@ class PlanResult:
     eligible_sectors: frozenset[int]
     timings: dict[str, float]
     terminated: str | None = None
+    move_costs: NDArray[np.float64] | None = None
+    """(C,) seconds the move to each candidate would take (inf = unknown or unreachable), when the selection
+    traded F against move time (``selection.move_cost_weight`` > 0); None otherwise."""
 
     @property
     def best(self) -> Candidate | None:

@@ -214,12 +214,18 @@ class VoxelMap:
         self._lo: NDArray[np.int64] | None = None
         self._classes: NDArray[np.uint8] = np.zeros((0, 0, 0), dtype=np.uint8)
         self._looks: NDArray[np.uint8] = np.zeros((0, 0, 0), dtype=np.uint8)  # see ``looks``
+        self._frames = 0  # see ``frames``
 
     # ------------------------------------------------------------------ properties
 
     @property
     def config(self) -> VoxelConfig:
         return self._config
+
+    @property
+    def frames(self) -> int:
+        """Frames integrated so far (changes exactly when the map may have)."""
+        return self._frames
 
     @property
     def resolution(self) -> float:
@@ -388,6 +394,7 @@ class VoxelMap:
             seconds=time.perf_counter() - t0,
         )
         self._classes, self._looks, self._lo = new, looks, lo.copy()  # commit
+        self._frames += 1
         return stats
 
     def _occupied_range(self) -> bb.LatticeRange | None:

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import socket
 from typing import Any
 
 from fastapi.testclient import TestClient
 
+from tests.helpers import SMALL, free_port
 from tests.servers import LiveServer as Live
 from tests.servers import running_server
 
@@ -14,13 +14,6 @@ __all__ = ["BASE_URL", "CUBE_OBJ", "SMALL", "Live", "free_port", "registry_of", 
 
 BASE_URL = "http://127.0.0.1"
 """The Host the API answers to when bound to loopback (app/security.py refuses others)."""
-
-SMALL: dict[str, Any] = {
-    "voxel": {"resolution": 0.02},
-    "candidates": {"count": 60, "parallels": 4},
-    "cluster": {"t_min": 2, "t_max": 6},
-}
-"""A coarse map and few candidates: a capture + plan takes well under a second."""
 
 CUBE_OBJ = """v 0 0 0
 v 1 0 0
@@ -46,12 +39,6 @@ f 4 5 8
 
 
 # ---------------------------------------------------------------------- live servers (real sockets, 127.0.0.1 only)
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def registry_of(client: TestClient) -> Any:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 
 import numpy as np
+from apphelpers import registry_of
 from fastapi.testclient import TestClient
 from PIL import Image
 
@@ -140,24 +141,20 @@ def test_override_with_another_candidate_and_a_custom_pose(client: TestClient, p
 
 
 def test_auto_mode_runs_and_stops(client: TestClient, new_session) -> None:
-    import time
-
     sid = new_session(client)
     client.post(f"/api/sessions/{sid}/capture")
     r = client.post(f"/api/sessions/{sid}/auto", json={"count": 2})
     assert r.status_code == 202 and r.json()["state"] == "auto"
     assert client.post(f"/api/sessions/{sid}/plan").status_code == 409  # busy
-    deadline = time.time() + 60
-    while client.get(f"/api/sessions/{sid}").json()["state"] == "auto" and time.time() < deadline:
-        time.sleep(0.05)
+    auto = registry_of(client).get(sid).auto
+    assert auto.join(60)  # the run's thread ended
     st = client.get(f"/api/sessions/{sid}").json()
     assert (st["state"], st["iteration"]) == ("ready", 3)
 
     r = client.post(f"/api/sessions/{sid}/auto", json={"count": 50})
     assert r.status_code == 202
     client.post(f"/api/sessions/{sid}/stop")
-    while client.get(f"/api/sessions/{sid}").json()["state"] == "auto" and time.time() < deadline:
-        time.sleep(0.05)
+    assert auto.join(60)
     st = client.get(f"/api/sessions/{sid}").json()
     assert st["state"] in ("ready", "planned") and st["iteration"] <= 4
     kinds = [d["kind"] for d in client.get(f"/api/sessions/{sid}/export").json()["decisions"]]

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import threading
-import time
 from typing import Any
 
 from apphelpers import SMALL, registry_of
@@ -11,13 +10,9 @@ from fastapi.testclient import TestClient
 
 
 def wait_until_not_auto(client: TestClient, sid: str, timeout: float = 60.0) -> dict[str, Any]:
-    deadline = time.time() + timeout
-    while time.time() < deadline:
-        st = client.get(f"/api/sessions/{sid}").json()
-        if st["state"] != "auto":
-            return st
-        time.sleep(0.02)
-    raise AssertionError("auto mode did not end")
+    """Wait for the auto run's thread to end (a join, no polling); the status after it."""
+    assert registry_of(client).get(sid).auto.join(timeout), "auto mode did not end"
+    return client.get(f"/api/sessions/{sid}").json()
 
 
 def test_auto_mode_stops_at_the_first_fault(client: TestClient) -> None:
@@ -28,7 +23,7 @@ def test_auto_mode_stops_at_the_first_fault(client: TestClient) -> None:
     st = wait_until_not_auto(client, sid)
     assert (st["state"], st["iteration"], st["moves"]) == ("error", 3, 4)
     assert "capture failed" in st["error"] and st["retry"] == "auto"
-    time.sleep(0.3)  # nothing happens after the fault
+    # the run's thread has ended (joined above): nothing can happen after the fault
     doc = client.get(f"/api/sessions/{sid}/export").json()
     assert len(doc["plans"]) == 3 and [d["kind"] for d in doc["decisions"]] == ["auto"] * 3
     assert doc["session"]["iteration"] == 3 and doc["session"]["moves"] == 4
@@ -61,7 +56,6 @@ def test_the_stop_button_ends_auto_mode_after_the_action_in_flight(client: TestC
     release.set()
     st = wait_until_not_auto(client, sid)
     assert (st["state"], st["iteration"], st["moves"], st["error"]) == ("ready", 3, 3, None)
-    time.sleep(0.3)
     st = client.get(f"/api/sessions/{sid}").json()
     assert (st["iteration"], st["moves"]) == (3, 3) and len(calls) == 2
     doc = client.get(f"/api/sessions/{sid}/export").json()

@@ -9,7 +9,7 @@ from concurrent.futures import ThreadPoolExecutor
 import httpx
 from fastapi.testclient import TestClient
 
-from app.errors import ConflictError
+from workbench.errors import Conflict
 
 
 def test_two_clients_approving_one_plan_move_once(client: TestClient, planned_session) -> None:
@@ -88,7 +88,7 @@ def test_many_threads_approving_one_plan_move_once(client: TestClient, planned_s
         try:
             wb.approve(plan["plan_id"], index=plan["best"]["index"])
             results.append("ok")
-        except ConflictError:
+        except Conflict:
             results.append("409")
 
     threads = [threading.Thread(target=approve) for _ in range(8)]

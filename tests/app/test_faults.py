@@ -28,7 +28,8 @@ EXPECTED = {
 
 @pytest.fixture
 def fault_client(settings: AppSettings):
-    with TestClient(create_app(settings.replace(capture_timeout=0.5, fault_api=True)), base_url=BASE_URL) as c:
+    # 2 s: short enough for the hanging-camera case, long enough for a real capture on a loaded 2-core machine
+    with TestClient(create_app(settings.replace(capture_timeout=2.0, fault_api=True)), base_url=BASE_URL) as c:
         yield c
 
 

@@ -13,9 +13,9 @@ import pytest
 from apphelpers import BASE_URL, SMALL
 from fastapi.testclient import TestClient
 
-from app.journal import JournalWriter, read_journal
 from app.main import create_app
 from app.settings import AppSettings
+from workbench.journal.store import JournalWriter, read_journal
 
 
 @contextmanager

@@ -9,8 +9,8 @@ import pytest
 from apphelpers import BASE_URL, CUBE_OBJ, SMALL
 from fastapi.testclient import TestClient
 
-from app.main import create_app, viewer_host
-from app.settings import AppSettings, check_exposure, is_loopback, load_settings
+from app.main import create_app
+from app.settings import AppSettings, check_exposure, is_loopback, load_settings, viewer_host
 from nbv.cli import main as nbv_main
 
 TOKEN = "s3cret-token-for-tests"

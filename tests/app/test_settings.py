@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.scene_geometry import VIRIDIS, box_segments, candidate_colors, colormap, gmm_instance, sector_segments
+from app.scene.geometry import VIRIDIS, box_segments, candidate_colors, colormap, gmm_instance, sector_segments
 from app.settings import AppSettings, load_settings
 from nbv import serve
 from planner import BoundingBox, Ellipsoid, Pose

@@ -14,6 +14,9 @@ from devices.protocols import DeviceError, UnreachableError
 from devices.sim import SimulatedArm, SimulatedTurntable, make_sim_cell
 from planner.types import DepthFrame, Intrinsics, Pose
 
+SPHERE = CellConfig(kinematics="reach_sphere")
+"""These tests pin the reach-sphere cell (the URDF arm's are in test_arm_cell.py)."""
+
 
 def _angle_between(a: Pose, b: Pose) -> float:
     R = a.rotation.T @ b.rotation
@@ -33,7 +36,7 @@ def test_rz_and_wrap() -> None:
 
 
 def test_plan_motion_turns_the_camera_to_the_arm() -> None:
-    cell = make_sim_cell(None)
+    cell = make_sim_cell(None, cell_config=SPHERE)
     view = Pose.look_at((0.0, 0.3, 0.2), (0.0, 0.0, 0.1))  # azimuth +90 degrees in the table frame
     motion = cell.plan_motion(view)
     assert isinstance(motion, Motion)
@@ -47,7 +50,7 @@ def test_plan_motion_turns_the_camera_to_the_arm() -> None:
 
 
 def test_camera_on_the_axis_keeps_the_turntable_angle() -> None:
-    cell = make_sim_cell(None)
+    cell = make_sim_cell(None, cell_config=SPHERE)
     cell.turntable.rotate_to(0.7)
     top = Pose(np.diag([1.0, -1.0, -1.0]), np.array([0.0, 0.0, 0.5]))
     motion = cell.plan_motion(top)
@@ -67,7 +70,7 @@ def test_camera_on_the_axis_keeps_the_turntable_angle() -> None:
     ],
 )
 def test_unreachable_views_say_why(position: tuple[float, float, float], pattern: str) -> None:
-    cell = make_sim_cell(None)
+    cell = make_sim_cell(None, cell_config=SPHERE)
     view = Pose(np.eye(3), np.array(position))
     with pytest.raises(UnreachableError, match=pattern):
         cell.plan_motion(view)
@@ -75,20 +78,22 @@ def test_unreachable_views_say_why(position: tuple[float, float, float], pattern
 
 
 def test_reach_boundary_numbers() -> None:
-    cell = make_sim_cell(None)
+    cell = make_sim_cell(None, cell_config=SPHERE)
     # After turning, a camera at horizontal radius rho and height z is sqrt((0.45 - rho)^2 + z^2) from the base.
     assert cell.is_reachable(Pose(np.eye(3), np.array([0.0, 0.5, 0.79])))  # sqrt(0.05^2 + 0.79^2) = 0.7916
     assert not cell.is_reachable(Pose(np.eye(3), np.array([0.0, 0.5, 0.81])))  # 0.8116
     assert cell.is_reachable(Pose(np.eye(3), np.array([0.35, 0.0, 0.12])))  # sqrt(0.1^2 + 0.12^2) = 0.156
     assert not cell.is_reachable(Pose(np.eye(3), np.array([0.35, 0.0, 0.1])))  # 0.1414
-    custom = make_sim_cell(None, cell_config=CellConfig(arm_base=(0.0, -0.5, 0.0), arm_reach=0.6))
+    custom = make_sim_cell(
+        None, cell_config=CellConfig(kinematics="reach_sphere", arm_base=(0.0, -0.5, 0.0), arm_reach=0.6)
+    )
     motion = custom.plan_motion(Pose(np.eye(3), np.array([0.3, 0.0, 0.2])))
     assert motion.angle == pytest.approx(-math.pi / 2)  # the arm sits at azimuth -90 degrees
     np.testing.assert_allclose(motion.T_base_camera.translation, [0.0, -0.3, 0.2], atol=1e-12)
 
 
 def test_move_to_moves_nothing_when_unreachable() -> None:
-    cell = make_sim_cell(None)
+    cell = make_sim_cell(None, cell_config=SPHERE)
     angle, pose = cell.turntable.angle, cell.arm.pose
     with pytest.raises(UnreachableError):
         cell.move_to(Pose(np.eye(3), np.array([0.0, 0.0, 2.0])))
@@ -98,7 +103,7 @@ def test_move_to_moves_nothing_when_unreachable() -> None:
 
 
 def test_move_to_then_capture_reports_the_table_pose(l_block) -> None:
-    cell = make_sim_cell(l_block)
+    cell = make_sim_cell(l_block, cell_config=SPHERE)
     view = Pose.look_at((0.25, 0.3, 0.35), (0.0, 0.0, 0.08))
     motion = cell.move_to(view)
     assert cell.turntable.angle == pytest.approx(motion.angle)
@@ -110,7 +115,7 @@ def test_move_to_then_capture_reports_the_table_pose(l_block) -> None:
 
 
 def test_same_table_pose_at_two_turntable_angles_gives_the_same_image(l_block) -> None:
-    cell = make_sim_cell(l_block)
+    cell = make_sim_cell(l_block, cell_config=SPHERE)
     view = Pose.look_at((0.25, -0.3, 0.3), (0.0, 0.0, 0.08))
     cell.move_to(view)
     first = cell.capture()
@@ -125,7 +130,7 @@ def test_same_table_pose_at_two_turntable_angles_gives_the_same_image(l_block) -
 
 
 def test_turning_the_plate_under_a_fixed_arm_turns_the_object(l_block) -> None:
-    cell = make_sim_cell(l_block)
+    cell = make_sim_cell(l_block, cell_config=SPHERE)
     before = cell.capture()
     cell.turntable.rotate_to(cell.turntable.angle + math.pi / 2)
     after = cell.capture()
@@ -137,7 +142,7 @@ def test_turning_the_plate_under_a_fixed_arm_turns_the_object(l_block) -> None:
 
 
 def test_initial_pose_and_the_starting_state(l_block) -> None:
-    cell = make_sim_cell(l_block)
+    cell = make_sim_cell(l_block, cell_config=SPHERE)
     pose = cell.initial_pose()
     # elevation 30, azimuth 180, distance 0.55 about (0, 0, 0.1)
     np.testing.assert_allclose(pose.translation, [-0.55 * math.cos(math.pi / 6), 0.0, 0.1 + 0.275], atol=1e-12)
@@ -152,7 +157,7 @@ def test_initial_pose_and_the_starting_state(l_block) -> None:
 def test_pose_noise_is_seeded_and_has_the_configured_size(l_block) -> None:
     camera = CameraConfig(width=64, height=48, fx=61.0, fy=61.0, cx=31.5, cy=23.5)
     noisy = CameraConfig(**{**camera.__dict__, "pose_noise_translation": 0.005, "pose_noise_rotation_deg": 1.0})
-    a, b = make_sim_cell(l_block, noisy, seed=7), make_sim_cell(l_block, noisy, seed=7)
+    a, b = make_sim_cell(l_block, noisy, SPHERE, seed=7), make_sim_cell(l_block, noisy, SPHERE, seed=7)
     true = a.pose
     frames = [a.capture() for _ in range(200)]
     np.testing.assert_array_equal(frames[0].T_world_camera.matrix, b.capture().T_world_camera.matrix)
@@ -162,7 +167,7 @@ def test_pose_noise_is_seeded_and_has_the_configured_size(l_block) -> None:
     # |rotation vector| of a 3-D Gaussian with sigma = 1 degree: mean sigma * sqrt(8 / pi) = 1.596
     assert angles.mean() == pytest.approx(1.596, rel=0.1)
     # the image is rendered from the true pose: identical to a noise-free cell's
-    clean = make_sim_cell(l_block, camera, seed=7)
+    clean = make_sim_cell(l_block, camera, SPHERE, seed=7)
     np.testing.assert_array_equal(frames[0].depth, clean.capture().depth)
 
 
@@ -188,7 +193,7 @@ def test_cell_with_fake_devices_uses_only_the_protocols() -> None:
         def rotate_to(self, angle: float) -> None:
             self.angle = angle
 
-    cell = Cell(FakeCamera(), FakeArm(), FakeTable(), CellConfig(arm_reach=2.0))  # type: ignore[arg-type]
+    cell = Cell(FakeCamera(), FakeArm(), FakeTable(), CellConfig(kinematics="reach_sphere", arm_reach=2.0))  # type: ignore[arg-type]
     view = Pose.look_at((0.3, 0.0, 0.3), (0.0, 0.0, 0.1))
     cell.move_to(view)
     frame = cell.capture()
@@ -199,7 +204,7 @@ def test_cell_with_fake_devices_uses_only_the_protocols() -> None:
 
 
 def test_bad_arguments() -> None:
-    cell = make_sim_cell(None)
+    cell = make_sim_cell(None, cell_config=SPHERE)
     with pytest.raises(ValueError, match="T_table_camera: expected a Pose"):
         cell.plan_motion((0.0, 0.0, 0.5))  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="pose_noise_translation: must be >= 0"):
@@ -207,7 +212,7 @@ def test_bad_arguments() -> None:
 
 
 def test_is_reachable_closed_form_agrees_with_plan_motion() -> None:
-    cell = make_sim_cell(None, CameraConfig(), CellConfig(), seed=0)
+    cell = make_sim_cell(None, CameraConfig(), SPHERE, seed=0)
     rng = np.random.default_rng(3)
     agree = 0
     for _ in range(300):

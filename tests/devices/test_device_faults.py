@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from devices.builtins import make_builtin
+from devices.config import CellConfig
 from devices.faults import FaultConfig, FaultInjector, ScheduledFault, interpolate, with_faults
 from devices.frames import load_frame, save_frame
 from devices.protocols import CaptureError, DeviceError
@@ -25,8 +26,9 @@ def mesh():
 
 
 def faulty_cell(mesh, **config):
+    """A reach-sphere cell (a pose arm) with faults; the joint arm's faults are in test_arm_cell.py."""
     injector = FaultInjector(FaultConfig.from_dict(config))
-    return with_faults(make_sim_cell(mesh), injector), injector
+    return with_faults(make_sim_cell(mesh, cell_config=CellConfig(kinematics="reach_sphere")), injector), injector
 
 
 def test_config_from_dict_and_its_errors() -> None:

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from devices.builtins import make_builtin
+from devices.config import CellConfig
 from devices.ply import write_ply
 from devices.protocols import CaptureError
 from devices.replay import ReplayCamera, ReplayCell, load_recording
@@ -25,7 +26,9 @@ def frames() -> list[DepthFrame]:
     from devices.config import CameraConfig
 
     cell = make_sim_cell(
-        make_builtin("l-block", 0.2), CameraConfig(width=160, height=120, fx=152.5, fy=152.5, cx=79.5, cy=59.5)
+        make_builtin("l-block", 0.2),
+        CameraConfig(width=160, height=120, fx=152.5, fy=152.5, cx=79.5, cy=59.5),
+        CellConfig(kinematics="reach_sphere"),  # the sphere puts the camera exactly at the recorded views
     )
     out = []
     for pose in VIEWS:
@@ -132,7 +135,9 @@ def test_sequence_and_nearest_playback(frames) -> None:
     seq.move_to(VIEWS[2])  # a sequence plays frame 1 whatever was asked; the recorded pose is kept
     first = seq.capture()
     assert first is frames[0] and np.allclose(first.T_world_camera.translation, VIEWS[0].translation)
-    assert seq.is_reachable(VIEWS[0]) == make_sim_cell(None).is_reachable(VIEWS[0])
+    assert seq.is_reachable(VIEWS[0]) == make_sim_cell(
+        None, cell_config=CellConfig(kinematics="reach_sphere")
+    ).is_reachable(VIEWS[0])
 
 
 def test_replay_camera_refuses_mixed_intrinsics(frames) -> None:

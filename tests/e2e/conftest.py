@@ -4,13 +4,13 @@ headless Debian Chromium page. The helpers are plain functions so ``tests/e2e/sc
 from __future__ import annotations
 
 import shutil
-import socket
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
 from app.settings import AppSettings
+from tests.helpers import free_port
 from tests.servers import LiveServer, running_server
 
 CHROMIUM_ARGS = [
@@ -31,12 +31,6 @@ def chromium_path() -> str:
         if path:
             return path
     raise RuntimeError("Debian's chromium is needed for the browser tests (make system-deps installs it)")
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 OUTPUT_DIR = Path(__file__).resolve().parents[2] / "test-output" / "e2e"

@@ -23,6 +23,7 @@ from planner import Pose
 
 if TYPE_CHECKING:
     from tests.e2e.conftest import LiveServer
+from tests.helpers import wait_until
 
 pytestmark = [pytest.mark.e2e, pytest.mark.slow]
 
@@ -36,15 +37,9 @@ SMALL_PARAMS = {
 }
 
 
-def wait_for(fn, timeout: float = 30.0, interval: float = 0.1) -> Any:
-    """Poll ``fn`` until it returns something truthy; fail after ``timeout`` seconds."""
-    deadline = time.time() + timeout
-    while time.time() < deadline:
-        value = fn()
-        if value:
-            return value
-        time.sleep(interval)
-    raise AssertionError(f"timed out after {timeout} s waiting for {getattr(fn, '__name__', fn)}")
+def wait_for(fn, timeout: float = 30.0) -> Any:
+    """Until ``fn`` returns something truthy (the server sends these tests no event); fail after ``timeout``."""
+    return wait_until(fn, timeout, getattr(fn, "__name__", str(fn)))
 
 
 def project(camera: dict[str, Any], point: np.ndarray) -> tuple[float, float]:
@@ -115,7 +110,7 @@ def test_supervised_loop_in_the_browser(live_server: LiveServer, browser_page: P
         return None
 
     camera = wait_for(camera_on_target, timeout=30)
-    time.sleep(1.0)  # let SwiftShader render the new view before clicking
+    page.wait_for_timeout(1000)  # let SwiftShader render the new view before clicking (page events keep flowing)
     u, v = project(camera, position)
     box = viewer_canvas_box(page)
     x = box["x"] + u * box["width"] / camera["image_width"]

@@ -20,7 +20,10 @@ TINY = ["--views", "2", "--candidates", "40", "--resolution", "0.02", "--t-min",
 
 
 def bench(out: Path, *extra: str) -> int:
-    return main(["bench", "--models", "l-block", "--planners", "projection,random", *TINY, "--out", str(out), *extra])
+    cache = ["--ceiling-cache", str(out / "ceilings")]
+    return main(
+        ["bench", "--models", "l-block", "--planners", "projection,random", *TINY, "--out", str(out), *cache, *extra]
+    )
 
 
 def read_csv(path: Path) -> list[dict[str, str]]:
@@ -67,12 +70,17 @@ def check_outputs(out: Path, reachable: bool) -> list[dict[str, str]]:
         assert 0.0 < float(r["eval_seconds"]) < float(r["plan_seconds"])
         assert (float(r["fit_seconds"]) > 0.0) == (r["planner"] == "projection")
     ceilings = {r["reachable_coverage"] for r in rows}
-    if reachable:  # computed once (in projection's run) and shared by every planner's rows
+    if reachable:  # computed once per (model, placement) and shared by every planner's rows
         assert len(ceilings) == 1
         ceiling = float(ceilings.pop())
         assert max(float(r["coverage"]) for r in rows) <= ceiling + 0.02
+        for r in rows:
+            assert float(r["coverage_ratio"]) == pytest.approx(float(r["coverage"]) / ceiling)
+            assert 1 <= int(r["views_to_90"]) <= int(r["views_to_95"]) <= int(r["views_to_98"]) <= 3
+            assert 0.0 < float(r["auc"]) <= 1.05
+        assert len(list((out / "ceilings").glob("*.json"))) == 1
     else:
-        assert ceilings == {""}
+        assert ceilings == {""} and {r["auc"] for r in rows} == {""}
 
     runs = json.loads((out / "runs.json").read_text())
     assert {r["planner"] for r in runs} == {"projection", "random"}
@@ -82,12 +90,19 @@ def check_outputs(out: Path, reachable: bool) -> list[dict[str, str]]:
     assert len(first_cov) == 1, "same first view and camera seed -> same first coverage"
 
     text = (out / "summary.md").read_text()
-    for heading in ("## Total planning time (s)", "## Ratio, baseline over projection", "## Coverage at view 2"):
+    headings = ["## Total planning time (s)", "## Ratio, baseline over projection", "## Coverage at view 2"]
+    headings += ["## Coverage against the ceiling", "## Paired comparison against projection"]
+    for heading in headings:
         assert heading in text
+    if reachable:
+        assert "| random | coverage / ceiling at the last view | 1 |" in text
+    page = (out / "report.html").read_text()
+    assert page.startswith("<!DOCTYPE html>") and "<table>" in page and "data:image/png;base64," in page
+    assert "<h2>Paired comparison against projection</h2>" in page
     assert "| planner | l-block | average per iteration |" in text
     assert "| random |" in text and "×" in text
     assert "eval + fit" in text
-    for name in ("coverage.png", "time.png"):
+    for name in ("coverage.png", "time.png", *(["ratio.png"] if reachable else [])):
         width, height = png_size(out / name)
         assert width > 200 and height > 200
     return rows
@@ -160,7 +175,7 @@ def _outcome(planner: str, evals: list[float], fits: list[float], cov: float) ->
         }
         for i, (e, f) in enumerate(zip(evals, fits, strict=True))
     ]
-    return RunOutcome("m", planner, 0, rows=rows, terminated="max_views", seconds=1.0, reachable_coverage=0.9)
+    return RunOutcome("m", planner, 0, rows=rows, terminated="max_views", seconds=1.0)
 
 
 def test_summary_numbers() -> None:
@@ -179,12 +194,16 @@ def test_summary_numbers() -> None:
         "threads": None,
         "wall_seconds": 1.0,
     }
-    text = summary_markdown(outcomes, meta)
+    text = summary_markdown(outcomes, meta, {("m", 0.0): 0.9})
     assert "| projection | 0.120 | 0.060 |" in text  # total plan time, average per iteration
     assert "| raycast-oa | 8.000 | 4.000 |" in text
     assert "| raycast-oa | 100.0× | 50.0× | 66.7× |" in text
     assert "| projection | 0.8000 | 0.8000 |" in text
     assert "| reachable (ceiling) | 0.9000 | 0.9000 |" in text
+    # coverage / ceiling: projection 0.8 / 0.9 at both views, raycast-oa 0.7 / 0.9
+    assert "| projection | 0.8889 | 0.8889 | 3.00 | 3.00 | 3.00 |" in text
+    assert "| raycast-oa | coverage / ceiling at the last view | 1 | -0.1111 | – | 0 / 0 / 1 |" in text
+    assert "| raycast-oa | views to 95 % of the ceiling | 1 | +0.00 | – | 0 / 1 / 0 |" in text
 
 
 @pytest.mark.parametrize(
@@ -196,6 +215,11 @@ def test_summary_numbers() -> None:
         (["--models", "l-block", "--views", "0"], "--views: must be >= 1, got 0"),
         (["--models", "l-block", "--jobs", "0"], "--jobs: must be >= 1, got 0"),
         (["--models", "l-block", "--seeds", "0"], "--seeds: must be >= 1, got 0"),
+        (["--models", "l-block", "--yaws", "0,x"], "--yaws: expected comma-separated degrees"),
+        (["--models", "l-block", "--yaws", "0,90,0"], "--yaws: 0 is listed twice"),
+        (["--models", "l-block", "--planners", "random", "--reference", "projection"], "--reference: 'projection'"),
+        (["--models", "l-block", "--address", "tcp://127.0.0.1:1"], "--address: only with --executor dask"),
+        (["--models", "l-block", "--executor", "dask", "--workers", "0"], "--workers: must be >= 1, got 0"),
     ],
 )
 def test_bad_input_is_one_line_before_any_work(

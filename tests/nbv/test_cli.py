@@ -11,8 +11,7 @@ import numpy as np
 import pytest
 
 from nbv.cli import main
-
-SMALL = ["--resolution", "0.02", "--candidates", "60", "--t-min", "2", "--t-max", "6"]
+from tests.helpers import SMALL_FLAGS as SMALL
 
 
 def test_scan_writes_metrics_and_cloud(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -10,18 +10,13 @@ import pytest
 from app.settings import AppSettings
 from devices.ply import read_ply
 from nbv.cli import main
-
-SMALL = {
-    "voxel": {"resolution": 0.02},
-    "candidates": {"count": 60, "parallels": 4},
-    "cluster": {"t_min": 2, "t_max": 6},
-}
+from tests.helpers import SMALL
 
 
 @pytest.fixture(scope="module")
 def journaled(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict, bytes]:
     """A session journaled by the workbench: first view, an override, two steps, a plan left pending."""
-    from app.sessions import SessionRegistry
+    from workbench.registry import SessionRegistry
 
     data = tmp_path_factory.mktemp("replay") / "data"
     registry = SessionRegistry(AppSettings(scene=False, data_dir=data))
@@ -30,7 +25,7 @@ def journaled(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict, byt
     entry = wb.plan()
     other = next(i for i, s in enumerate(entry.plan.scores) if s.eligible and i != entry.plan.best_index)
     wb.approve(entry.plan_id, index=other)
-    wb.step(2)
+    wb.auto.step(2)
     wb.plan()
     export = wb.export()
     from devices.ply import ply_bytes

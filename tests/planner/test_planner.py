@@ -21,7 +21,7 @@ SMALL = PlannerConfig().replace(
 
 @pytest.fixture(scope="module")
 def cell():
-    return make_sim_cell(make_builtin("l-block"), CameraConfig(), CellConfig(), seed=0)
+    return make_sim_cell(make_builtin("l-block"), CameraConfig(), CellConfig(kinematics="reach_sphere"), seed=0)
 
 
 def first_frame(cell) -> DepthFrame:
@@ -92,7 +92,7 @@ def test_growth_threshold_stops_the_scan(cell) -> None:
 
 def test_rays_ending_on_the_plate_carve_free_space(monkeypatch: pytest.MonkeyPatch) -> None:
     """Departure (docs/method.md): plate hits count as free space, so far less frontier is left on the plate."""
-    mug_cell = make_sim_cell(make_builtin("mug"), CameraConfig(), CellConfig(), seed=0)
+    mug_cell = make_sim_cell(make_builtin("mug"), CameraConfig(), CellConfig(kinematics="reach_sphere"), seed=0)
     frames = []
     for azimuth in (np.pi, np.pi / 2, 0.0, 1.5 * np.pi):  # four views round the mug, 20 degrees up
         eye = np.array([0.0, 0.0, 0.08]) + 0.5 * np.array(

@@ -1,0 +1,21 @@
+"""The REST API (the paths are a contract of issue 4; OpenAPI at /docs): one router per resource.
+
+Thin routes: each calls the session (workbench/session.py) or the registry and returns a schema object.
+Heavy routes are plain ``def`` (FastAPI runs them in its thread pool). Errors are ``{"detail": ...}`` with
+400 (bad Host), 401 (token), 403 (cross-origin), 404 (unknown session / candidate / model / recording),
+409 (wrong state, stale or used plan_id, an interrupted session not resumed yet), 413 (body too large),
+422 (bad parameters, unreachable pose or one inside the object, bad frames from a recording) and 503 (a
+device fault or timeout; the session is then in state error, the map unchanged). app/errors.py maps the
+domain errors' types to these codes.
+"""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+
+from app.api import candidates, loop, models, scene, sessions, viewer
+from app.schemas import ERROR_RESPONSES
+
+router = APIRouter(prefix="/api", responses=ERROR_RESPONSES)
+for module in (viewer, models, sessions, loop, candidates, scene):
+    router.include_router(module.router)

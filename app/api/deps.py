@@ -1,0 +1,38 @@
+"""Typed dependencies of the routes (``Annotated`` aliases, as in FastAPI's full-stack template)."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import Depends, Request
+
+from app.scene.controller import SceneController
+from app.settings import AppSettings
+from workbench.errors import Conflict
+from workbench.registry import SessionRegistry
+from workbench.session import Session
+
+
+def registry_of(request: Request) -> SessionRegistry:
+    return request.app.state.registry
+
+
+def settings_of(request: Request) -> AppSettings:
+    return request.app.state.settings
+
+
+def scene_of(request: Request) -> SceneController:
+    scene = request.app.state.scene
+    if scene is None:
+        raise Conflict("the 3D scene is disabled on this server")
+    return scene
+
+
+def session_of(session_id: str, registry: Annotated[SessionRegistry, Depends(registry_of)]) -> Session:
+    return registry.get(session_id)
+
+
+Registry = Annotated[SessionRegistry, Depends(registry_of)]
+Settings = Annotated[AppSettings, Depends(settings_of)]
+SessionDep = Annotated[Session, Depends(session_of)]
+Scene = Annotated[SceneController, Depends(scene_of)]

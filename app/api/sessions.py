@@ -1,0 +1,107 @@
+"""Sessions as resources: create, list, read, resume, retry, configure, delete, export."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Body, Response
+from fastapi.responses import JSONResponse
+
+from app.api.deps import Registry, SessionDep, Settings
+from app.schemas import FaultRequest, ResumeOut, SessionCreate, SessionCreated, SessionOut
+from app.serialize import SafeJSONResponse
+from workbench.errors import Conflict, NotFound
+
+router = APIRouter()
+
+
+@router.post("/sessions", status_code=201, response_model=SessionCreated)
+def create_session(registry: Registry, body: Annotated[SessionCreate | None, Body()] = None) -> dict[str, str]:
+    """A new session (every field optional: the server's default model, planner config, simulated cell)."""
+    body = body or SessionCreate()
+    source = None if body.source is None else body.source.model_dump(exclude_none=True)
+    session = registry.create(body.model, body.config, body.seed, source=source, faults=body.faults)
+    return {"id": session.id}
+
+
+@router.get("/sessions", response_model=list[SessionOut])
+def list_sessions(registry: Registry) -> list[dict[str, Any]]:
+    """Live sessions, and journaled ones of an earlier server process (state ``interrupted``)."""
+    return registry.list_status()
+
+
+@router.get("/sessions/{session_id}", response_model=SessionOut)
+def get_session(session_id: str, registry: Registry) -> dict[str, Any]:
+    return registry.status(session_id)
+
+
+@router.post("/sessions/{session_id}/resume", response_model=ResumeOut)
+def resume(session_id: str, registry: Registry) -> dict[str, Any]:
+    """Rebuild an interrupted session from its journal: the same map and the same pending plan."""
+    session, rebuilt = registry.resume(session_id)
+    return {
+        "session": session.status(),
+        "verified": not rebuilt.mismatches,
+        "mismatches": rebuilt.mismatches,
+        "interrupted": rebuilt.interrupted,
+    }
+
+
+@router.post("/sessions/{session_id}/retry", response_model=SessionOut)
+def retry(session: SessionDep) -> dict[str, Any]:
+    """In state error: re-do the failed step (the same move and capture)."""
+    session.retry()
+    return session.status()
+
+
+@router.patch("/sessions/{session_id}/config")
+def change_config(session: SessionDep, body: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """Change ``termination``, ``candidates`` or ``partitions`` of a running session (journaled)."""
+    return session.change_config(body)
+
+
+@router.post("/sessions/{session_id}/faults", status_code=202)
+def inject_fault(settings: Settings, session: SessionDep, body: FaultRequest) -> dict[str, Any]:
+    """Test-only (``fault_api``): the next action of the fault's device fails with ``kind``."""
+    if not settings.fault_api:
+        raise NotFound("fault injection is disabled on this server (fault_api)")
+    if session.injector is None:
+        raise Conflict(f"session {session.id}: its devices do not inject faults")
+    session.injector.inject(body.kind)
+    return {"queued": body.kind}
+
+
+@router.delete("/sessions/{session_id}", status_code=204)
+def delete_session(session_id: str, registry: Registry) -> Response:
+    registry.delete(session_id)
+    return Response(status_code=204)
+
+
+@router.get("/sessions/{session_id}/metrics")
+def metrics(session: SessionDep) -> dict[str, Any]:
+    """Per-iteration coverage, point count and plan time; the BIC curves of the last fit."""
+    return session.metrics()
+
+
+@router.get(
+    "/sessions/{session_id}/cloud.ply",
+    response_class=Response,
+    responses={200: {"content": {"application/octet-stream": {}}}},
+)
+def cloud_ply(session: SessionDep) -> Response:
+    """The registered, accumulated cloud as binary PLY."""
+    from devices.ply import ply_bytes
+
+    return Response(
+        ply_bytes(session.planner.cloud),
+        media_type="application/octet-stream",
+        headers={"Content-Disposition": f'attachment; filename="nbv-{session.id}-cloud.ply"'},
+    )
+
+
+@router.get("/sessions/{session_id}/export")
+def export(session: SessionDep) -> JSONResponse:
+    """The whole session (every pose, plan, decision, override and metric) as JSON."""
+    return SafeJSONResponse(
+        session.export(), headers={"Content-Disposition": f'attachment; filename="nbv-{session.id}-session.json"'}
+    )

@@ -1,0 +1,129 @@
+"""What the arm costs: IK + collision checks per plan, trajectory planning per view, and its share of plan_seconds.
+
+Run: ``.venv/bin/python benchmarks/bench_arm.py [--model ../shared/models/bunny.obj] [--views 10]``.
+
+One scan of the model with the UR5 (the default cell) and one with the reach-sphere cell, same seed. Prints:
+
+1. IK + collision checks of the 400 candidates of each plan (the cell's ``is_reachable`` over the hemisphere,
+   caches as in a session): median and max seconds per plan (goal: median <= 0.1 s on 2 cores);
+2. trajectory planning per approved view (``plan_motion``: plate angle + IK branches + path + timing): median and
+   max seconds (goal: median <= 0.3 s);
+3. median ``plan_seconds`` with the arm and with the reach sphere, and the difference (the reachability test
+   runs inside the planner's "select" stage);
+
+(1 and 2 also as the thread's CPU time: on a loaded machine the wall time includes waiting for a core,)
+
+and the share of the first hemisphere the arm reaches, with the reasons for the rest.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import statistics
+import time
+from pathlib import Path
+from typing import Any
+
+from devices.builtins import resolve_model
+from devices.config import CameraConfig, CellConfig
+from devices.sim import make_sim_cell
+from nbv.scan import IterationRecord, run_scan
+from planner import Planner, PlannerConfig, PlanResult
+
+
+def timed_scan(model: str, views: int, kinematics: str, seed: int) -> dict[str, Any]:
+    """Scan with the given arm, timing the cell's reachability per plan and its motion planning per move."""
+    name, mesh = resolve_model(model, up="y", size=0.2)
+    t0 = time.perf_counter()
+    cell = make_sim_cell(mesh, CameraConfig(), CellConfig(kinematics=kinematics), seed=seed)  # type: ignore[arg-type]
+    build = time.perf_counter() - t0
+    reach_seconds = [0.0]
+    reach_cpu = [0.0]
+    motion_seconds: list[float] = []
+    motion_cpu: list[float] = []
+    is_reachable, plan_motion = cell.is_reachable, cell.plan_motion
+
+    def timed_reachable(pose: Any) -> bool:
+        t, c = time.perf_counter(), time.thread_time()
+        try:
+            return is_reachable(pose)
+        finally:
+            reach_seconds[-1] += time.perf_counter() - t
+            reach_cpu[-1] += time.thread_time() - c
+
+    def timed_motion(pose: Any) -> Any:
+        t, c = time.perf_counter(), time.thread_time()
+        try:
+            return plan_motion(pose)
+        finally:
+            motion_seconds.append(time.perf_counter() - t)
+            motion_cpu.append(time.thread_time() - c)
+
+    cell.is_reachable = timed_reachable  # type: ignore[method-assign]
+    cell.plan_motion = timed_motion  # type: ignore[method-assign]
+    per_plan: list[float] = []
+    per_plan_cpu: list[float] = []
+    first_plan: list[PlanResult] = []
+
+    def done(record: IterationRecord, plan: PlanResult) -> None:
+        per_plan.append(reach_seconds[-1])
+        per_plan_cpu.append(reach_cpu[-1])
+        reach_seconds.append(0.0)
+        reach_cpu.append(0.0)
+        if not first_plan:
+            first_plan.append(plan)
+
+    config = PlannerConfig.from_dict({"termination": {"max_views": views}, "cluster": {"seed": seed}})
+    result = run_scan(Planner(config), cell, on_iteration=done)
+    reasons: collections.Counter[str] = collections.Counter()
+    if first_plan:
+        for ok, reason in cell.reachability_many([c.T_world_camera for c in first_plan[0].candidates]):
+            reasons["reachable" if ok else str(reason)] += 1
+    return {
+        "name": name,
+        "build": build,
+        "reach_per_plan": per_plan,
+        "reach_per_plan_cpu": per_plan_cpu,
+        "motion": motion_seconds[1:],  # the first is the move to the initial view, already there
+        "motion_cpu": motion_cpu[1:],
+        "plan_seconds": [r.plan_seconds for r in result.records],
+        "robot_seconds": result.robot_seconds,
+        "reasons": reasons,
+    }
+
+
+def stats(values: list[float]) -> str:
+    if not values:
+        return "-"
+    return f"median {statistics.median(values):.3f} s, max {max(values):.3f} s (n = {len(values)})"
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    p.add_argument("--model", default=str(Path("../shared/models/bunny.obj")))
+    p.add_argument("--views", type=int, default=10)
+    p.add_argument("--seed", type=int, default=0)
+    args = p.parse_args()
+    arm = timed_scan(args.model, args.views, "urdf", args.seed)
+    sphere = timed_scan(args.model, args.views, "reach_sphere", args.seed)
+    print(f"{arm['name']}, {args.views} views, seed {args.seed} (UR5 cell built in {arm['build']:.2f} s)")
+    print(f"1. IK + collisions of the 400 candidates, per plan: {stats(arm['reach_per_plan'])}")
+    print(f"   its CPU time (the wall time on an idle core): {stats(arm['reach_per_plan_cpu'])}")
+    print(f"   (reach sphere, per plan: {stats(sphere['reach_per_plan'])})")
+    print(f"2. trajectory planning per approved view: {stats(arm['motion'])}")
+    print(f"   its CPU time: {stats(arm['motion_cpu'])}")
+    arm_plan, sphere_plan = statistics.median(arm["plan_seconds"]), statistics.median(sphere["plan_seconds"])
+    print(
+        f"3. median plan_seconds: arm {arm_plan:.3f} s, reach sphere {sphere_plan:.3f} s, "
+        f"the arm adds {arm_plan - sphere_plan:+.3f} s"
+    )
+    total = sum(arm["reasons"].values())
+    parts = ", ".join(f"{k} {v}" for k, v in arm["reasons"].most_common())
+    print(f"first hemisphere: {arm['reasons']['reachable']}/{total} reachable by the UR5 ({parts})")
+    print(f"robot time of the scan: arm {arm['robot_seconds']:.1f} s, reach sphere {sphere['robot_seconds']:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,165 @@
+"""The arm's configuration: which robot, where its flange and camera are, how fast it may move, how it plans.
+
+A frozen dataclass in the style of ``devices/config.py``: every default is documented at its field, a bad
+value raises a one-line ``ValueError`` naming the field (``arm.T_flange_camera: ...``). Lengths in metres,
+angles in degrees (a config edge). Whether the URDF loads and has the flange frame is checked when the
+model is built (:func:`devices.arm.model.load_arm`), before anything else of the cell exists.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.validate import finite, integer, require
+
+DEFAULT_T_FLANGE_CAMERA: tuple[tuple[float, ...], ...] = (
+    (1.0, 0.0, 0.0, 0.0),
+    (0.0, 1.0, 0.0, 0.0),
+    (0.0, 0.0, 1.0, 0.05),
+    (0.0, 0.0, 0.0, 1.0),
+)
+"""The camera 5 cm in front of the flange, looking along the flange's +z (OpenCV +z forward)."""
+
+
+def rigid_matrix(name: str, value: object) -> NDArray[np.float64]:
+    """(4, 4) float64 from ``value`` (nested sequences); ValueError naming ``name`` unless a rigid transform."""
+    try:
+        T = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: must be a 4x4 matrix of numbers, got {value!r}") from None
+    require(T.shape == (4, 4), f"{name}: must be a 4x4 matrix, got shape {T.shape}")
+    require(bool(np.all(np.isfinite(T))), f"{name}: has non-finite entries")
+    require(bool(np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9)), f"{name}: last row must be [0, 0, 0, 1]")
+    R = T[:3, :3]
+    error = float(np.abs(R.T @ R - np.eye(3)).max())
+    require(
+        error < 1e-6 and np.linalg.det(R) > 0,
+        f"{name}: not a rigid transform (rotation part not orthonormal with det +1, error {error:.2g})",
+    )
+    return T
+
+
+@dataclass(frozen=True)
+class ArmConfig:
+    """A robot arm from a URDF with a depth camera on its flange; its mount is ``CellConfig.arm_base``."""
+
+    urdf: str = "ur5"
+    """'ur5' = the UR5 of the ``example-robot-data`` package (its SRDF too), or the path of a URDF file."""
+    srdf: str = ""
+    """SRDF whose ``disable_collisions`` pairs are not checked ('' = the UR5's for 'ur5', none otherwise).
+    Geometries of adjacent links are never checked against each other."""
+    package_dirs: tuple[str, ...] = ()
+    """Where ``package://`` mesh paths of the URDF are looked up (the URDF's folder and its parents are added)."""
+    flange_frame: str = "tool0"
+    """The URDF frame the camera is mounted on."""
+    T_flange_camera: tuple[tuple[float, ...], ...] = DEFAULT_T_FLANGE_CAMERA
+    """Hand-eye calibration: the camera pose (OpenCV axes) in the flange frame, a 4x4 rigid transform (metres)."""
+    camera_size: tuple[float, float, float] = (0.09, 0.03, 0.03)
+    """The camera body, a box behind the optical centre (x, y, z extents in the camera frame), metres;
+    checked for collisions like the links."""
+    base: tuple[float, float, float] = (-0.85, 0.0, 0.0)
+    """Position of the arm's mount (URDF root) in the cell's base frame, metres: beside the turntable, so that
+    the paper's hemisphere at the default working distance is mostly but not entirely reachable (with the
+    UR5, the two top parallels are out of reach). The reach-sphere cell uses ``cell.arm_base`` instead."""
+    home_deg: tuple[float, ...] = (0.0, -90.0, 90.0, -90.0, -90.0, 0.0)
+    """Configuration the arm starts from, degrees, one per joint (() or a wrong length = all zeros, clipped
+    to the limits). The default is the UR5's elbow-up pose with the flange looking down."""
+    base_yaw_deg: float = 0.0
+    """Rotation of the arm's mount about the vertical axis, degrees."""
+    joint_lower_deg: tuple[float, ...] = ()
+    """Tighter lower joint limits than the URDF's, degrees, one per joint (() = the URDF's)."""
+    joint_upper_deg: tuple[float, ...] = ()
+    """Tighter upper joint limits than the URDF's, degrees, one per joint (() = the URDF's)."""
+    velocity_scale: float = 0.5
+    """Fraction of the URDF's joint velocity limits a move may use."""
+    acceleration_limit_deg: float = 180.0
+    """Joint acceleration limit, degrees/s^2, every joint (URDFs do not give one)."""
+    turntable_speed_deg: float = 45.0
+    """Turntable speed, degrees/s (for the move duration; the simulated plate turns at once)."""
+    plate_offsets_deg: tuple[float, ...] = (0.0, -30.0, 30.0, -60.0, 60.0, -90.0, 90.0)
+    """Plate angles tried per view: the view's azimuth minus the arm's azimuth after turning, degrees.
+    The first reachable one decides reachability; a move takes the one with the shortest move."""
+    table_height: float = -0.06
+    """Top of the table the turntable stands on, below the plate top (z = 0), metres (0 = no table)."""
+    object_padding: float = 0.02
+    """Margin added to the object's box for collisions, metres."""
+    ik_iterations: int = 60
+    """Damped least squares iterations per IK seed."""
+    ik_seeds: int = 4
+    """IK attempts per pose and plate angle (the current configuration, a neighbour's solution, fixed ones)."""
+    ik_tolerance: float = 1e-4
+    """IK converged when the position error is below this (metres) and the rotation error below 10x (radians)."""
+    path_resolution_deg: float = 2.0
+    """Largest joint step between collision checks along a path, degrees."""
+    planning_time: float = 1.0
+    """Time limit of one OMPL RRT-Connect query, seconds (the view is then unreachable, 'no_path')."""
+
+    def __post_init__(self) -> None:
+        require(isinstance(self.urdf, str) and self.urdf.strip() != "", f"arm.urdf: 'ur5' or a path, got {self.urdf!r}")
+        require(isinstance(self.srdf, str), f"arm.srdf: must be a path or '', got {self.srdf!r}")
+        require(
+            isinstance(self.flange_frame, str) and self.flange_frame != "",
+            f"arm.flange_frame: must be a frame name, got {self.flange_frame!r}",
+        )
+        dirs = self.package_dirs
+        require(
+            isinstance(dirs, list | tuple) and all(isinstance(d, str) for d in dirs),
+            f"arm.package_dirs: must be a list of paths, got {dirs!r}",
+        )
+        object.__setattr__(self, "package_dirs", tuple(dirs))
+        T = rigid_matrix("arm.T_flange_camera", self.T_flange_camera)
+        object.__setattr__(self, "T_flange_camera", tuple(tuple(float(v) for v in row) for row in T))
+        size = tuple(self.camera_size) if isinstance(self.camera_size, list | tuple) else ()
+        require(
+            len(size) == 3 and finite(*size) and all(s >= 0 for s in size),
+            f"arm.camera_size: must be 3 numbers >= 0, got {self.camera_size!r}",
+        )
+        object.__setattr__(self, "camera_size", tuple(float(s) for s in size))
+        for name in ("joint_lower_deg", "joint_upper_deg", "plate_offsets_deg"):
+            v = getattr(self, name)
+            require(
+                isinstance(v, list | tuple) and finite(*v), f"arm.{name}: must be a list of finite numbers, got {v!r}"
+            )
+            object.__setattr__(self, name, tuple(float(x) for x in v))
+        require(len(self.plate_offsets_deg) >= 1, "arm.plate_offsets_deg: need at least one plate angle")
+        try:
+            base = tuple(float(v) for v in self.base)
+        except (TypeError, ValueError):
+            raise ValueError(f"arm.base: must be 3 numbers, got {self.base!r}") from None
+        require(len(base) == 3 and finite(*base), f"arm.base: must be 3 finite numbers, got {self.base!r}")
+        object.__setattr__(self, "base", base)
+        require(
+            isinstance(self.home_deg, list | tuple) and finite(*self.home_deg),
+            f"arm.home_deg: must be a list of finite numbers, got {self.home_deg!r}",
+        )
+        object.__setattr__(self, "home_deg", tuple(float(x) for x in self.home_deg))
+        require(finite(self.base_yaw_deg), f"arm.base_yaw_deg: must be finite, got {self.base_yaw_deg!r}")
+        require(
+            finite(self.velocity_scale) and 0 < self.velocity_scale <= 1,
+            f"arm.velocity_scale: must be in (0, 1], got {self.velocity_scale!r}",
+        )
+        for name in ("acceleration_limit_deg", "turntable_speed_deg", "ik_tolerance", "path_resolution_deg"):
+            v = getattr(self, name)
+            require(finite(v) and v > 0, f"arm.{name}: must be > 0, got {v!r}")
+        require(
+            finite(self.planning_time) and 0 < self.planning_time <= 60,
+            f"arm.planning_time: must be in (0, 60] seconds, got {self.planning_time!r}",
+        )
+        require(
+            finite(self.table_height) and self.table_height <= 0, "arm.table_height: must be <= 0 (below the plate)"
+        )
+        require(
+            finite(self.object_padding) and self.object_padding >= 0,
+            f"arm.object_padding: must be >= 0, got {self.object_padding!r}",
+        )
+        for name in ("ik_iterations", "ik_seeds"):
+            v = getattr(self, name)
+            require(integer(v) and v >= 1, f"arm.{name}: must be an integer >= 1, got {v!r}")
+
+    @property
+    def T_flange_camera_matrix(self) -> NDArray[np.float64]:
+        """(4, 4) float64 the hand-eye transform."""
+        return np.array(self.T_flange_camera, dtype=np.float64)

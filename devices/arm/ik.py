@@ -1,0 +1,130 @@
+"""Inverse kinematics of the camera pose: Pinocchio's damped least squares from several seeds, joint limits after.
+
+A solution must put the camera (``ArmModel.camera_frame``) at ``T_base_camera`` within ``ArmConfig.ik_tolerance``
+(metres; radians x 10) and lie inside the joint limits. Revolute joints are wrapped by whole turns to the
+solution nearest the reference configuration that fits the limits. Failure reasons: ``no_ik`` (no seed
+converged: the pose is out of the arm's workspace) or ``joint_limit`` (it converged, but only outside the limits).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from devices.arm.model import ArmModel
+from planner.types import Pose
+
+DAMPING = 1e-6
+"""Damping of the least-squares step (Pinocchio's IK example uses 1e-6)."""
+STALL_WINDOW = 6
+"""Iterations over which the error must shrink ..."""
+STALL_RATIO = 0.9
+"""... to at most this fraction of what it was, or the seed is given up."""
+MAX_STEP = 0.5
+"""Largest joint step of one iteration, radians (keeps the iteration from jumping between branches)."""
+
+
+def dls(
+    arm: ArmModel, data: Any, M_target: Any, q0: NDArray[np.float64], iterations: int, tolerance: float
+) -> NDArray[np.float64] | None:
+    """(n,) a configuration putting the camera at ``M_target`` (``pinocchio.SE3``, base frame) from seed ``q0``,
+    or None if damped least squares does not converge in ``iterations`` steps. No joint limits here."""
+    import pinocchio as pin  # pyright: ignore[reportMissingImports]  (under cmeel.prefix)
+
+    model, frame = arm.model, arm.camera_frame
+    q = np.array(q0, dtype=np.float64)
+    eye6 = np.eye(6)
+    history: list[float] = []
+    for i in range(iterations):
+        pin.forwardKinematics(model, data, q)
+        M = pin.updateFramePlacement(model, data, frame)
+        iMd = M.actInv(M_target)
+        err = pin.log6(iMd).vector
+        position, rotation = math.sqrt(err[:3] @ err[:3]), math.sqrt(err[3:] @ err[3:])
+        if position < tolerance and rotation < 10 * tolerance:
+            return q
+        history.append(position + 0.1 * rotation)
+        if i >= STALL_WINDOW and history[-1] > STALL_RATIO * history[-1 - STALL_WINDOW]:
+            return None  # stalled: out of reach from this seed (a singular or limit-bound configuration)
+        pin.computeJointJacobians(model, data)  # from the placements just computed (no second FK)
+        J = -pin.Jlog6(iMd.inverse()) @ pin.getFrameJacobian(model, data, frame, pin.LOCAL)
+        v = -J.T @ np.linalg.solve(J @ J.T + DAMPING * eye6, err)
+        largest = float(np.max(np.abs(v)))
+        if largest > MAX_STEP:
+            v *= MAX_STEP / largest
+        q = q + v
+    return None
+
+
+def fit_limits(
+    q: NDArray[np.float64], reference: NDArray[np.float64], lower: NDArray[np.float64], upper: NDArray[np.float64]
+) -> NDArray[np.float64] | None:
+    """(n,) ``q`` with each joint moved by whole turns to lie in [lower, upper], nearest ``reference``; None if a
+    joint fits no turn."""
+    two_pi = 2 * math.pi
+    out = np.empty_like(q)
+    for j in range(len(q)):
+        k_lo = math.ceil((lower[j] - q[j]) / two_pi - 1e-12)
+        k_hi = math.floor((upper[j] - q[j]) / two_pi + 1e-12)
+        if k_lo > k_hi:
+            return None
+        k = min(max(round((reference[j] - q[j]) / two_pi), k_lo), k_hi)
+        out[j] = min(max(q[j] + k * two_pi, lower[j]), upper[j])
+    return out
+
+
+def solve_ik(
+    arm: ArmModel,
+    T_base_camera: Pose,
+    seeds: Iterable[NDArray[np.float64]],
+    reference: NDArray[np.float64],
+    data: Any | None = None,
+    *,
+    first: bool = True,
+    accept: Callable[[NDArray[np.float64]], bool] | None = None,
+) -> tuple[list[NDArray[np.float64]], str | None]:
+    """Solutions (each (n,), inside the limits) for ``T_base_camera`` from ``seeds`` (any iterable: a generator
+    computes the later seeds only when the earlier ones failed), and the reason when none.
+
+    first: stop at the first solution (a reachability test); else try every seed and return the distinct
+    solutions sorted by joint distance from ``reference`` (the current configuration).
+    accept: solutions it refuses (e.g. in collision) are dropped and the next seed is tried.
+    """
+    import pinocchio as pin  # pyright: ignore[reportMissingImports]  (under cmeel.prefix)
+
+    cfg = arm.config
+    data = data if data is not None else arm.model.createData()
+    M_target = pin.SE3(T_base_camera.rotation, T_base_camera.translation)
+    solutions: list[NDArray[np.float64]] = []
+    converged = False
+    for seed in seeds:
+        q = dls(arm, data, M_target, seed, cfg.ik_iterations, cfg.ik_tolerance)
+        if q is None:
+            continue
+        converged = True
+        fitted = fit_limits(q, reference, arm.lower, arm.upper)
+        if fitted is None:
+            continue
+        if any(np.max(np.abs(fitted - s)) < 1e-3 for s in solutions):
+            continue
+        if accept is not None and not accept(fitted):
+            continue
+        solutions.append(fitted)
+        if first:
+            break
+    if not solutions:
+        return [], "joint_limit" if converged else "no_ik"
+    solutions.sort(key=lambda s: float(np.linalg.norm(s - reference)))
+    return solutions, None
+
+
+def fixed_seeds(arm: ArmModel, count: int, seed: int = 0) -> list[NDArray[np.float64]]:
+    """``count`` spread configurations inside the limits (deterministic), the generic IK seeds of any URDF."""
+    rng = np.random.default_rng(seed)
+    lo = np.maximum(arm.lower, -math.pi)
+    hi = np.minimum(arm.upper, math.pi)
+    return [rng.uniform(lo, hi) for _ in range(count)]

@@ -1,0 +1,128 @@
+"""The arm side of the cell in one object: model, collision world, reachability and motion planning.
+
+:class:`ArmKinematics` is what :class:`devices.cell.Cell` uses when the cell has a real arm model
+(``CellConfig.kinematics == "urdf"``): it answers whether a view is reachable (and why not), picks the plate
+angle and joint target with the shortest move, plans and times the joint trajectory, and gives the camera pose
+of any configuration by forward kinematics. It moves nothing: the cell sends the result to the devices.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from devices.arm.collision import CollisionWorld
+from devices.arm.config import ArmConfig
+from devices.arm.ik import dls
+from devices.arm.model import ArmModel, load_arm
+from devices.arm.motion import NoPathError, plan_path, time_path
+from devices.arm.reach import ArmReach, ArmTarget, rz_matrix, wrap
+from devices.protocols import UnreachableError
+from devices.trajectory import JointTrajectory
+from planner.types import Pose
+
+REFINE_TOLERANCE = 1e-9
+"""A move's joint target is polished to this IK tolerance (metres; radians x 10)."""
+REFINE_ITERATIONS = 10
+"""Damped least squares iterations of that polish (from a converged solution it needs one or two)."""
+TURN_CHECKS_PER_RADIAN = 12
+"""While the plate turns, the arm (standing still) is checked against the turning object this often."""
+
+
+@dataclass(frozen=True, eq=False)
+class ArmMove:
+    """A planned move: the target, the timed trajectory, and what it costs.
+
+    target: plate angle, joint target q (n,), ``T_base_camera``. trajectory: the arm's joint trajectory (it runs
+    after the plate has turned). turn_seconds: the plate's turn. path_method: 'straight' or 'rrt_connect'.
+    planning_seconds: time spent choosing the target and planning the path.
+    """
+
+    target: ArmTarget
+    trajectory: JointTrajectory
+    turn_seconds: float
+    path_method: str
+    planning_seconds: float
+
+    @property
+    def duration(self) -> float:
+        """Seconds of the whole move: the plate's turn, then the arm's trajectory."""
+        return self.turn_seconds + self.trajectory.duration
+
+
+class ArmKinematics:
+    """config: the arm. plate_radius, plate_thickness: the turntable (``CellConfig``), metres."""
+
+    def __init__(self, config: ArmConfig, plate_radius: float, plate_thickness: float) -> None:
+        if math.hypot(config.base[0], config.base[1]) < plate_radius:
+            raise ValueError(
+                f"arm.base: {config.base} is inside the plate (radius {plate_radius} m about the origin); "
+                "put the arm beside the turntable"
+            )
+        self.config = config
+        self.model: ArmModel = load_arm(config, config.base)
+        self.world = CollisionWorld(self.model, plate_radius, plate_thickness)
+        home = np.radians(config.home_deg) if len(config.home_deg) == self.model.nq else np.zeros(self.model.nq)
+        self.home: NDArray[np.float64] = np.clip(home, self.model.lower, self.model.upper)
+        self.reach = ArmReach(self.model, self.world, self.home)
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return self.model.joint_names
+
+    def camera_pose(self, q: NDArray[np.float64]) -> Pose:
+        """``T_base_camera`` of configuration (n,) ``q`` (forward kinematics)."""
+        return self.model.camera_pose(q)
+
+    def set_object_box(self, lower_table: NDArray[np.float64] | None, upper_table: NDArray[np.float64] | None) -> None:
+        """The object's box (table frame, (3,) corners) the arm must keep clear of; None = no object model yet."""
+        self.world.set_object_box(lower_table, upper_table)
+
+    def reachability(self, T_table_camera: Pose, q: NDArray[np.float64], angle: float) -> tuple[bool, str | None]:
+        """(reachable, reason) of a view from the state (q, plate angle)."""
+        target, reason = self.reach.reachability(T_table_camera, q, angle)
+        return target is not None, reason
+
+    def violations(self, q: NDArray[np.float64], angle: float) -> str | None:
+        """Why configuration (n,) ``q`` at plate ``angle`` is not allowed ('joint_limit' or a collision), or None."""
+        if not self.model.within_limits(np.asarray(q, dtype=np.float64)):
+            return "joint_limit"
+        return self.world.collision(np.asarray(q, dtype=np.float64), angle)
+
+    def _refined(self, T_table_camera: Pose, target: ArmTarget) -> ArmTarget:
+        """The target with its joints polished to ``REFINE_TOLERANCE`` (the camera lands on the view to about a
+        micrometre, not just within the IK tolerance), if the polished joints are still inside the limits and free."""
+        import pinocchio as pin  # pyright: ignore[reportMissingImports]  (under cmeel.prefix)
+
+        R = rz_matrix(target.angle)
+        M = pin.SE3(R @ T_table_camera.rotation, R @ T_table_camera.translation)
+        q = dls(self.model, self.model.model.createData(), M, target.q, REFINE_ITERATIONS, REFINE_TOLERANCE)
+        if q is None or self.violations(q, target.angle) is not None:
+            return target
+        return ArmTarget(target.angle, q, self.camera_pose(q), target.move_estimate)
+
+    def plan(self, T_table_camera: Pose, q: NDArray[np.float64], angle: float) -> ArmMove:
+        """The move to a view from the state (q (n,), plate angle): the reachable, collision-free target with the
+        shortest move and its trajectory. UnreachableError(reason) when there is none."""
+        t0 = time.perf_counter()
+        q = np.asarray(q, dtype=np.float64)
+        target, reason = self.reach.best_target(T_table_camera, q, angle)
+        if target is None:
+            raise UnreachableError(f"unreachable: {reason}", reason=reason or "no_ik")
+        target = self._refined(T_table_camera, target)
+        turn = wrap(target.angle - angle)
+        for s in np.linspace(0.0, 1.0, max(2, math.ceil(abs(turn) * TURN_CHECKS_PER_RADIAN) + 1)):
+            hit = self.world.collision(q, angle + s * turn)
+            if hit is not None:
+                raise UnreachableError(f"unreachable: {hit} while the plate turns", reason=hit)
+        try:
+            path = plan_path(self.world, q, target.q, target.angle)
+        except NoPathError as exc:
+            raise UnreachableError(f"unreachable: {exc}", reason="no_path") from None
+        trajectory = time_path(self.model, path.waypoints)
+        turn_seconds = abs(turn) / math.radians(self.config.turntable_speed_deg)
+        return ArmMove(target, trajectory, turn_seconds, path.method, time.perf_counter() - t0)

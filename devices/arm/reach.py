@@ -1,0 +1,267 @@
+"""Where the arm can put the camera: plate angle + IK + joint limits + collisions, per view, with its reason.
+
+A view ``T_table_camera`` (the planner's world is the table frame) is reached by turning the plate to some angle
+theta and moving the arm so that ``T_base_camera = Rz(theta) @ T_table_camera``. The plate angles tried put the
+view's azimuth at the arm's azimuth plus each of ``ArmConfig.plate_offsets_deg``. A view is *reachable* when
+one of them has an IK solution inside the joint limits, free of collisions; otherwise the reason of the attempt
+that got furthest is kept: ``no_ik`` < ``joint_limit`` < ``collision:<link>:<obstacle>``.
+
+Reachability is a pure function of the view and the object box (not of the arm's state or of what was asked
+before), so replaying a journal gives the same eligible candidates. Speed (400 candidates per plan): IK is
+seeded by the solution of an *anchor*, the centre of the view's cell on a coarse pose grid (solved once, kept
+for the whole session: with the turntable, successive plans put their candidates in the same cells), then by
+a library of configurations sampled at start-up; results are cached by exact pose; a reach bound answers
+``no_ik`` for far poses without IK; the plate offset that served the previous view is tried first (the
+verdict does not depend on the order). Collisions are always checked (the object box and the plate angle
+change).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import KDTree
+
+from devices.arm.collision import CollisionWorld
+from devices.arm.ik import fixed_seeds, solve_ik
+from devices.arm.model import ArmModel
+from planner.types import Pose
+
+LIBRARY_SIZE = 600
+"""Configurations sampled at start-up whose camera poses seed IK for nearby targets."""
+ORIENTATION_WEIGHT = 0.2
+"""Metres per unit of camera-axis difference in the seed library's pose distance."""
+ANCHOR_STEP = 0.03
+"""Grid step of the IK anchors' positions, metres."""
+ANCHOR_AXIS_STEP = 0.1
+"""Grid step of the IK anchors' camera axes (per component of the unit z and x axes)."""
+CACHE_SIZE = 20_000
+"""IK results kept (cleared when full)."""
+
+
+def rz_matrix(theta: float) -> NDArray[np.float64]:
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def wrap(angle: float) -> float:
+    """``angle`` wrapped to (-pi, pi]."""
+    a = math.remainder(angle, 2 * math.pi)
+    return math.pi if a == -math.pi else a
+
+
+@dataclass(frozen=True, eq=False)
+class ArmTarget:
+    """A reachable view: plate ``angle`` (rad, (-pi, pi]), joint target ``q`` (n,) and ``T_base_camera`` (FK of q).
+
+    move_estimate: seconds the move from the current state would take at the speed limits (turntable, then arm).
+    """
+
+    angle: float
+    q: NDArray[np.float64]
+    T_base_camera: Pose
+    move_estimate: float
+
+
+def _severity(reason: str) -> int:
+    return 2 if reason.startswith("collision") else 1 if reason == "joint_limit" else 0
+
+
+class ArmReach:
+    """Reachability and targets of views for one arm in one cell (not thread-safe: one per cell).
+
+    arm: the loaded model. world: its collision world (plate, table, object box). home: (n,) the configuration
+    reachability's IK solutions are wrapped towards (joint turns), so they do not depend on the current state.
+    """
+
+    def __init__(self, arm: ArmModel, world: CollisionWorld, home: NDArray[np.float64]) -> None:
+        self.arm = arm
+        self.home = np.asarray(home, dtype=np.float64)
+        self.world = world
+        self._data = arm.model.createData()
+        mount = arm.T_base_mount.translation
+        self.arm_azimuth = math.atan2(mount[1], mount[0])
+        self._offsets = [math.radians(o) for o in arm.config.plate_offsets_deg]
+        self._library = [q for q in fixed_seeds(arm, LIBRARY_SIZE, seed=1) if world.collision(q, 0.0) is None]
+        self._library_tree = KDTree(np.array([self._feature(arm.camera_pose(q, self._data)) for q in self._library]))
+        self._wrist_joint = int(arm.model.frames[arm.camera_frame].parentJoint)
+        self._wrist_in_camera, self._root, self.reach = self._reach_bound()
+        self._cache: dict[tuple[object, ...], tuple[list[NDArray[np.float64]], str | None]] = {}
+        self._anchors: dict[tuple[int, ...], NDArray[np.float64] | None] = {}
+        self._last_offset = 0
+
+    # ------------------------------------------------------------------ helpers
+
+    def _reach_bound(self) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+        """(the last joint's origin in the camera frame (3,), the first joint's origin (3,), the largest distance
+        between the two over the seed library and the zero configuration, plus 2 %): a pose whose last joint would
+        be farther than that from the first is out of reach (``no_ik`` without running IK)."""
+        import pinocchio as pin  # pyright: ignore[reportMissingImports]  (under cmeel.prefix)
+
+        model, data = self.arm.model, self._data
+        distances = []
+        wrist_in_camera = np.zeros(3)
+        root = np.zeros(3)
+        for q in [np.zeros(self.arm.nq), *self._library]:
+            pin.framesForwardKinematics(model, data, q)
+            wrist, root = np.array(data.oMi[self._wrist_joint].translation), np.array(data.oMi[1].translation)
+            distances.append(float(np.linalg.norm(wrist - root)))
+            wrist_in_camera = np.array(data.oMf[self.arm.camera_frame].actInv(data.oMi[self._wrist_joint]).translation)
+        return wrist_in_camera, root, 1.02 * max(distances)
+
+    def out_of_reach(self, T_base_camera: Pose) -> bool:
+        """Whether the last joint would be beyond :attr:`reach` from the first for this camera pose."""
+        wrist = T_base_camera.rotation @ self._wrist_in_camera + T_base_camera.translation
+        return bool(np.linalg.norm(wrist - self._root) > self.reach)
+
+    @staticmethod
+    def _feature(T: Pose) -> NDArray[np.float64]:
+        R = T.rotation
+        return np.concatenate([T.translation, ORIENTATION_WEIGHT * R[:, 2], ORIENTATION_WEIGHT * R[:, 0]])
+
+    def plate_angles(self, T_table_camera: Pose, current_angle: float) -> list[float]:
+        """The plate angles tried for this view (rad), in the order of ``plate_offsets_deg``."""
+        x, y = T_table_camera.translation[:2]
+        if math.hypot(x, y) < 1e-9:
+            return [wrap(current_angle + o) for o in self._offsets]
+        return [wrap(self.arm_azimuth + o - math.atan2(y, x)) for o in self._offsets]
+
+    def move_estimate(
+        self, q_from: NDArray[np.float64], q_to: NDArray[np.float64], angle_from: float, angle_to: float
+    ) -> float:
+        """Seconds of a rest-to-rest move: turntable at its speed, then the slowest joint (trapezoid profile)."""
+        turn = abs(wrap(angle_to - angle_from)) / math.radians(self.arm.config.turntable_speed_deg)
+        dq = np.abs(np.asarray(q_to) - np.asarray(q_from))
+        v, a = self.arm.velocity, self.arm.acceleration
+        t = np.where(dq > v * v / a, dq / v + v / a, 2.0 * np.sqrt(dq / a))
+        return float(turn + (np.max(t) if len(t) else 0.0))
+
+    def _ik(
+        self, T_base_camera: Pose, reference: NDArray[np.float64], *, first: bool
+    ) -> tuple[list[NDArray[np.float64]], str | None]:
+        """IK of one pose. first=True (reachability): a pure function of the pose (seeds: its anchor and the
+        library; limits fitted towards home), so a replay of the same plans gets the same answers whatever was
+        asked before. first=False (a move): every branch, the current configuration ``reference`` first."""
+        key = (T_base_camera.translation.tobytes(), T_base_camera.rotation.tobytes(), first)
+        if not first:
+            key += (np.asarray(reference).tobytes(),)
+        hit = self._cache.get(key)
+        if hit is not None:
+            return hit
+
+        def seeds() -> Iterator[NDArray[np.float64]]:  # lazily: the library is searched only if needed
+            if not first:
+                yield np.asarray(reference, dtype=np.float64)
+            anchor = self._anchor(T_base_camera)
+            if anchor is not None:
+                yield anchor
+            k = self.arm.config.ik_seeds if first else 2 * self.arm.config.ik_seeds
+            if first and anchor is None:
+                k = 1  # the cell's centre is out of reach: one more try (a cell on the workspace's edge), not all
+            yield from self._library_seeds(T_base_camera, k)
+
+        result = solve_ik(self.arm, T_base_camera, seeds(), self.home if first else reference, self._data, first=first)
+        if len(self._cache) >= CACHE_SIZE:
+            self._cache.clear()
+        self._cache[key] = result
+        return result
+
+    def _library_seeds(self, T_base_camera: Pose, k: int) -> list[NDArray[np.float64]]:
+        _, idx = self._library_tree.query(self._feature(T_base_camera), k=min(k, len(self._library)))
+        return [self._library[i] for i in np.atleast_1d(idx)]
+
+    def _anchor(self, T_base_camera: Pose) -> NDArray[np.float64] | None:
+        """The IK solution of the centre of the pose's grid cell (``ANCHOR_STEP`` metres, ``ANCHOR_AXIS_STEP`` per
+        camera-axis component), computed once per cell: a seed a few iterations from any pose of the cell."""
+        p = np.round(T_base_camera.translation / ANCHOR_STEP)
+        z = np.round(T_base_camera.rotation[:, 2] / ANCHOR_AXIS_STEP)
+        x = np.round(T_base_camera.rotation[:, 0] / ANCHOR_AXIS_STEP)
+        key = (*p.astype(int), *z.astype(int), *x.astype(int))
+        if key in self._anchors:
+            return self._anchors[key]
+        z_axis = z / max(float(np.linalg.norm(z)), 1e-12)
+        x_axis = x - (x @ z_axis) * z_axis
+        anchor: NDArray[np.float64] | None = None
+        if float(np.linalg.norm(x_axis)) > 1e-6 and float(np.linalg.norm(z)) > 1e-6:
+            x_axis /= np.linalg.norm(x_axis)
+            centre = Pose(np.column_stack([x_axis, np.cross(z_axis, x_axis), z_axis]), p * ANCHOR_STEP)
+            if not self.out_of_reach(centre):
+                seeds = self._library_seeds(centre, self.arm.config.ik_seeds)
+                solutions, _ = solve_ik(self.arm, centre, seeds, self.home, self._data, first=True)
+                anchor = solutions[0] if solutions else None
+        if len(self._anchors) >= CACHE_SIZE:
+            self._anchors.clear()
+        self._anchors[key] = anchor
+        return anchor
+
+    # ------------------------------------------------------------------ queries
+
+    def reachability(
+        self, T_table_camera: Pose, q_current: NDArray[np.float64], angle_current: float
+    ) -> tuple[ArmTarget | None, str | None]:
+        """A plate angle whose IK solution is inside the limits and free (the first found; the offset that
+        served the previous query is tried first), or (None, reason)."""
+        worst = "no_ik"
+        angles = self.plate_angles(T_table_camera, angle_current)
+        order = [self._last_offset, *(i for i in range(len(angles)) if i != self._last_offset)]
+        for i in order:  # the offset that served the previous view first: neighbours behave alike
+            target, reason = self._try(T_table_camera, angles[i], q_current, angle_current, first=True)
+            if target is not None:
+                self._last_offset = i
+                return target, None
+            assert reason is not None
+            if _severity(reason) > _severity(worst):
+                worst = reason
+        return None, worst
+
+    def best_target(
+        self, T_table_camera: Pose, q_current: NDArray[np.float64], angle_current: float
+    ) -> tuple[ArmTarget | None, str | None]:
+        """Among every plate angle and IK branch, the free target with the shortest estimated move."""
+        best: ArmTarget | None = None
+        worst = "no_ik"
+        for angle in self.plate_angles(T_table_camera, angle_current):
+            target, reason = self._try(T_table_camera, angle, q_current, angle_current, first=False)
+            if target is None:
+                assert reason is not None
+                if _severity(reason) > _severity(worst):
+                    worst = reason
+            elif best is None or target.move_estimate < best.move_estimate:
+                best = target
+        return (best, None) if best is not None else (None, worst)
+
+    def _try(
+        self, T_table_camera: Pose, angle: float, q_current: NDArray[np.float64], angle_current: float, *, first: bool
+    ) -> tuple[ArmTarget | None, str | None]:
+        R = rz_matrix(angle)
+        T_base_camera = Pose.trusted(R @ T_table_camera.rotation, R @ T_table_camera.translation)
+        if self.out_of_reach(T_base_camera):
+            return None, "no_ik"
+        solutions, reason = self._ik(T_base_camera, q_current, first=first)
+        if not solutions:
+            return None, reason
+        best: ArmTarget | None = None
+        collision: str | None = None
+        if first and (collision := self.world.collision(solutions[0], angle)) is not None:
+            # another branch may be free: the library's seeds, keeping only a free solution (state-independent)
+            seeds = self._library_seeds(T_base_camera, self.arm.config.ik_seeds)
+
+            def free(q: NDArray[np.float64]) -> bool:
+                return self.world.collision(q, angle) is None
+
+            solutions, _ = solve_ik(self.arm, T_base_camera, seeds, self.home, self._data, first=True, accept=free)
+        for q in solutions:
+            hit = self.world.collision(q, angle)
+            if hit is not None:
+                collision = collision or hit
+                continue
+            estimate = self.move_estimate(q_current, q, angle_current, angle)
+            if best is None or estimate < best.move_estimate:
+                best = ArmTarget(angle, q, self.arm.camera_pose(q, self._data), estimate)
+            if first:
+                break
+        return (best, None) if best is not None else (None, collision)

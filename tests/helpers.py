@@ -1,0 +1,65 @@
+"""Helpers every test package shares: the small planner config, free ports, waiting for a session's state."""
+
+from __future__ import annotations
+
+import socket
+import threading
+from collections.abc import Callable, Iterable
+from typing import Any
+
+from planner import PlannerConfig
+
+SMALL: dict[str, Any] = {
+    "voxel": {"resolution": 0.02},
+    "candidates": {"count": 60, "parallels": 4},
+    "cluster": {"t_min": 2, "t_max": 6},
+}
+"""A coarse map and few candidates: a capture + plan takes well under a second."""
+
+SMALL_CONFIG = PlannerConfig().replace(**SMALL)
+"""``SMALL`` as a PlannerConfig."""
+
+SMALL_FLAGS = ["--resolution", "0.02", "--candidates", "60", "--t-min", "2", "--t-max", "6"]
+"""``SMALL`` as ``nbv scan`` / ``nbv bench`` flags (the default 10 parallels)."""
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that nothing listens on now."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_for_state(session: Any, states: Iterable[str], timeout: float = 60.0) -> str:
+    """Block until ``session`` (a workbench Session) is in one of ``states``; woken by its events, no polling.
+
+    Returns the state reached; AssertionError after ``timeout`` seconds.
+    """
+    wanted = {str(s) for s in states}
+    changed = threading.Event()
+
+    def listener(_session: Any, _event: Any) -> None:
+        changed.set()
+
+    session.listeners.append(listener)
+    try:
+        while str(session.state) not in wanted:
+            if not changed.wait(timeout):
+                raise AssertionError(f"session {session.id}: still {session.state} after {timeout} s, wanted {wanted}")
+            changed.clear()
+        return str(session.state)
+    finally:
+        session.listeners.remove(listener)
+
+
+def wait_until(predicate: Callable[[], Any], timeout: float = 30.0, what: str = "condition") -> Any:
+    """For things that send no event (a process, a socket): poll ``predicate`` every 50 ms until truthy."""
+    done = threading.Event()
+    deadline = timeout
+    while deadline > 0:
+        value = predicate()
+        if value:
+            return value
+        done.wait(0.05)
+        deadline -= 0.05
+    raise AssertionError(f"{what}: not reached after {timeout} s")

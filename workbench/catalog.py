@@ -1,0 +1,142 @@
+"""The objects a session can scan: built-ins, files in the models directory, and uploads.
+
+A request names a model; it never names a path. Names are looked up in the
+catalogue (built-in names, file names directly inside ``models_dir``, and
+``uploads/<file>`` directly inside ``data_dir/uploads``), so no request can reach
+a file outside those two directories.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import trimesh
+
+from workbench.errors import Invalid, NotFound, TooLarge
+from workbench.settings import WorkbenchSettings
+
+ModelKind = Literal["builtin", "file", "upload"]
+UPLOAD_PREFIX = "uploads/"
+
+
+@dataclass(frozen=True)
+class ModelInfo:
+    """One entry of the catalogue. ``path`` is None for built-ins."""
+
+    name: str
+    kind: ModelKind
+    description: str
+    path: Path | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        return {"name": self.name, "kind": self.kind, "description": self.description}
+
+
+def _suffixes() -> tuple[str, ...]:
+    from devices.mesh import SUPPORTED_SUFFIXES
+
+    return tuple(SUPPORTED_SUFFIXES)
+
+
+def _files(directory: Path) -> list[Path]:
+    """Mesh files directly in ``directory``; a symlink counts only when it resolves inside ``directory``."""
+    if not directory.is_dir():
+        return []
+    suffixes = _suffixes()
+    root = directory.resolve()
+    return sorted(
+        p
+        for p in directory.iterdir()
+        if p.is_file()
+        and not p.name.startswith(".")
+        and p.suffix.lower() in suffixes
+        and p.resolve().is_relative_to(root)
+    )
+
+
+def upload_dir(settings: WorkbenchSettings) -> Path:
+    return settings.data_dir / "uploads"
+
+
+def list_models(settings: WorkbenchSettings) -> list[ModelInfo]:
+    """Built-ins first, then the models directory, then uploads."""
+    from devices.builtins import BUILTIN_OBJECTS
+
+    models = [ModelInfo(name, "builtin", text) for name, text in BUILTIN_OBJECTS.items()]
+    default = settings.devices.model  # `nbv serve --model some/file.obj`: the operator's choice, offered too
+    if default not in BUILTIN_OBJECTS and Path(default).is_file() and Path(default).suffix.lower() in _suffixes():
+        models.append(ModelInfo(default, "file", f"{Path(default).name} (the server's default model)", Path(default)))
+    models += [ModelInfo(p.name, "file", f"{p.name} in {settings.models_dir}", p) for p in _files(settings.models_dir)]
+    models += [
+        ModelInfo(UPLOAD_PREFIX + p.name, "upload", f"uploaded {p.name}", p) for p in _files(upload_dir(settings))
+    ]
+    return models
+
+
+def find_model(settings: WorkbenchSettings, name: str) -> ModelInfo:
+    """The catalogue entry called ``name``; NotFound lists what exists."""
+    models = list_models(settings)
+    for info in models:
+        if info.name == name:
+            return info
+    known = ", ".join(m.name for m in models)
+    raise NotFound(f"model {name!r}: unknown (known: {known})")
+
+
+def load_model(settings: WorkbenchSettings, name: str) -> trimesh.Trimesh:
+    """The placed mesh (on the plate, scaled to ``devices.size``) of model ``name``.
+
+    NotFound for an unknown name, Invalid for a file that is not a usable mesh.
+    """
+    from devices.builtins import make_builtin
+    from devices.mesh import load_mesh
+
+    info = find_model(settings, name)
+    size = settings.devices.size
+    try:
+        if info.kind == "builtin":
+            return make_builtin(info.name, size)
+        assert info.path is not None
+        return load_mesh(info.path, up=settings.devices.up, size=size)
+    except ValueError as exc:
+        raise Invalid(f"model {name!r}: {exc}") from None
+
+
+_SAFE = re.compile(r"[^A-Za-z0-9_.-]+")
+
+
+def save_upload(settings: WorkbenchSettings, filename: str, data: bytes) -> ModelInfo:
+    """Store an uploaded mesh under ``data_dir/uploads`` after checking it loads.
+
+    The stored name is the sanitised stem plus a content hash, so two uploads
+    never overwrite each other and the name carries no path. TooLarge over
+    ``max_upload_bytes``; Invalid for an unsupported or unusable file
+    (nothing is kept then).
+    """
+    from devices.mesh import load_mesh
+
+    if len(data) > settings.max_upload_bytes:
+        raise TooLarge(f"upload: {len(data)} bytes is over the limit of {settings.max_upload_bytes} bytes")
+    if not data:
+        raise Invalid("upload: empty file")
+    suffix = Path(filename).suffix.lower()
+    if suffix not in _suffixes():
+        raise Invalid(f"upload: unsupported file type {suffix or '(none)'!r} (supported: {', '.join(_suffixes())})")
+    stem = _SAFE.sub("_", Path(filename).stem)[:40].strip("._") or "mesh"
+    digest = hashlib.sha256(data).hexdigest()[:10]
+    directory = upload_dir(settings)
+    directory.mkdir(parents=True, exist_ok=True)
+    final = directory / f"{stem}-{digest}{suffix}"
+    tmp = directory / f".{stem}-{digest}.part{suffix}"
+    tmp.write_bytes(data)
+    try:
+        load_mesh(tmp, up=settings.devices.up, size=settings.devices.size)
+    except ValueError as exc:
+        tmp.unlink(missing_ok=True)
+        raise Invalid(f"upload {filename!r}: {str(exc).replace(str(tmp), 'file')}") from None
+    tmp.replace(final)
+    return ModelInfo(UPLOAD_PREFIX + final.name, "upload", f"uploaded {filename}", final)

@@ -1,0 +1,152 @@
+"""What a new (or resumed) session is made of: the object, the cell (simulated or replay), the faults.
+
+Sources (the ``source`` of ``POST /api/sessions``):
+
+- ``{"kind": "sim"}`` (default): the model on the simulated cell.
+- ``{"kind": "replay", "recording": NAME, "mode": "sequence" | "nearest"}``: a recording folder
+  ``data_dir/recordings/NAME`` (PLY + pose JSON per view, docs/journal.md).
+- ``{"kind": "replay", "session": ID, "mode": ...}``: the frames of a journaled session.
+
+Requests name recordings and sessions; they never give a path. A name is looked
+up among the folders that exist (:func:`list_recordings`), so ``../``, absolute
+paths and symlinks leading out of the data directory find nothing.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from devices.cell import Cell
+from devices.config import DeviceConfig
+from devices.faults import FaultConfig, FaultInjector, with_faults
+from planner import DepthFrame
+from workbench.catalog import find_model, load_model
+from workbench.errors import Invalid, NotFound
+from workbench.journal.store import SESSION_ID, list_journals, read_journal
+from workbench.settings import WorkbenchSettings
+
+SURFACE_SAMPLES = 10_000
+"""Points sampled on the ground-truth mesh to measure coverage (simulation only)."""
+RECORDING_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
+
+
+@dataclass(eq=False)
+class SessionParts:
+    """The object and devices of a session. ``mesh`` is empty and ``surface_samples`` None without ground truth."""
+
+    model: str
+    model_kind: str
+    mesh: trimesh.Trimesh
+    cell: Cell
+    surface_samples: NDArray[np.float64] | None
+    source: dict[str, Any]
+    injector: FaultInjector
+
+
+def recordings_dir(settings: WorkbenchSettings) -> Path:
+    return settings.data_dir / "recordings"
+
+
+def list_recordings(settings: WorkbenchSettings) -> list[str]:
+    """Names of the recording folders directly inside ``data_dir/recordings`` (no symlinks, no dot names)."""
+    root = recordings_dir(settings)
+    if not root.is_dir():
+        return []
+    return sorted(p.name for p in root.iterdir() if RECORDING_NAME.match(p.name) and p.is_dir() and not p.is_symlink())
+
+
+def ground_truth(settings: WorkbenchSettings, name: str, seed: int) -> tuple[trimesh.Trimesh, NDArray[np.float64]]:
+    """The mesh of model ``name`` and ``SURFACE_SAMPLES`` points on it (seeded). NotFound / Invalid."""
+    from devices.mesh import sample_surface
+
+    mesh = load_model(settings, name)
+    try:
+        return mesh, sample_surface(mesh, SURFACE_SAMPLES, seed=seed)
+    except ValueError as exc:
+        raise Invalid(f"model {name!r}: {exc}") from None
+
+
+def replay_frames(settings: WorkbenchSettings, source: dict[str, Any]) -> tuple[list[DepthFrame], str, str | None]:
+    """(frames, label, ground-truth model name or None) of a replay source. 404 unknown name, 422 bad data."""
+    from devices.replay import load_recording
+
+    if source.get("recording") is not None:
+        name = str(source["recording"])
+        if name not in list_recordings(settings):  # a lookup among what exists, never a path join
+            known = ", ".join(list_recordings(settings)) or "none"
+            raise NotFound(f"recording {name!r}: unknown (known: {known})")
+        try:
+            return load_recording(recordings_dir(settings) / name), f"replay:{name}", None
+        except ValueError as exc:
+            raise Invalid(f"recording {name!r}: {str(exc).replace(str(settings.data_dir), '<data>')}") from None
+    session = str(source.get("session") or "")
+    folders = {p.name: p for p in list_journals(settings.data_dir)} if SESSION_ID.match(session) else {}
+    if session not in folders:
+        raise NotFound(f"journaled session {session!r}: unknown")
+    try:
+        journal = read_journal(folders[session])
+        frames = [journal.frame(e) for e in journal.of_kind("capture") if e.get("frame")]
+    except ValueError as exc:
+        raise Invalid(f"journaled session {session!r}: {exc}") from None
+    if not frames:
+        raise Invalid(f"journaled session {session!r}: no frame to replay")
+    truth = journal.header.get("model", {}).get("name")
+    return frames, f"replay:{session}", truth if journal.header.get("source", {}).get("kind") == "sim" else None
+
+
+def build_parts(
+    settings: WorkbenchSettings,
+    model: str | None,
+    source: dict[str, Any] | None,
+    seed: int,
+    devices: DeviceConfig,
+    faults: FaultConfig,
+) -> SessionParts:
+    """The object and the (fault-injecting) devices of a session. 404/422 with a clear message on bad input."""
+    from devices.sim import make_sim_cell
+
+    source = dict(source or {"kind": "sim"})
+    kind = source.get("kind", "sim")
+    if kind == "sim":
+        name = model or settings.devices.model
+        try:
+            info = find_model(settings, name)
+        except NotFound as exc:  # a bad parameter of this request, not an unknown resource
+            raise Invalid(exc.detail) from None
+        mesh, samples = ground_truth(settings, name, seed)
+        try:
+            cell = make_sim_cell(mesh, devices.camera, devices.cell, seed=seed)
+        except ValueError as exc:
+            raise Invalid(f"model {name!r}: {exc}") from None
+        model_kind = info.kind
+    elif kind == "replay":
+        from devices.replay import ReplayCell
+
+        frames, name, truth = replay_frames(settings, source)
+        mesh, samples = trimesh.Trimesh(), None
+        if truth is not None:
+            with contextlib.suppress(NotFound, Invalid):  # gone: no coverage, the replay still works
+                mesh, samples = ground_truth(settings, truth, seed)
+        try:
+            cell = ReplayCell(frames, devices.cell, source.get("mode", "sequence"))
+        except ValueError as exc:
+            raise Invalid(f"{name}: {exc}") from None
+        model_kind = "replay"
+    else:
+        raise Invalid(f"source.kind: 'sim' or 'replay', got {kind!r}")
+    injector = FaultInjector(faults)
+    with_faults(cell, injector)
+    return SessionParts(name, model_kind, mesh, cell, samples, source, injector)
+
+
+def session_devices(settings: WorkbenchSettings, model: str, seed: int) -> DeviceConfig:
+    return dataclasses.replace(settings.devices, model=model, seed=seed)

@@ -1,0 +1,152 @@
+"""Rebuild a session from its journal: re-integrate the journaled frames through a fresh Planner.
+
+The planner's state after a frame depends on every earlier integrate *and plan*
+(the fits are warm-started, the fits' RNG advances), so the events are replayed
+in their journaled order: ``capture`` -> ``Planner.integrate`` of the stored frame,
+``plan`` -> ``Planner.plan`` with the cell's reachability, ``config`` -> the same
+change. Every step is checked against what the journal recorded (points, voxel
+counts, iteration, coverage, best view and its score); differences are listed
+in ``Rebuilt.mismatches``. Used by ``POST /api/sessions/{id}/resume`` and ``nbv replay``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner import Planner, PlannerConfig, PlanResult, Pose
+from planner.planner import IntegrationReport
+from workbench.journal.store import Journal
+from workbench.record import SessionRecord
+from workbench.states import PendingPlan
+from workbench.summaries import best_of, capture_fields, plan_fields, voxel_counts
+
+SCORE_RTOL = 1e-9
+"""Relative tolerance of a replayed score (the same computation on the same build is exact)."""
+COVERAGE_ATOL = 1e-3
+"""Absolute tolerance of a replayed coverage: open3d's ICP sums in parallel, so a pose can differ in its last
+bits when the original ran beside other sessions; a few of the 10 000 surface samples at the 5 mm radius may
+flip. Points and voxel counts are still compared exactly."""
+
+
+@dataclass
+class ReplayedCapture:
+    """One journaled capture re-integrated, and the plan made after it (if one was journaled)."""
+
+    event: dict[str, Any]
+    report: IntegrationReport
+    voxels: dict[str, int]
+    coverage: float | None
+    plans: list[tuple[dict[str, Any], PlanResult]] = field(default_factory=list)
+
+
+@dataclass
+class Rebuilt:
+    """A session's state rebuilt from its journal."""
+
+    planner: Planner
+    config: PlannerConfig
+    record: SessionRecord
+    captures: list[ReplayedCapture]
+    pending: PendingPlan | None
+    last: PendingPlan | None
+    used: set[str]
+    stale: set[str]
+    mismatches: list[str]
+    interrupted: str | None
+    """plan_id of a decision whose capture never happened (the step in flight at the crash)."""
+    device_state: dict[str, Any] | None
+
+
+def _close(a: float | None, b: float | None, rtol: float = SCORE_RTOL) -> bool:
+    if a is None or b is None:
+        return a is b
+    return math.isclose(a, b, rel_tol=rtol, abs_tol=1e-12)
+
+
+def rebuild(
+    journal: Journal,
+    reachable: Callable[[Pose], bool],
+    coverage: Callable[[NDArray[np.float64]], float] | None = None,
+) -> Rebuilt:
+    """Replay ``journal`` through a fresh Planner. ValueError for a damaged journal or frame.
+
+    reachable: the cell's check, as the session used it when planning.
+    coverage: cloud -> coverage of the ground truth, when it is known (simulation).
+    """
+    header = journal.header
+    config = PlannerConfig.from_dict(header["config"])
+    planner = Planner(config)
+    record = SessionRecord.from_header(header)
+    captures: list[ReplayedCapture] = []
+    mismatches: list[str] = []
+    pending: PendingPlan | None = None
+    last: PendingPlan | None = None
+    in_flight: PendingPlan | None = None
+    used: set[str] = set()
+    stale: set[str] = set()
+    device_state: dict[str, Any] | None = None
+
+    def differ(what: str, recorded: Any, replayed: Any) -> None:
+        mismatches.append(f"{what}: journal {recorded!r}, replay {replayed!r}")
+
+    for ev in journal.events:
+        kind = ev["kind"]
+        if kind == "config":
+            config = config.replace(**ev["changes"])
+            planner.config = config
+            record.apply(ev)
+        elif kind == "capture":
+            it = int(ev["iteration"])
+            report = planner.integrate(journal.frame(ev))
+            voxels = voxel_counts(planner)
+            cov = float(coverage(planner.cloud)) if coverage is not None else None
+            if report.iteration != it:
+                differ(f"capture {it}: iteration", it, report.iteration)
+            if report.n_points_total != ev["points"]:
+                differ(f"capture {it}: points", ev["points"], report.n_points_total)
+            if ev.get("voxels") is not None and voxels != ev["voxels"]:
+                differ(f"capture {it}: voxel counts", ev["voxels"], voxels)
+            if cov is not None and ev.get("coverage") is not None and abs(cov - ev["coverage"]) > COVERAGE_ATOL:
+                differ(f"capture {it}: coverage", ev["coverage"], cov)
+            # a journal of an older build lacks some fields: the replay supplies them, the journal's values win
+            record.apply({**capture_fields(report, voxels, cov), **ev})
+            captures.append(ReplayedCapture(ev, report, voxels, cov))
+            if in_flight is not None:
+                used.add(in_flight.plan_id)
+                in_flight = None
+            device_state = ev.get("device_state")
+        elif kind == "plan":
+            plan = planner.plan(reachable=reachable)
+            best, recorded = best_of(plan), ev.get("best")
+            where = f"plan {ev['plan_id']} (view {plan.iteration})"
+            if (best is None) != (recorded is None):
+                differ(f"{where}: best view", recorded, best)
+            elif best is not None and recorded is not None:
+                if best["index"] != recorded["index"]:
+                    differ(f"{where}: best index", recorded["index"], best["index"])
+                elif not _close(best["score"], recorded["score"]):
+                    differ(f"{where}: best score", recorded["score"], best["score"])
+            entry = PendingPlan(str(ev["plan_id"]), plan, float(ev["time"]))
+            if pending is not None:
+                stale.add(pending.plan_id)
+            pending = last = entry
+            record.apply({**plan_fields(plan), **ev})
+            if captures:
+                captures[-1].plans.append((ev, plan))
+        else:
+            record.apply(ev)
+            if kind in ("decision", "retry") and pending is not None and ev.get("plan_id") == pending.plan_id:
+                in_flight, pending = pending, None
+            elif kind == "error" and in_flight is not None and ev.get("restored_plan") == in_flight.plan_id:
+                pending, in_flight = in_flight, None
+    interrupted = None
+    if in_flight is not None:  # killed between the decision and its capture: the step never completed
+        interrupted = in_flight.plan_id
+        pending = in_flight
+    return Rebuilt(planner, config, record, captures, pending, last, used, stale, mismatches, interrupted, device_state)

@@ -1,0 +1,216 @@
+"""The session journal: a folder per session with a JSON-lines event log and one ``.npz`` per frame.
+
+Layout (format ``nbv-journal``, version ``JOURNAL_VERSION``; docs/journal.md is the reference)::
+
+    <data_dir>/sessions/<id>/journal.jsonl        one JSON object per line, appended
+    <data_dir>/sessions/<id>/frames/000001.npz    the DepthFrame of capture 1 (devices/frames.py)
+
+Durability: a frame file is written to a temp name, fsynced and renamed before
+the ``capture`` event that names it is appended; each event is one ``write`` of
+one line on an ``O_APPEND`` descriptor followed by ``fsync``. A ``kill -9`` can
+therefore lose at most the step in flight: a frame without its event (ignored)
+or a torn last line (ignored by the reader, cut off when the journal is reopened).
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import re
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from devices.frames import fsync_dir, load_frame, save_frame
+from planner import DepthFrame
+from workbench.jsonable import jsonable
+
+JOURNAL_FORMAT = "nbv-journal"
+JOURNAL_VERSION = 1
+JOURNAL_FILE = "journal.jsonl"
+SESSION_ID = re.compile(r"^[0-9a-f]{8}$")
+"""Session ids are 8 lowercase hex digits; nothing else is ever joined to a path."""
+
+
+def sessions_dir(data_dir: Path) -> Path:
+    return Path(data_dir) / "sessions"
+
+
+def make_event(seq: int, kind: str, data: dict[str, Any]) -> dict[str, Any]:
+    """The event ``{"seq", "time", "kind", **data}`` as the journal stores it (data made JSON-ready)."""
+    return {"seq": seq, "time": time.time(), "kind": kind, **jsonable(data)}
+
+
+class JournalBusyError(ValueError):
+    """Another writer (another server on the same data directory) holds the journal."""
+
+
+class JournalWriter:
+    """Appends events (and frames) to one session's journal. Thread-safe; every write is fsynced."""
+
+    def __init__(self, directory: Path, *, fsync: bool = True, seq: int = 0) -> None:
+        self.directory = Path(directory)
+        self.frames_dir = self.directory / "frames"
+        self.fsync = fsync
+        self._lock = threading.Lock()
+        self._seq = seq
+        self.frames_dir.mkdir(parents=True, exist_ok=True)
+        self._fd = os.open(self.directory / JOURNAL_FILE, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+        try:  # one writer per journal, also across processes (released by the OS when the process dies)
+            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(self._fd)
+            raise JournalBusyError(f"session {self.directory.name}: its journal is open in another process") from None
+
+    @classmethod
+    def create(cls, data_dir: Path, session_id: str, header: dict[str, Any], *, fsync: bool = True) -> JournalWriter:
+        """A new journal whose first event is ``session`` with ``header`` (format and version added)."""
+        if not SESSION_ID.match(session_id):
+            raise ValueError(f"session id {session_id!r}: not 8 hex digits")
+        root = sessions_dir(data_dir)
+        directory = root / session_id
+        directory.mkdir(parents=True, exist_ok=False)
+        writer = cls(directory, fsync=fsync)
+        if fsync:
+            fsync_dir(root)
+        writer.append("session", format=JOURNAL_FORMAT, version=JOURNAL_VERSION, id=session_id, **header)
+        return writer
+
+    @classmethod
+    def reopen(cls, journal: Journal, *, fsync: bool = True) -> JournalWriter:
+        """Append to an existing journal, first cutting off a torn last line left by a crash."""
+        path = journal.directory / JOURNAL_FILE
+        last = journal.events[-1]["seq"] if journal.events else journal.header["seq"]
+        writer = cls(journal.directory, fsync=fsync, seq=int(last) + 1)  # locks first, then repairs
+        if journal.valid_bytes < path.stat().st_size:
+            os.ftruncate(writer._fd, journal.valid_bytes)
+            os.fsync(writer._fd)
+        return writer
+
+    def append(self, kind: str, **data: Any) -> dict[str, Any]:
+        """Append one event ``{"seq", "time", "kind", **data}`` and make it durable; returns it."""
+        with self._lock:
+            event = make_event(self._seq, kind, data)
+            line = (json.dumps(event, separators=(",", ":"), allow_nan=False) + "\n").encode("utf-8")
+            os.write(self._fd, line)
+            if self.fsync:
+                os.fsync(self._fd)
+            self._seq += 1
+            return event
+
+    def write_frame(self, iteration: int, frame: DepthFrame) -> tuple[str, str]:
+        """Store the frame of capture ``iteration``; returns (path relative to the journal folder, sha256)."""
+        name = f"frames/{iteration:06d}.npz"
+        digest = save_frame(self.directory / name, frame, fsync=self.fsync)
+        return name, digest
+
+    def discard_frame(self, name: str) -> None:
+        """Remove a frame that was written but then rejected (best effort)."""
+        (self.directory / name).unlink(missing_ok=True)
+
+    def close(self) -> None:
+        with self._lock:
+            if self._fd >= 0:
+                os.close(self._fd)
+                self._fd = -1
+
+
+@dataclass
+class Journal:
+    """A journal read back: the ``session`` header and the events after it, in order."""
+
+    directory: Path
+    header: dict[str, Any]
+    events: list[dict[str, Any]] = field(default_factory=list)
+    valid_bytes: int = 0
+    """Length of the file up to the end of the last complete line (a torn tail is past it)."""
+    torn: bool = False
+
+    @property
+    def session_id(self) -> str:
+        return str(self.header["id"])
+
+    @property
+    def deleted(self) -> bool:
+        return any(e["kind"] == "deleted" for e in self.events)
+
+    def of_kind(self, *kinds: str) -> list[dict[str, Any]]:
+        return [e for e in self.events if e["kind"] in kinds]
+
+    def frame(self, event: dict[str, Any]) -> DepthFrame:
+        """The DepthFrame of a ``capture`` event (checked against its sha256). ValueError if missing or damaged."""
+        name = str(event["frame"])
+        if not re.fullmatch(r"frames/\d{6}\.npz", name):
+            raise ValueError(f"capture {event.get('iteration')}: bad frame name {name!r}")
+        return load_frame(self.directory / name, event.get("frame_sha256"))
+
+
+def read_journal(directory: str | Path) -> Journal:
+    """Read ``directory/journal.jsonl``. ValueError when it is missing, not a journal or of another version.
+
+    A last line without its newline, or one that is not JSON, is the torn write of a
+    crash: it is left out (``torn`` is set). A bad line before the last is damage: ValueError.
+    """
+    directory = Path(directory)
+    path = directory / JOURNAL_FILE
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ValueError(f"{directory.name}: no journal ({exc.strerror})") from None
+    events: list[dict[str, Any]] = []
+    valid = 0
+    *complete, tail = data.split(b"\n")
+    torn = tail != b""  # a last line without its newline: the write was cut
+    for i, raw in enumerate(complete):
+        try:
+            event = json.loads(raw)
+            if not isinstance(event, dict) or "kind" not in event or "seq" not in event:
+                raise ValueError("not an event")
+        except ValueError:
+            if i == len(complete) - 1:  # garbage in the last line (power loss): also a torn write
+                torn = True
+                break
+            raise ValueError(f"{directory.name}/{JOURNAL_FILE}: line {i + 1} is damaged") from None
+        events.append(event)
+        valid += len(raw) + 1
+    if not events or events[0]["kind"] != "session":
+        raise ValueError(f"{directory.name}: not a session journal (no 'session' event first)")
+    header = events[0]
+    if header.get("format") != JOURNAL_FORMAT:
+        raise ValueError(f"{directory.name}: format {header.get('format')!r}, expected {JOURNAL_FORMAT!r}")
+    if header.get("version") != JOURNAL_VERSION:
+        raise ValueError(
+            f"{directory.name}: journal version {header.get('version')!r}; this build reads {JOURNAL_VERSION}"
+        )
+    return Journal(directory, header, events[1:], valid, torn)
+
+
+def in_use(directory: Path) -> bool:
+    """Whether a live writer (this or another process) holds the journal in ``directory``."""
+    try:
+        fd = os.open(Path(directory) / JOURNAL_FILE, os.O_RDONLY)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except OSError:
+        return True
+    finally:
+        os.close(fd)  # closing drops the probe's lock
+    return False
+
+
+def list_journals(data_dir: Path) -> list[Path]:
+    """Session folders (named like a session id, not symlinks) under ``data_dir/sessions``, oldest first."""
+    root = sessions_dir(data_dir)
+    if not root.is_dir():
+        return []
+    found = [
+        p
+        for p in root.iterdir()
+        if SESSION_ID.match(p.name) and p.is_dir() and not p.is_symlink() and (p / JOURNAL_FILE).is_file()
+    ]
+    return sorted(found, key=lambda p: (p / JOURNAL_FILE).stat().st_mtime)

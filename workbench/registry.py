@@ -1,0 +1,296 @@
+"""The registry of sessions: live ones (a Session each, with its own lock) and journaled ones from an earlier
+server process, listed as ``interrupted`` until ``resume`` rebuilds them. The registry's lock guards only its dicts."""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import logging
+import secrets
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from devices.config import DeviceConfig
+from devices.faults import FaultConfig
+from planner import PlannerConfig
+from planner.config import from_dict
+from workbench.errors import Conflict, Invalid, NotFound, StorageFault
+from workbench.factory import SURFACE_SAMPLES, SessionParts, build_parts, session_devices
+from workbench.journal.rebuild import Rebuilt, rebuild
+from workbench.journal.store import JournalBusyError, JournalWriter, in_use, list_journals, read_journal, sessions_dir
+from workbench.limits import check_config
+from workbench.record import SessionRecord
+from workbench.session import Session
+from workbench.settings import WorkbenchSettings
+from workbench.states import State
+from workbench.summaries import session_status
+
+__all__ = ["SURFACE_SAMPLES", "DormantSession", "SessionRegistry"]
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class DormantSession:
+    """A journaled session of an earlier server process (not loaded): what ``GET /api/sessions`` shows of it."""
+
+    id: str
+    directory: Path
+    record: SessionRecord
+    """Derived from the journal's events (no frame is read)."""
+    stopped: float
+
+    def status(self) -> dict[str, Any]:
+        return session_status(
+            self.record,
+            state=State.INTERRUPTED,
+            source="journal",
+            error=f"the server stopped during this session; POST /api/sessions/{self.id}/resume to continue it",
+        )
+
+
+def _dormant(directory: Path) -> DormantSession | None:
+    journal = read_journal(directory)
+    if journal.deleted:
+        return None
+    record = SessionRecord.from_header(journal.header)
+    for event in journal.events:
+        record.apply(event)
+    stopped = journal.events[-1]["time"] if journal.events else journal.header["time"]
+    return DormantSession(journal.session_id, directory, record, float(stopped))
+
+
+class SessionRegistry:
+    """Creates, finds, resumes and deletes sessions. ``on_create`` / ``on_delete`` hooks let the scene follow."""
+
+    def __init__(self, settings: WorkbenchSettings) -> None:
+        self.settings = settings
+        self._lock = threading.Lock()
+        self._sessions: dict[str, Session] = {}
+        self._dormant: dict[str, DormantSession] = {}
+        self._resuming: set[str] = set()
+        self.on_create: list[Callable[[Session], None]] = []
+        self.on_delete: list[Callable[[Session], None]] = []
+        if settings.journal:
+            for directory in list_journals(settings.data_dir):
+                if in_use(directory):  # live in another server on the same data directory
+                    continue
+                try:
+                    dormant = _dormant(directory)
+                except (ValueError, KeyError, TypeError) as exc:
+                    log.warning("journal %s not listed: %s", directory, exc)
+                    continue
+                if dormant is not None:
+                    self._dormant[dormant.id] = dormant
+
+    # ------------------------------------------------------------------ create
+
+    def planner_config(self, overrides: dict[str, Any] | None, seed: int) -> PlannerConfig:
+        """The default planner config with ``overrides`` (any subset); the seed goes to ``cluster.seed``
+        unless the overrides set it. Invalid for unknown names, values out of range or beyond
+        the API's bounds (app/limits.py)."""
+        overrides = dict(overrides or {})
+        cluster = overrides.get("cluster") or {}
+        if isinstance(cluster, dict):
+            overrides["cluster"] = {"seed": seed, **cluster}
+        try:
+            config = self.settings.planner.replace(**overrides)
+        except (ValueError, TypeError) as exc:
+            raise Invalid(f"config: {exc}") from None
+        check_config(config)
+        return config
+
+    def _new_id(self) -> str:
+        """A fresh id, unused by live, journaled and on-disk sessions (caller holds the lock)."""
+        while True:
+            sid = secrets.token_hex(4)
+            taken = sid in self._sessions or sid in self._dormant or sid in self._resuming
+            if not taken and not (sessions_dir(self.settings.data_dir) / sid).exists():
+                return sid
+
+    def create(
+        self,
+        model: str | None = None,
+        config: dict[str, Any] | None = None,
+        seed: int = 0,
+        source: dict[str, Any] | None = None,
+        faults: dict[str, Any] | None = None,
+    ) -> Session:
+        """A new session. 422 for a bad config, model, source or fault setting; 404 for an unknown recording."""
+        planner_config = self.planner_config(config, seed)
+        try:
+            fault_config = self.settings.faults if faults is None else FaultConfig.from_dict(faults)
+        except ValueError as exc:
+            raise Invalid(str(exc)) from None
+        name = model or self.settings.devices.model
+        parts = build_parts(self.settings, name, source, seed, session_devices(self.settings, name, seed), fault_config)
+        devices = session_devices(self.settings, parts.model, seed)
+        with self._lock:
+            session_id = self._new_id()
+            self._resuming.add(session_id)  # reserved while the journal is created outside the lock
+        try:
+            journal = None
+            if self.settings.journal:
+                header = {
+                    "model": {"name": parts.model, "kind": parts.model_kind},
+                    "source": parts.source,
+                    "config": planner_config.to_dict(),
+                    "seed": seed,
+                    "devices": dataclasses.asdict(devices),
+                    "faults": fault_config.to_dict(),
+                }
+                try:
+                    journal = JournalWriter.create(self.settings.data_dir, session_id, header)
+                except OSError as exc:
+                    raise StorageFault(f"cannot journal the session in the data directory ({exc.strerror})") from None
+            wb = self._session(session_id, parts, planner_config, devices, seed, journal)
+            with self._lock:
+                self._sessions[session_id] = wb
+        finally:
+            with self._lock:
+                self._resuming.discard(session_id)
+        for hook in list(self.on_create):
+            hook(wb)
+        return wb
+
+    def _session(
+        self, sid: str, parts: SessionParts, config: PlannerConfig, devices: DeviceConfig, seed: int, journal: Any
+    ) -> Session:
+        s = self.settings
+        return Session(
+            sid,
+            parts,
+            config,
+            devices,
+            seed,
+            journal=journal,
+            capture_timeout=s.capture_timeout,
+            move_timeout=s.move_timeout,
+        )
+
+    # ------------------------------------------------------------------ find
+
+    def get(self, session_id: str) -> Session:
+        """The live session; 409 for an interrupted one (resume it first), 404 for an unknown id."""
+        with self._lock:
+            wb = self._sessions.get(session_id)
+            dormant = session_id in self._dormant
+        if wb is None:
+            if dormant:
+                raise Conflict(
+                    f"session {session_id!r} was interrupted (the server stopped); "
+                    f"POST /api/sessions/{session_id}/resume"
+                )
+            raise NotFound(f"session {session_id!r}: unknown")
+        return wb
+
+    def status(self, session_id: str) -> dict[str, Any]:
+        with self._lock:
+            dormant = self._dormant.get(session_id)
+        return dormant.status() if dormant is not None else self.get(session_id).status()
+
+    def list(self) -> list[Session]:
+        with self._lock:
+            return list(self._sessions.values())
+
+    def list_status(self) -> list[dict[str, Any]]:
+        """Interrupted sessions (oldest first), then live ones."""
+        with self._lock:
+            dormant = sorted(self._dormant.values(), key=lambda d: d.stopped)
+            live = list(self._sessions.values())
+        return [d.status() for d in dormant] + [wb.status() for wb in live]
+
+    # ------------------------------------------------------------------ resume
+
+    def resume(self, session_id: str) -> tuple[Session, Rebuilt]:
+        """Rebuild an interrupted session from its journal: same frames, same config, same seed -> same map
+        and same next plan. Fault injection is not re-armed. 404 unknown, 409 live or resuming, 422 damaged."""
+        with self._lock:
+            dormant = self._dormant.get(session_id)
+            if dormant is None:
+                if session_id in self._sessions or session_id in self._resuming:
+                    raise Conflict(f"session {session_id!r} is live; nothing to resume")
+                raise NotFound(f"session {session_id!r}: unknown")
+            del self._dormant[session_id]
+            self._resuming.add(session_id)
+        try:
+            wb, rebuilt = self._rebuild(dormant)
+        except BaseException:
+            with self._lock:
+                self._dormant[session_id] = dormant
+            raise
+        finally:
+            with self._lock:
+                self._resuming.discard(session_id)
+        with self._lock:
+            self._sessions[session_id] = wb
+        for hook in list(self.on_create):
+            hook(wb)
+        return wb, rebuilt
+
+    def _rebuild(self, dormant: DormantSession) -> tuple[Session, Rebuilt]:
+        from workbench.metrics import coverage
+
+        try:
+            journal = read_journal(dormant.directory)
+            header = journal.header
+            devices = from_dict(DeviceConfig, header["devices"])
+            config = PlannerConfig.from_dict(header["config"])
+            seed = int(header["seed"])
+        except (ValueError, KeyError, TypeError) as exc:
+            raise Invalid(f"session {dormant.id}: cannot resume: {exc}") from None
+        parts = build_parts(self.settings, header["model"]["name"], header.get("source"), seed, devices, FaultConfig())
+        samples = parts.surface_samples
+        try:
+            writer = JournalWriter.reopen(journal)  # first: it locks the journal against a second resumer
+        except JournalBusyError as exc:
+            raise Conflict(str(exc)) from None
+        wb = self._session(dormant.id, parts, config, devices, seed, None)
+        try:
+            rebuilt = rebuild(
+                journal, wb.cell.is_reachable, None if samples is None else lambda c: coverage(samples, c)
+            )
+        except (ValueError, KeyError, TypeError) as exc:
+            writer.close()
+            raise Invalid(f"session {dormant.id}: cannot resume: {exc}") from None
+        wb.restore(rebuilt)
+        wb.journal = writer
+        writer.append(
+            "resume", verified=not rebuilt.mismatches, mismatches=rebuilt.mismatches, interrupted=rebuilt.interrupted
+        )
+        if rebuilt.mismatches:
+            log.warning("session %s resumed with differences: %s", dormant.id, "; ".join(rebuilt.mismatches))
+        return wb, rebuilt
+
+    # ------------------------------------------------------------------ delete and close
+
+    def delete(self, session_id: str) -> None:
+        """Forget a session (live or interrupted). Its journal stays on disk, marked deleted."""
+        with self._lock:
+            wb = self._sessions.pop(session_id, None)
+            dormant = self._dormant.pop(session_id, None) if wb is None else None
+        if wb is None and dormant is None:
+            raise NotFound(f"session {session_id!r}: unknown")
+        if wb is not None:
+            if wb.journal is not None:
+                with contextlib.suppress(OSError):
+                    wb.journal.append("deleted")
+            wb.close()
+            for hook in list(self.on_delete):
+                hook(wb)
+        elif dormant is not None:
+            try:
+                writer = JournalWriter.reopen(read_journal(dormant.directory))
+            except JournalBusyError as exc:
+                with self._lock:
+                    self._dormant[session_id] = dormant
+                raise Conflict(str(exc)) from None
+            writer.append("deleted")
+            writer.close()
+
+    def close(self) -> None:
+        """Stop every session's auto mode (shutdown)."""
+        for wb in self.list():
+            wb.close(timeout=10.0)

@@ -1,0 +1,67 @@
+"""What the workbench needs to run sessions: where models and journals live, limits, timeouts, defaults.
+
+``WorkbenchSettings`` is frozen and knows no server: the web app's ``AppSettings`` (app/settings.py)
+extends it with where it listens, so ``[server] data_dir = ...`` in a TOML file reaches the same field.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from devices.config import DeviceConfig
+from devices.faults import FaultConfig
+from planner.config import PlannerConfig
+from planner.validate import finite, integer
+
+
+def default_models_dir() -> Path:
+    """``../shared/models`` when it exists (the team's test meshes), else ``./models``."""
+    shared = Path("../shared/models")
+    return shared if shared.is_dir() else Path("models")
+
+
+@dataclass(frozen=True)
+class WorkbenchSettings:
+    """Where the sessions' files live and how the sessions run. Paths are resolved when used, not here."""
+
+    models_dir: Path = field(default_factory=default_models_dir)
+    """Directory of mesh files offered as models (.obj, .ply, .stl, .off, .glb)."""
+    data_dir: Path = Path("nbv-data")
+    """Where uploads (``uploads/``), session journals (``sessions/``) and replay recordings
+    (``recordings/``) live. See docs/journal.md."""
+    max_upload_bytes: int = 50 * 1024 * 1024
+    """Uploads larger than this are refused (413)."""
+    capture_timeout: float = 30.0
+    """A capture that takes longer fails with a timeout (the session goes to state error), seconds."""
+    move_timeout: float = 120.0
+    """A cell move (turntable + arm) that takes longer fails with a timeout, seconds."""
+    journal: bool = True
+    """Journal every session under ``data_dir/sessions`` (resume after a crash, ``nbv replay``)."""
+    faults: FaultConfig = field(default_factory=FaultConfig)
+    """Faults injected into every new session's devices (a session's own ``faults`` replace these)."""
+    planner: PlannerConfig = field(default_factory=PlannerConfig)
+    """Default planner configuration; a session's ``config`` overrides any subset of it."""
+    devices: DeviceConfig = field(default_factory=DeviceConfig)
+    """The simulated devices. ``devices.model`` is the default model (a built-in name or a file
+    in models_dir), ``devices.size`` / ``devices.up`` apply to every model file."""
+
+    def __post_init__(self) -> None:
+        if not integer(self.max_upload_bytes) or self.max_upload_bytes < 1:
+            raise ValueError(f"server.max_upload_bytes: must be a positive integer, got {self.max_upload_bytes!r}")
+        for name in ("capture_timeout", "move_timeout"):
+            value = getattr(self, name)
+            if not finite(value):
+                raise ValueError(f"server.{name}: must be a number of seconds (0: no limit), got {value!r}")
+            if value < 0:
+                raise ValueError(f"server.{name}: must be >= 0 (0: no limit), got {value!r}")
+        if not isinstance(self.faults, FaultConfig):
+            raise ValueError("faults: must be a FaultConfig")
+        object.__setattr__(self, "models_dir", Path(self.models_dir))
+        object.__setattr__(self, "data_dir", Path(self.data_dir))
+
+    def replace(self, **changes: Any) -> Any:
+        """A copy with some fields changed (of the same class)."""
+        return dataclasses.replace(self, **changes)

@@ -1,0 +1,131 @@
+"""The value types of a session's state machine: states, decisions, plans waiting for a decision, the events
+listeners receive, and what the 3D scene draws."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import Any
+
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from planner import PlanResult, Pose
+
+
+class State(StrEnum):
+    NEW = "new"
+    CAPTURING = "capturing"
+    READY = "ready"
+    PLANNING = "planning"
+    PLANNED = "planned"
+    MOVING = "moving"
+    AUTO = "auto"
+    DONE = "done"
+    ERROR = "error"
+    INTERRUPTED = "interrupted"
+    """Journaled by an earlier server process that stopped; resume rebuilds it (never a live state)."""
+
+
+BUSY = frozenset({State.CAPTURING, State.PLANNING, State.MOVING, State.AUTO})
+CAN_PLAN = frozenset({State.READY, State.PLANNED, State.DONE, State.ERROR})
+
+
+class SessionEvent(StrEnum):
+    """What a listener (the 3D scene, the page's event stream) is told after a change."""
+
+    STATE = "state"
+    """The state, the error or the progress changed."""
+    PLANNED = "planned"
+    """A new pending plan."""
+    CAPTURED = "captured"
+    """A view was integrated (the map, the cloud and the views changed)."""
+    SELECTION = "selection"
+    """Another candidate is selected."""
+    CUSTOM_POSE = "custom_pose"
+    """A custom pose was proposed."""
+
+
+class DecisionKind(StrEnum):
+    """Why the cell moved: the first view, a person's approval of the planner's choice or of another
+    view (override), or the planner's choice taken without a person (step, auto)."""
+
+    INITIAL = "initial"
+    APPROVE = "approve"
+    OVERRIDE = "override"
+    STEP = "step"
+    AUTO = "auto"
+
+
+@dataclass(frozen=True)
+class Decision:
+    """One decision to take a view at ``pose``: which plan and candidate it answered (None for the first view
+    and for a custom pose's index), the planner's best index of that plan, and whether the pose was custom."""
+
+    kind: DecisionKind
+    pose: Pose
+    plan_id: str | None = None
+    index: int | None = None
+    best_index: int | None = None
+    custom: bool = False
+
+    def to_json(self) -> dict[str, Any]:
+        """``{"kind", "plan_id", "index", "best_index", "pose", "custom"}`` (the journal's decision fields)."""
+        return {
+            "kind": str(self.kind),
+            "plan_id": self.plan_id,
+            "index": self.index,
+            "best_index": self.best_index,
+            "pose": self.pose.to_dict(),
+            "custom": self.custom,
+        }
+
+
+@dataclass(frozen=True)
+class CustomPose:
+    """A pose a person set with the gizmo (or over REST) and whether the cell can reach it."""
+
+    pose: Pose
+    reachable: bool
+    reason: str
+
+    def to_json(self) -> dict[str, Any]:
+        return {"pose": self.pose.to_dict(), "reachable": self.reachable, "reason": self.reason}
+
+
+@dataclass(frozen=True, eq=False)
+class PendingPlan:
+    """A plan waiting for a decision. ``plan_id`` is what an approval must quote."""
+
+    plan_id: str
+    plan: PlanResult
+    created: float
+
+
+@dataclass(frozen=True, eq=False)
+class FailedStep:
+    """The step a fault interrupted, which ``retry`` re-does: move to ``decision.pose``, capture, integrate.
+
+    entry: the plan whose decision this was (restored as pending by the fault), None for the first capture.
+    """
+
+    decision: Decision
+    entry: PendingPlan | None
+
+
+@dataclass(frozen=True, eq=False)
+class SceneData:
+    """What the 3D scene draws, copied out under the lock."""
+
+    session_id: str
+    plan: PlanResult | None
+    plan_id: str | None
+    views: tuple[Pose, ...]
+    cloud: NDArray[np.float64]
+    selected: int | None
+    custom: CustomPose | None
+    mesh: trimesh.Trimesh
+    plate_radius: float
+    fov_y: float
+    aspect: float

@@ -1,0 +1,123 @@
+"""One builder per fact a session reports: a plan's journal fields and REST summary, the best view, voxel
+counts, a capture's journal fields, the session status. Every caller (session, record, rebuild, registry,
+the CLI) uses these, so each fact has one shape."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from planner import Planner, PlanResult, VoxelClass
+from planner.planner import IntegrationReport
+from workbench.states import CustomPose, PendingPlan, State
+
+VOXEL_CLASSES = ("occupied", "frontier", "unknown", "empty")
+
+
+def voxel_counts(planner: Planner) -> dict[str, int]:
+    """``{"occupied", "frontier", "unknown", "empty"}``: how many voxels of each class the map holds."""
+    vm = planner.voxel_map
+    return {name: vm.count(VoxelClass[name.upper()]) for name in VOXEL_CLASSES}
+
+
+def best_of(plan: PlanResult) -> dict[str, Any] | None:
+    """``{"index", "score", "pose"}`` of the plan's best view, or None."""
+    best = plan.best_index
+    if best is None:
+        return None
+    return {
+        "index": best,
+        "score": float(plan.scores[best].score),
+        "pose": plan.candidates[best].T_world_camera.to_dict(),
+    }
+
+
+def fit_json(fit: Any) -> dict[str, Any]:
+    """A ClusterFit as ``{"kind", "t_chosen", "n_points", "seconds", "bic": [[t, bic], ...]}``."""
+    return {
+        "kind": fit.kind,
+        "t_chosen": int(fit.t_chosen),
+        "n_points": int(fit.n_points),
+        "seconds": float(fit.seconds),
+        "bic": [[int(t), float(b)] for t, b in fit.bic],
+    }
+
+
+def plan_fields(plan: PlanResult) -> dict[str, Any]:
+    """The journal's ``plan`` event fields of ``plan`` (besides ``plan_id``): what the record, the status and
+    the rebuild's check read."""
+    return {
+        "iteration": plan.iteration,
+        "best": best_of(plan),
+        "timings": {k: float(v) for k, v in plan.timings.items()},
+        "n_candidates": len(plan.candidates),
+        "n_eligible": int(sum(s.eligible for s in plan.scores)),
+        "n_ellipsoids": {"occupied": len(plan.occupied_ellipsoids), "frontier": len(plan.frontier_ellipsoids)},
+        "fits": [fit_json(f) for f in plan.fits],
+        "terminated": plan.terminated,
+    }
+
+
+PLAN_SUMMARY_KEYS = ("iteration", "best", "timings", "n_candidates", "n_eligible", "terminated")
+
+
+def plan_summary(entry: PendingPlan) -> dict[str, Any]:
+    """``{"plan_id", "iteration", "best": {"index", "pose", "score"} | None, "timings", "n_candidates",
+    "n_eligible", "terminated"}``: the REST answer of a plan, a subset of its journal fields."""
+    fields = plan_fields(entry.plan)
+    return {"plan_id": entry.plan_id, **{k: fields[k] for k in PLAN_SUMMARY_KEYS}}
+
+
+def capture_fields(report: IntegrationReport, voxels: dict[str, int], coverage: float | None) -> dict[str, Any]:
+    """The journal's ``capture`` event fields that come from integrating the frame."""
+    reg = report.registration
+    return {
+        "iteration": report.iteration,
+        "pose_used": report.T_world_camera.to_dict(),
+        "points_frame": report.n_points_frame,
+        "points": report.n_points_total,
+        "growth": report.growth,
+        "voxels": voxels,
+        "coverage": coverage,
+        "registration": None if reg is None else reg.summary(),
+        "timings": {k: float(v) for k, v in report.timings.items()},
+    }
+
+
+def session_status(
+    record: Any,
+    *,
+    state: State,
+    source: str,
+    pending: PendingPlan | None = None,
+    selected: int | None = None,
+    custom: CustomPose | None = None,
+    error: str | None = None,
+    retry: str | None = None,
+    terminated: str | None = None,
+    auto_remaining: int = 0,
+    moves: int = 0,
+) -> dict[str, Any]:
+    """The session summary of ``GET /api/sessions/{id}``, for a live and for an interrupted session alike.
+
+    record: the session's :class:`workbench.record.SessionRecord` (id, model, seed and the last capture).
+    """
+    last = record.iterations[-1] if record.iterations else None
+    return {
+        "id": record.session_id,
+        "model": record.model,
+        "source": source,
+        "state": str(state),
+        "iteration": len(record.iterations),
+        "coverage": None if last is None else last["coverage"],
+        "points": 0 if last is None else last["points"],
+        "voxels": dict(record.voxels),
+        "pending_plan": None if pending is None else plan_summary(pending),
+        "selected": selected,
+        "custom_pose": None if custom is None else custom.to_json(),
+        "error": error,
+        "retry": retry,
+        "terminated": terminated,
+        "auto_remaining": auto_remaining,
+        "moves": moves,
+        "seed": record.seed,
+    }

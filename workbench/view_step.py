@@ -1,0 +1,96 @@
+"""Taking one view, the device half of an approve: move, capture (each under a deadline), store, integrate.
+
+:class:`ViewStep` runs outside the session's lock after the session claimed a busy state; it touches no
+session field, so the session publishes its :class:`ViewOutcome` under its lock. ``Planner.integrate`` is
+atomic and called last, so a device fault, a timeout or a rejected frame leaves the map as it was; a frame
+already written to the journal is removed again. :func:`failure_of` turns what went wrong into the
+session's error message and the domain error its caller receives.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from devices.cell import Cell
+from devices.protocols import DeviceError, UnreachableError
+from devices.timeout import DeviceTimeoutError, call_with_timeout
+from planner import DepthFrame, Planner, Pose, VoxelClass
+from planner.planner import IntegrationReport
+from workbench.errors import DeviceFault, Unreachable, WorkbenchError
+from workbench.journal.store import JournalWriter
+from workbench.metrics import coverage
+from workbench.summaries import voxel_counts
+
+
+@dataclass(frozen=True, eq=False)
+class ViewOutcome:
+    """One view integrated: the frame, the planner's report and the facts the session caches.
+
+    stored: (frame path in the journal folder, sha256), None without a journal.
+    occupied: (K, 3) float64 centres of the occupied voxels after the view (the override check's region).
+    """
+
+    frame: DepthFrame
+    report: IntegrationReport
+    stored: tuple[str, str] | None
+    voxels: dict[str, int]
+    coverage: float | None
+    occupied: NDArray[np.float64]
+
+
+@dataclass
+class ViewStep:
+    """Moves the cell, captures, stores and integrates one view of one session."""
+
+    cell: Cell
+    journal: JournalWriter | None
+    surface_samples: NDArray[np.float64] | None
+    capture_timeout: float
+    move_timeout: float
+
+    def run(self, planner: Planner, pose: Pose, moved: Callable[[], None]) -> ViewOutcome:
+        """Take the view at ``T_table_camera = pose`` into ``planner``; ``moved()`` is called once the cell moved.
+
+        Raises whatever the devices, the journal or ``Planner.integrate`` raised (see :func:`failure_of`).
+        """
+        stored: tuple[str, str] | None = None
+        try:
+            call_with_timeout(lambda: self.cell.move_to(pose), self.move_timeout, "cell move")
+            moved()
+            frame = call_with_timeout(self.cell.capture, self.capture_timeout, "camera capture")
+            if self.journal is not None:
+                stored = self.journal.write_frame(planner.iteration + 1, frame)
+            report = planner.integrate(frame)  # atomic: a ValueError leaves the map as it was
+        except Exception:
+            if stored is not None and self.journal is not None:
+                self.journal.discard_frame(stored[0])
+            raise
+        cov = None if self.surface_samples is None else float(coverage(self.surface_samples, planner.cloud))
+        occupied = planner.voxel_map.centers(VoxelClass.OCCUPIED)
+        return ViewOutcome(frame, report, stored, voxel_counts(planner), cov, occupied)
+
+
+def failure_of(exc: Exception, session_id: str, restored_plan: bool) -> tuple[str, WorkbenchError | None]:
+    """(the session's error message, the domain error to raise) for an exception of :meth:`ViewStep.run`.
+
+    The error is None for an unexpected exception (a bug, not the robot): the caller re-raises it after
+    putting the session in its error state, so it never stays busy.
+    """
+    if isinstance(exc, UnreachableError):
+        return str(exc), Unreachable(f"session {session_id}: {exc}")
+    if isinstance(exc, DeviceTimeoutError):
+        message = f"device timeout: {exc}"
+    elif isinstance(exc, DeviceError):
+        message = f"device fault: {exc}"
+    elif isinstance(exc, ValueError):
+        message = f"frame rejected: {exc}"
+    elif isinstance(exc, OSError):
+        message = f"journal: cannot store the frame ({exc.strerror or exc})"
+    else:
+        return f"internal error: {type(exc).__name__}: {exc}", None
+    hint = "retry (POST .../retry)" + (" or approve the plan again" if restored_plan else "")
+    return message, DeviceFault(f"session {session_id}: {message}. The map is unchanged; state error: {hint}")
