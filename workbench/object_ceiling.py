@@ -36,7 +36,7 @@ from workbench.ceiling import (
     visibility_ceiling,
 )
 
-CEILING_VERSION = 1
+CEILING_VERSION = 2
 """Bumped whenever the computation changes, so old cache entries are not reused."""
 
 
