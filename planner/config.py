@@ -169,9 +169,10 @@ class ZBufferConfig:
     depth_tolerance_voxels: float = 0.0
     """A pixel shows frontier when its nearest frontier ellipsoid is at most this many voxels behind the nearest
     occupied one (0: strictly in front; 1 and 3 measured worse early, docs/method.md)."""
-    measure: Literal["pixels", "voxels"] = "pixels"
-    """What a frontier pixel is worth: 1 ("pixels"), or its ellipsoid's voxel count over the pixels the ellipsoid
-    covers in that view ("voxels": V = sum of n_points x the visible fraction of each frontier ellipsoid)."""
+    measure: Literal["pixels", "voxels"] = "voxels"
+    """What a frontier pixel is worth: its ellipsoid's voxel count over the pixels the ellipsoid covers in that view
+    ("voxels": V = sum over frontier ellipsoids of n_points x visible fraction), or 1 ("pixels": V = visible frontier
+    pixels; measured slightly lower area under the coverage curve, docs/method.md)."""
     hidden_weight: float = 0.0
     """A frontier pixel hidden behind an occupied ellipsoid counts this much (0: only frontier in view counts)."""
     frontier_decay: float = 1.0

@@ -414,7 +414,10 @@ class Candidate:
 class ViewScore:
     """Score of one candidate and why (paper eqs. for W, L-hat, F).
 
-    F = frontier - occupied, each the sum of w * L over ellipsoids of its kind.
+    F = frontier - occupied, each the sum of w * L over ellipsoids of its kind. (For ``projection-zbuffer``,
+    ``planner.visibility``: score = frontier = the visible frontier V, occupied = the frontier hidden in this
+    view; pixels are raster pixels: a frontier ellipsoid's visible ones, or the frontier ones an occupied
+    ellipsoid hides; weights the worth of one such pixel.)
     Per-ellipsoid arrays are indexed like ``PlanResult.ellipsoids``
     (occupied first, then frontier), length E:
     ranks: (E,) int64 depth rank, -1 for ellipsoids that are behind the camera;

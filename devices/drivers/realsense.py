@@ -19,6 +19,7 @@ through the exact code path of the live camera.
 from __future__ import annotations
 
 import contextlib
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -154,10 +155,18 @@ class RealSenseCamera:
             pipeline, self._pipeline = self._pipeline, None
             with contextlib.suppress(RuntimeError):
                 if self.config.playback:
-                    # librealsense#3126: stopping a pipeline whose playback is not real time can hang or
-                    # abort while the reader waits for the consumer; back to real time releases it first.
-                    pipeline.get_active_profile().get_device().as_playback().set_real_time(True)
+                    self._drain(pipeline)
                 pipeline.stop()
+
+    def _drain(self, pipeline: Any) -> None:
+        """Read a playback to its end before stopping it. librealsense 2.59 aborts now and then ("pure virtual
+        method called") when a pipeline is stopped while its non-real-time playback still has frames to hand
+        over (librealsense#3126 is the same race as a hang); at the end of the file the reader is idle."""
+        rs = self._rs
+        playback = pipeline.get_active_profile().get_device().as_playback()
+        deadline = time.monotonic() + 10.0 + self.config.timeout_s
+        while playback.current_status() != rs.playback_status.stopped and time.monotonic() < deadline:
+            pipeline.try_wait_for_frames(100)
 
     def __enter__(self) -> RealSenseCamera:
         return self

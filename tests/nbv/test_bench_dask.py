@@ -8,7 +8,6 @@ import os
 import socket
 import subprocess
 import sys
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -62,8 +61,8 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-@pytest.fixture
-def scheduler(tmp_path: Path) -> Iterator[str]:
+@pytest.fixture(scope="module")
+def scheduler(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     """``dask scheduler`` and two ``dask worker`` processes on 127.0.0.1; yields the address, then stops them."""
     from distributed import Client
 
@@ -72,7 +71,7 @@ def scheduler(tmp_path: Path) -> Iterator[str]:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path.cwd()), *sys.path])}
     common = ["--no-dashboard"]
     procs: list[subprocess.Popen[bytes]] = []
-    log = (tmp_path / "dask.log").open("wb")
+    log = (tmp_path_factory.mktemp("dask") / "dask.log").open("wb")
     try:
         procs.append(
             subprocess.Popen(
@@ -100,15 +99,10 @@ def scheduler(tmp_path: Path) -> Iterator[str]:
             client.wait_for_workers(2, timeout=90)
         yield address
     finally:
+        for p in procs:  # single processes (no nanny): killing them leaves nothing behind
+            p.kill()
         for p in procs:
-            p.terminate()
-        deadline = time.monotonic() + 5
-        for p in procs:
-            try:
-                p.wait(timeout=max(0.1, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
+            p.wait(timeout=30)
         log.close()
 
 
@@ -122,7 +116,7 @@ def test_dask_with_address_uses_the_external_cluster(
     assert f"Executor: dask ({scheduler})" in (out / "summary.md").read_text()
 
 
-def test_a_failed_dask_task_keeps_the_others() -> None:
+def test_a_failed_dask_task_keeps_the_others(scheduler: str) -> None:
     from devices.builtins import resolve_model
 
     config = PlannerConfig().replace(termination={"max_views": 1}, voxel={"resolution": 0.02}, candidates={"count": 40})
@@ -130,7 +124,7 @@ def test_a_failed_dask_task_keeps_the_others() -> None:
     bad = RunTask("box", "box", "no-such-planner", 0, config, threads=1)
     outcomes: list[RunOutcome] = []
     mesh = MeshPayload.of(resolve_model("box")[1])
-    run_dask([good, bad], {"box": mesh}, outcomes.append, workers=1)
+    run_dask([good, bad], {"box": mesh}, outcomes.append, address=scheduler)
     by_planner = {o.planner: o for o in outcomes}
     assert len(outcomes) == 2
     assert by_planner["random"].error is None and len(by_planner["random"].rows) == 1

@@ -16,7 +16,7 @@ from planner.visibility import score_visible_frontier, zbuffer_image
 RES = 0.01
 SMALL = Intrinsics(width=48, height=36, fx=40.0, fy=40.0, cx=23.5, cy=17.5)
 """A camera whose pixels are the raster's: with a 48 x 36 raster, V counts camera pixels."""
-CFG = ZBufferConfig(width=48, height=36)
+CFG = ZBufferConfig(width=48, height=36, measure="pixels")
 
 
 def sphere(center, r: float, kind: str = "occupied") -> Ellipsoid:
@@ -83,7 +83,7 @@ def test_depth_tolerance_lets_frontier_just_behind_the_occupied_surface_count() 
     o = sphere([0.0, 0.0, 0.5], 0.05)
     f = sphere([0.0, 0.0, 0.57], 0.03, "frontier")  # its front (0.54) is 1 cm behind o's back... but o's front is 0.45
     (strict,) = score([o, f])
-    (loose,) = score([o, f], cfg=ZBufferConfig(width=48, height=36, depth_tolerance_voxels=10.0))
+    (loose,) = score([o, f], cfg=ZBufferConfig(width=48, height=36, measure="pixels", depth_tolerance_voxels=10.0))
     assert strict.score == 0.0
     assert loose.score == hits(f).sum()  # 10 cm of tolerance: every pixel of f
 
@@ -134,14 +134,14 @@ def test_weights_and_hidden_weight() -> None:
     (s,) = score([o, f], frontier_weights=[7.0, 0.5])  # occupied entries are not used
     assert s.score == pytest.approx(0.5 * shown)
     assert s.occupied == pytest.approx(0.5 * hidden) and s.weights[0] == pytest.approx(0.5)
-    (h,) = score([o, f], cfg=ZBufferConfig(width=48, height=36, hidden_weight=0.25))
+    (h,) = score([o, f], cfg=ZBufferConfig(width=48, height=36, measure="pixels", hidden_weight=0.25))
     assert h.score == pytest.approx(shown + 0.25 * hidden) and h.frontier == shown
 
 
 def test_coarse_raster_counts_blocks_of_pixels() -> None:
     f = sphere([0.0, 0.0, 0.6], 0.2, "frontier")
     (fine,) = score([f])
-    (coarse,) = score([f], cfg=ZBufferConfig(width=24, height=18))
+    (coarse,) = score([f], cfg=ZBufferConfig(width=24, height=18, measure="pixels"))
     assert fine.score > 500
     assert coarse.score == pytest.approx(fine.score / 4, rel=0.05)  # 2 x 2 camera pixels per raster pixel
 

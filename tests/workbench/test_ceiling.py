@@ -100,7 +100,13 @@ def test_cache_is_shared_and_keyed_by_placement(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(
     ("field", "value"),
-    [("coverage_radius", 0.0), ("samples", 0), ("probe_spacing", -1.0), ("occlusion_tolerance", float("nan"))],
+    [
+        ("coverage_radius", 0.0),
+        ("samples", 0),
+        ("probe_spacing", -1.0),
+        ("occlusion_tolerance", float("nan")),
+        ("probe_views", -1),
+    ],
 )
 def test_bad_config_names_the_field(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=f"ceiling.{field}"):
