@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 from planner import Planner, PlanResult, Pose
 from planner.planner import IntegrationReport
 from workbench.metrics import coverage
+from workbench.planning import plan_in
 from workbench.summaries import voxel_counts
 
 STAGES = ("preprocess", "register", "integrate", "cluster", "ellipsoids", "candidates", "score", "select")
@@ -167,17 +168,13 @@ def run_scan(
     plans: list[PlanResult] = []
     terminated: str | None = None
     plan: PlanResult | None = None
-    set_box = getattr(cell, "set_object_box", None)
-    move_cost = getattr(cell, "move_costs", None)
     while True:
         pose, motion = _move(cell, pose, plan)
         t0 = time.perf_counter()
         frame = cell.capture()
         capture_seconds = time.perf_counter() - t0
         report = planner.integrate(frame)
-        if callable(set_box):
-            set_box(planner.voxel_map.bbox)  # the arm keeps clear of the object's (padded) box
-        plan = planner.plan(reachable=cell.is_reachable, move_cost=move_cost)
+        plan = plan_in(cell, planner)
         cov = coverage(surface_samples, planner.cloud) if surface_samples is not None else None
         record = make_record(report, plan, voxel_counts(planner), cov)
         record.capture_seconds = capture_seconds

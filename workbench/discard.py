@@ -43,7 +43,7 @@ def discard_last_view(wb: Session) -> dict[str, Any]:
     try:
         rebuilt = rebuild(
             read_journal(journal.directory),
-            wb.cell.is_reachable,
+            wb.cell,
             None if samples is None else (lambda cloud: coverage(samples, cloud)),
         )
     except (ValueError, KeyError, TypeError) as exc:

@@ -18,6 +18,7 @@ from devices.faults import FaultConfig
 from planner import PlannerConfig
 from planner.config import from_dict
 from planner.evaluators import evaluator_names
+from workbench.ceilings import CeilingService
 from workbench.errors import Conflict, Invalid, NotFound, StorageFault
 from workbench.factory import SURFACE_SAMPLES, SessionParts, build_parts, session_devices
 from workbench.journal.rebuild import Rebuilt, rebuild
@@ -26,7 +27,7 @@ from workbench.limits import check_config
 from workbench.record import SessionRecord
 from workbench.session import Session
 from workbench.settings import WorkbenchSettings
-from workbench.states import State
+from workbench.states import SessionEvent, State
 from workbench.summaries import session_status
 from workbench.trash import empty_trash, move_to_trash
 
@@ -76,8 +77,11 @@ class SessionRegistry:
         self._sessions: dict[str, Session] = {}
         self._dormant: dict[str, DormantSession] = {}
         self._resuming: set[str] = set()
+        self._rebuilding: dict[str, DormantSession] = {}
+        """Interrupted sessions being resumed now: still listed (as interrupted) until they are live."""
         self.on_create: list[Callable[[Session], None]] = []
         self.on_delete: list[Callable[[Session], None]] = []
+        self.ceilings = CeilingService(settings.data_dir / "ceilings")
         if settings.journal:
             empty_trash(settings.data_dir)  # deleted in an earlier run: kept until now
             for directory in list_journals(settings.data_dir):
@@ -179,7 +183,7 @@ class SessionRegistry:
         evaluator: str = "projection",
     ) -> Session:
         s = self.settings
-        return Session(
+        session = Session(
             sid,
             parts,
             config,
@@ -190,6 +194,17 @@ class SessionRegistry:
             move_timeout=s.move_timeout,
             evaluator=evaluator,
         )
+        if parts.surface_samples is not None and parts.model_kind != "replay":  # a ground truth in the sim cell
+
+            def request() -> None:
+                def done(value: float) -> None:
+                    session.ceiling = value
+                    session.notify(SessionEvent.STATE)
+
+                self.ceilings.request(sid, parts.mesh, devices, config, done)
+
+            session.request_ceiling = request
+        return session
 
     # ------------------------------------------------------------------ find
 
@@ -198,7 +213,10 @@ class SessionRegistry:
         with self._lock:
             wb = self._sessions.get(session_id)
             dormant = session_id in self._dormant
+            rebuilding = session_id in self._rebuilding
         if wb is None:
+            if rebuilding:
+                raise Conflict(f"session {session_id!r} is being resumed; it is live in a moment")
             if dormant:
                 raise Conflict(
                     f"session {session_id!r} was interrupted (the server stopped); "
@@ -209,7 +227,7 @@ class SessionRegistry:
 
     def status(self, session_id: str) -> dict[str, Any]:
         with self._lock:
-            dormant = self._dormant.get(session_id)
+            dormant = self._dormant.get(session_id) or self._rebuilding.get(session_id)
         return dormant.status() if dormant is not None else self.get(session_id).status()
 
     def list(self) -> list[Session]:
@@ -219,7 +237,7 @@ class SessionRegistry:
     def list_status(self) -> list[dict[str, Any]]:
         """Interrupted sessions (oldest first), then live ones."""
         with self._lock:
-            dormant = sorted(self._dormant.values(), key=lambda d: d.stopped)
+            dormant = sorted([*self._dormant.values(), *self._rebuilding.values()], key=lambda d: d.stopped)
             live = list(self._sessions.values())
         return [d.status() for d in dormant] + [wb.status() for wb in live]
 
@@ -231,22 +249,26 @@ class SessionRegistry:
         with self._lock:
             dormant = self._dormant.get(session_id)
             if dormant is None:
+                if session_id in self._rebuilding:
+                    raise Conflict(f"session {session_id!r} is being resumed already")
                 if session_id in self._sessions or session_id in self._resuming:
                     raise Conflict(f"session {session_id!r} is live; nothing to resume")
                 raise NotFound(f"session {session_id!r}: unknown")
             del self._dormant[session_id]
             self._resuming.add(session_id)
+            self._rebuilding[session_id] = dormant  # still listed while it is rebuilt
         try:
             wb, rebuilt = self._rebuild(dormant)
         except BaseException:
             with self._lock:
                 self._dormant[session_id] = dormant
-            raise
-        finally:
-            with self._lock:
                 self._resuming.discard(session_id)
-        with self._lock:
+                del self._rebuilding[session_id]
+            raise
+        with self._lock:  # live and no longer rebuilding in one step: never unknown in between
             self._sessions[session_id] = wb
+            self._resuming.discard(session_id)
+            del self._rebuilding[session_id]
         for hook in list(self.on_create):
             hook(wb)
         return wb, rebuilt
@@ -271,7 +293,7 @@ class SessionRegistry:
         wb = self._session(dormant.id, parts, config, devices, seed, None, str(header.get("planner", "projection")))
         try:
             rebuilt = rebuild(
-                journal, wb.cell.is_reachable, None if samples is None else lambda c: coverage(samples, c)
+                journal, wb.cell, None if samples is None else lambda c: coverage(samples, c)
             )
         except (ValueError, KeyError, TypeError) as exc:
             writer.close()
@@ -325,3 +347,4 @@ class SessionRegistry:
         """Stop every session's auto mode (shutdown)."""
         for wb in self.list():
             wb.close(timeout=10.0)
+        self.ceilings.close()

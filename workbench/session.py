@@ -45,6 +45,7 @@ from workbench.factory import SessionParts
 from workbench.journal.rebuild import Rebuilt
 from workbench.journal.store import JournalWriter, make_event
 from workbench.limits import check_config
+from workbench.planning import plan_in
 from workbench.record import SessionRecord
 from workbench.region import ObjectRegion
 from workbench.states import (
@@ -119,6 +120,10 @@ class Session:
         self._region: ObjectRegion | None = None
         self._occupied: NDArray[np.float64] = np.zeros((0, 3))
         self.moves = 0
+        self.ceiling: float | None = None
+        """The reachable-coverage ceiling of a simulated session, once computed (workbench/ceilings.py)."""
+        self.request_ceiling: Callable[[], None] | None = None
+        """Starts computing ``ceiling`` (set by the registry for sessions with a ground truth)."""
 
     # ------------------------------------------------------------------ reading
 
@@ -149,9 +154,13 @@ class Session:
             )
 
     def metrics(self) -> dict[str, Any]:
-        """Per-iteration series for the charts and the BIC curves of the last plan."""
+        """Per-iteration series for the charts, the BIC curves of the last plan, and the reachable-coverage
+        ceiling (null until computed, and without a ground truth; asking starts its computation)."""
+        request, self.request_ceiling = self.request_ceiling, None
+        if request is not None:
+            request()
         with self._lock:
-            return self.record.metrics()
+            return {**self.record.metrics(), "ceiling": self.ceiling}
 
     def export(self) -> dict[str, Any]:
         """The whole session as one JSON document."""
@@ -234,7 +243,7 @@ class Session:
     def make_plan(self) -> PendingPlan:
         """Plan (the caller claimed a busy state) and publish the plan as pending."""
         try:
-            plan = self.planner.plan(reachable=self.cell.is_reachable)
+            plan = plan_in(self.cell, self.planner)
         except ValueError as exc:
             raise Conflict(f"session {self.id}: {exc}") from None
         entry = PendingPlan(secrets.token_hex(8), plan, time.time())

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from planner import Pose
-from tests.helpers import SMALL, wait_for_state
+from tests.helpers import SMALL, wait_for_state, wait_until
 from workbench.errors import Conflict, DeviceFault, Invalid, NotFound, Unreachable
 from workbench.journal.store import read_journal
 from workbench.registry import SessionRegistry
@@ -163,3 +163,16 @@ def test_an_interrupted_session_reports_the_same_status_shape(registry: SessionR
         live["points"],
         live["voxels"],
     )
+
+
+def test_a_simulated_session_reports_its_reachable_ceiling(registry: SessionRegistry) -> None:
+    """Asking for the metrics starts the ceiling's computation in a worker process; it arrives later, above
+    the coverage a first view reaches, and is cached for the next session on the same object."""
+    session = registry.create("l-block", SMALL)
+    session.capture()
+    assert session.metrics()["ceiling"] is None  # asked now, computed in the background
+    ceiling = wait_until(lambda: session.metrics()["ceiling"], timeout=240, what="the ceiling")
+    coverage = session.status()["coverage"]
+    assert 0 < coverage < ceiling <= 1
+    cached = list((registry.settings.data_dir / "ceilings").glob("*.json"))
+    assert len(cached) == 1 and json.loads(cached[0].read_text())["coverage"] == ceiling

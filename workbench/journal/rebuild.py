@@ -19,10 +19,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from planner import Planner, PlannerConfig, PlanResult, Pose
+from planner import Planner, PlannerConfig, PlanResult
 from planner.planner import IntegrationReport
 from workbench.journal.discard import without_discarded
 from workbench.journal.store import Journal
+from workbench.planning import plan_in
 from workbench.record import SessionRecord
 from workbench.states import PendingPlan
 from workbench.summaries import best_of, capture_fields, plan_fields, voxel_counts
@@ -72,12 +73,12 @@ def _close(a: float | None, b: float | None, rtol: float = SCORE_RTOL) -> bool:
 
 def rebuild(
     journal: Journal,
-    reachable: Callable[[Pose], bool],
+    cell: Any,
     coverage: Callable[[NDArray[np.float64]], float] | None = None,
 ) -> Rebuilt:
     """Replay ``journal`` through a fresh Planner. ValueError for a damaged journal or frame.
 
-    reachable: the cell's check, as the session used it when planning.
+    cell: the session's cell, asked as the session asked it when planning (:func:`workbench.planning.plan_in`).
     coverage: cloud -> coverage of the ground truth, when it is known (simulation).
     """
     header = journal.header
@@ -123,7 +124,7 @@ def rebuild(
                 in_flight = None
             device_state = ev.get("device_state")
         elif kind == "plan":
-            plan = planner.plan(reachable=reachable)
+            plan = plan_in(cell, planner)
             best, recorded = best_of(plan), ev.get("best")
             where = f"plan {ev['plan_id']} (view {plan.iteration})"
             if (best is None) != (recorded is None):

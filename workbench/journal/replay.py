@@ -61,5 +61,5 @@ def replay_journal(directory: Path, models_dir: Path | None = None) -> Replay:
     devices = from_dict(DeviceConfig, journal.header["devices"])
     cell = ReplayCell([journal.frame(e) for e in captures], devices.cell)  # reachability as in the session
     t0 = time.perf_counter()
-    rebuilt = rebuild(journal, cell.is_reachable, ground_truth_coverage(journal, models_dir))
+    rebuilt = rebuild(journal, cell, ground_truth_coverage(journal, models_dir))
     return Replay(journal, rebuilt, time.perf_counter() - t0)
