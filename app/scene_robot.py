@@ -232,7 +232,7 @@ def demo(port: int = 0, model: str = "mug") -> tuple[Any, RobotScene, Any]:
         "/plate", *_plate(cell.config.plate_radius, cell.config.plate_thickness), color=(120, 120, 130)
     )
     robot = RobotScene(server, cell.kinematics.model)
-    robot.show(cell.joint_positions(), cell.angle)
+    robot.show(cell.arm.joint_positions(), cell.angle)
     e, a = math.radians(35.0), math.radians(70.0)
     target = Pose.look_at(
         0.45 * np.array([math.cos(e) * math.cos(a), math.cos(e) * math.sin(a), math.sin(e)]) + [0, 0, 0.1], [0, 0, 0.1]
