@@ -218,3 +218,10 @@ def _limits(config: ArmConfig, model: Any) -> tuple[NDArray[np.float64], NDArray
 def _first_line(exc: BaseException) -> str:
     text = str(exc).strip().splitlines()
     return text[0] if text else type(exc).__name__
+
+
+def check_arm(config: ArmConfig) -> None:
+    """Load the arm of ``config`` once (cached) so a bad URDF, SRDF or flange frame fails at start-up with its
+    one-line ``ValueError`` naming the field, not when the first session is made. Call it with
+    ``CellConfig.arm`` when ``CellConfig.kinematics`` is 'urdf'."""
+    load_arm(config, config.base)
