@@ -43,6 +43,10 @@ def create_app(settings: AppSettings | None = None) -> FastAPI:
     """The workbench app for ``settings`` (defaults: 127.0.0.1:8000, viser on 8080, model l-block)."""
     settings = settings or AppSettings()
     check_exposure(settings)
+    if settings.devices.cell.kinematics == "urdf":  # a bad URDF, SRDF or flange frame fails here, in one line
+        from devices.arm.model import check_arm
+
+        check_arm(settings.devices.cell.arm)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:

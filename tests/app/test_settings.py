@@ -127,3 +127,19 @@ def test_bad_reliability_settings_name_the_problem(tmp_path: Path, text: str, me
     path.write_text(text)
     with pytest.raises(ValueError, match=message):
         load_settings(path)
+
+
+def test_an_arm_that_cannot_load_stops_the_server_at_start_in_one_line(tmp_path) -> None:
+    import subprocess
+    import sys
+
+    config = tmp_path / "cell.toml"
+    config.write_text('[devices.cell.arm]\nurdf = "/nonexistent/robot.urdf"\n')
+    out = subprocess.run(
+        [sys.executable, "-m", "nbv.cli", "serve", "--config", str(config), "--port", "0"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert out.returncode == 2
+    assert out.stderr.strip() == "nbv: error: arm.urdf: no such file '/nonexistent/robot.urdf'"
