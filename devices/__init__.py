@@ -6,6 +6,10 @@
 - ``builtins``   BUILTIN_OBJECTS, make_builtin, resolve_model
 - ``cell``       Cell: frames (base / table / camera), reachability, move_to, capture
 - ``sim``        SimulatedCamera / Arm / Turntable, make_sim_cell
+- ``drivers``    real hardware: RealSense, UR (RTDE), GRBL and Modbus turntables (vendor packages lazily)
+- ``cellfile``   the cell file: which driver per device, hand-eye, arm base, allow_auto
+- ``rig``        open_rig / check_devices: the cell file's devices opened, checked, stopped
+- ``hwcell``     hardware_cell: the kinematic Cell on a rig's devices
 
 Importing ``devices`` does not import open3d (the simulated camera does, when built).
 """

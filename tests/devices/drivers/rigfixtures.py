@@ -38,8 +38,11 @@ class FakeCell:
     controller: FakeController
 
 
-def cell_toml(port: str, intrinsics: Intrinsics, *, arm: bool = True, extra: str = "") -> str:
-    """A cell file for the recording ``scan.db3`` next to it, the GRBL on ``port`` and (if ``arm``) the fake UR."""
+def cell_toml(
+    port: str, intrinsics: Intrinsics, *, arm: bool = True, arm_speed: str = "max_joint_speed_deg = 30"
+) -> str:
+    """A cell file for the recording ``scan.db3`` next to it, the GRBL on ``port`` and (if ``arm``) the fake UR
+    (``arm_speed``: lines for its section) mounted like the simulator's UR5, beside the plate."""
     k = intrinsics
     text = f"""
 [devices]
@@ -65,17 +68,25 @@ poll_s = 0.01
 [devices.arm]
 driver = "ur"
 host = "{UR_HOST}"
-max_joint_speed_deg = 30
+{arm_speed}
 
 [devices.hand_eye]
 translation = [0.0, 0.0, 0.05]
+
+[devices.arm_base]
+translation = [-0.85, 0.0, 0.0]
 """
-    return text + extra
+    return text
 
 
 @contextmanager
 def fake_hardware_cell(
-    folder: Path, depths: Sequence[NDArray[np.float32]], intrinsics: Intrinsics, *, depth_unit: float = 1e-4
+    folder: Path,
+    depths: Sequence[NDArray[np.float32]],
+    intrinsics: Intrinsics,
+    *,
+    depth_unit: float = 1e-4,
+    arm_speed: str = "max_joint_speed_deg = 30",
 ) -> Iterator[FakeCell]:
     """See the module docstring. ``depths``: (H, W) float32 metres each, played back in order."""
     write_depth_recording(folder / "scan.db3", depths, intrinsics, depth_unit=depth_unit)
@@ -84,7 +95,7 @@ def fake_hardware_cell(
     try:
         with FakeGrbl() as grbl:
             path = folder / "cell.toml"
-            path.write_text(cell_toml(grbl.port, intrinsics))
+            path.write_text(cell_toml(grbl.port, intrinsics, arm_speed=arm_speed))
 
             def open_ur(config):
                 return URArm(config, control_factory=FakeRTDEControl, receive_factory=FakeRTDEReceive)

@@ -1,0 +1,54 @@
+"""The kinematic :class:`devices.cell.Cell` on real devices: what a session drives on hardware.
+
+:func:`hardware_cell` puts the opened devices of a :class:`devices.rig.Rig` into the same ``Cell`` the
+simulator uses, with the arm model (``devices/arm``, the UR5 by default) configured from the cell file:
+the hand-eye transform, the arm's mount and the driver's joint bounds. Planning, IK, collision checks and
+trajectories then run on our side exactly as in simulation; ``Cell.move_to`` turns the real plate and
+sends the trajectory to the real arm, ``Cell.capture`` takes a real image and places it by forward
+kinematics of the joints the controller reports.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from devices.cell import Cell
+from devices.config import CellConfig
+from devices.drivers.ur import URConfig
+from devices.rig import Rig
+
+
+def hardware_cell(rig: Rig, cell_config: CellConfig | None = None) -> Cell:
+    """A Cell of ``rig``'s camera, arm and turntable.
+
+    cell_config: the plate, the initial view and the arm model (``cell_config.arm``: URDF, planning
+    settings); its ``T_flange_camera``, ``base``, ``base_yaw_deg`` are replaced by the cell file's
+    ``hand_eye`` and ``arm_base`` and, for a UR arm, its joint bounds by ``[devices.arm]``'s, so plans and
+    the driver agree. ValueError when a device is missing, the arm base is tilted, or the model's joints
+    are not the driver's.
+    """
+    from devices.arm.kinematics import ArmKinematics
+
+    cell_config = cell_config if cell_config is not None else CellConfig()
+    missing = [kind for kind in ("camera", "arm", "turntable") if getattr(rig, kind) is None]
+    if missing:
+        raise ValueError(f"devices.{missing[0]}: a cell needs a camera, an arm and a turntable")
+    position, yaw_deg = rig.cell.arm_mount()
+    changes: dict[str, object] = {
+        "T_flange_camera": tuple(tuple(float(v) for v in row) for row in rig.cell.hand_eye.matrix),
+        "base": position,
+        "base_yaw_deg": yaw_deg,
+    }
+    driver = rig.cell.arm.config if rig.cell.arm is not None else None
+    if isinstance(driver, URConfig):
+        changes["joint_lower_deg"] = driver.joint_lower_deg
+        changes["joint_upper_deg"] = driver.joint_upper_deg
+    arm_config = dataclasses.replace(cell_config.arm, **changes)  # type: ignore[arg-type]
+    cell_config = dataclasses.replace(cell_config, kinematics="urdf", arm=arm_config)
+    kinematics = ArmKinematics(arm_config, cell_config.plate_radius, cell_config.plate_thickness)
+    if tuple(kinematics.joint_names) != tuple(rig.arm.joint_names):
+        raise ValueError(
+            f"devices.arm: the arm model's joints {list(kinematics.joint_names)} are not the driver's "
+            f"{list(rig.arm.joint_names)}"
+        )
+    return Cell(rig.camera, rig.arm, rig.turntable, cell_config, kinematics=kinematics)
