@@ -64,7 +64,7 @@ class WorkbenchSettings:
             if value < 0:
                 raise ValueError(f"server.{name}: must be >= 0 (0: no limit), got {value!r}")
         if not isinstance(self.cell, str):
-            raise ValueError(f"server.cell: must be the path of a cell file or \"\", got {self.cell!r}")
+            raise ValueError(f'server.cell: must be the path of a cell file or "", got {self.cell!r}')
         if not isinstance(self.dry_run, bool):
             raise ValueError(f"server.dry_run: expected true/false, got {self.dry_run!r}")
         if not isinstance(self.faults, FaultConfig):
