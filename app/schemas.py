@@ -97,7 +97,9 @@ class SessionCreate(BaseModel):
     model: str | None = Field(
         default=None, max_length=200, description="a name from GET /api/models (default: the server's)"
     )
-    source: SourceIn | None = Field(default=None, description="default: the simulated cell")
+    source: SourceIn | None = Field(
+        default=None, description="default: the simulated cell, or the cell file's devices when the server has one"
+    )
     faults: dict[str, Any] | None = Field(
         default=None,
         description='fault injection into the devices, e.g. {"schedule": [{"kind": "capture_failure", "at": 3}]} '
@@ -145,7 +147,10 @@ class CustomPoseOut(BaseModel):
 class SessionOut(BaseModel):
     id: str
     model: str
-    source: str = Field(description="sim, replay, or journal (an interrupted session not yet resumed)")
+    source: str = Field(
+        description="sim, replay, hardware (a cell file's devices, or its dry run), "
+        "or journal (an interrupted session not yet resumed)"
+    )
     state: str = Field(description="new, capturing, ready, planning, planned, moving, auto, done, error, interrupted")
     iteration: int
     coverage: float | None
