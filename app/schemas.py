@@ -62,10 +62,11 @@ ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
 
 
 class SourceIn(BaseModel):
-    """Where the session's frames come from: the simulated cell, or a replay of recorded / journaled frames."""
+    """Where the session's frames come from: the simulated cell, a replay of recorded / journaled frames, or the
+    devices of the server's cell file (``hardware``, docs/hardware.md; the default when the server has one)."""
 
     model_config = ConfigDict(extra="forbid")
-    kind: Literal["sim", "replay"] = "sim"
+    kind: Literal["sim", "replay", "hardware"] = "sim"
     recording: str | None = Field(
         default=None, max_length=64, description="replay: a name from GET /api/recordings (data_dir/recordings)"
     )
@@ -73,13 +74,21 @@ class SourceIn(BaseModel):
     mode: Literal["sequence", "nearest"] = Field(
         default="sequence", description="replay: frames in order, or the frame nearest the approved pose"
     )
+    dry_run: bool | None = Field(
+        default=None, description="hardware: plan and approve as usual, capture from the simulator, move no device"
+    )
+    truth: str | None = Field(
+        default=None, max_length=200, description="hardware: the model on the plate, to measure coverage against"
+    )
 
     @model_validator(mode="after")
     def _one_origin(self) -> SourceIn:
         if self.kind == "replay" and (self.recording is None) == (self.session is None):
             raise ValueError("a replay source needs exactly one of 'recording' or 'session'")
-        if self.kind == "sim" and (self.recording is not None or self.session is not None):
-            raise ValueError("a sim source takes no 'recording' or 'session'")
+        if self.kind != "replay" and (self.recording is not None or self.session is not None):
+            raise ValueError(f"a {self.kind} source takes no 'recording' or 'session'")
+        if self.kind != "hardware" and (self.dry_run is not None or self.truth is not None):
+            raise ValueError(f"a {self.kind} source takes no 'dry_run' or 'truth'")
         return self
 
 
@@ -88,7 +97,9 @@ class SessionCreate(BaseModel):
     model: str | None = Field(
         default=None, max_length=200, description="a name from GET /api/models (default: the server's)"
     )
-    source: SourceIn | None = Field(default=None, description="default: the simulated cell")
+    source: SourceIn | None = Field(
+        default=None, description="default: the simulated cell, or the cell file's devices when the server has one"
+    )
     faults: dict[str, Any] | None = Field(
         default=None,
         description='fault injection into the devices, e.g. {"schedule": [{"kind": "capture_failure", "at": 3}]} '
@@ -136,7 +147,10 @@ class CustomPoseOut(BaseModel):
 class SessionOut(BaseModel):
     id: str
     model: str
-    source: str = Field(description="sim, replay, or journal (an interrupted session not yet resumed)")
+    source: str = Field(
+        description="sim, replay, hardware (a cell file's devices, or its dry run), "
+        "or journal (an interrupted session not yet resumed)"
+    )
     state: str = Field(description="new, capturing, ready, planning, planned, moving, auto, done, error, interrupted")
     iteration: int
     coverage: float | None

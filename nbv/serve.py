@@ -44,6 +44,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="with a token on an exposed host, bind the 3D viewer there too (it has no authentication)",
     )
     parser.add_argument("--config", type=Path, default=None, help="a TOML file with [server], [planner], [devices]")
+    parser.add_argument(
+        "--cell",
+        type=Path,
+        default=None,
+        help="a cell file (docs/hardware.md): new sessions drive its camera, arm and turntable",
+    )
+    parser.add_argument(
+        "--dry-run",
+        action="store_true",
+        default=None,
+        help="with --cell: plan, preview and approve as usual, but capture from the simulator and move no device",
+    )
     parser.add_argument("--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"])
 
 
@@ -61,9 +73,22 @@ def settings_from_args(args: argparse.Namespace) -> AppSettings:
         token=getattr(args, "token", None) or os.environ.get(TOKEN_ENV) or None,
         cors_origins=tuple(args.cors_origin) if getattr(args, "cors_origin", None) else None,
         viser_public=getattr(args, "viser_public", None),
+        cell=str(args.cell) if getattr(args, "cell", None) else None,
+        dry_run=getattr(args, "dry_run", None),
     )
     check_exposure(settings)
+    check_cell(settings)
     return settings
+
+
+def check_cell(settings: AppSettings) -> None:
+    """Read the cell file now, so a bad one stops the server at start-up (ValueError naming the field)."""
+    if settings.dry_run and not settings.cell:
+        raise ValueError("server.dry_run: needs a cell file (--cell or [server] cell)")
+    if settings.cell:
+        from devices.cellfile import load_cell_file
+
+        load_cell_file(settings.cell)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -14,6 +14,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from workbench.errors import Conflict
+from workbench.hardware import auto_refusal
 from workbench.states import Decision, DecisionKind, SessionEvent, State
 
 if TYPE_CHECKING:
@@ -35,6 +36,9 @@ class AutoRunner:
         s = self.session
         if s.planner.iteration == 0:
             raise Conflict(f"session {s.id}: no frame yet; capture first")
+        refusal = auto_refusal(s.cell)
+        if refusal is not None:
+            raise Conflict(f"session {s.id}: {action} refused: {refusal}")
         s.claim(RUNNABLE, State.AUTO, action)
         self._stop.clear()
         self.remaining = count

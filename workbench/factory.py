@@ -6,6 +6,8 @@ Sources (the ``source`` of ``POST /api/sessions``):
 - ``{"kind": "replay", "recording": NAME, "mode": "sequence" | "nearest"}``: a recording folder
   ``data_dir/recordings/NAME`` (PLY + pose JSON per view, docs/journal.md).
 - ``{"kind": "replay", "session": ID, "mode": ...}``: the frames of a journaled session.
+- ``{"kind": "hardware", "dry_run": false, "truth": null}``: the devices of the server's cell file
+  (workbench/hardware.py); the default source when the server has one (``nbv serve --cell``).
 
 Requests name recordings and sessions; they never give a path. A name is looked
 up among the folders that exist (:func:`list_recordings`), so ``../``, absolute
@@ -114,7 +116,7 @@ def build_parts(
     """The object and the (fault-injecting) devices of a session. 404/422 with a clear message on bad input."""
     from devices.sim import make_sim_cell
 
-    source = dict(source or {"kind": "sim"})
+    source = dict(source or {"kind": "hardware" if settings.cell else "sim"})
     kind = source.get("kind", "sim")
     if kind == "sim":
         name = model or settings.devices.model
@@ -141,8 +143,22 @@ def build_parts(
         except ValueError as exc:
             raise Invalid(f"{name}: {exc}") from None
         model_kind = "replay"
+    elif kind == "hardware":
+        from workbench.hardware import hardware_cell, hardware_source
+
+        source = hardware_source(settings, source)
+        truth = source["truth"] or (model or settings.devices.model if source["dry_run"] else None)
+        mesh, samples = trimesh.Trimesh(), None
+        if truth is not None:
+            try:
+                find_model(settings, truth)
+            except NotFound as exc:
+                raise Invalid(f"source.truth: {exc.detail}") from None
+            mesh, samples = ground_truth(settings, truth, seed)
+        cell = hardware_cell(source, mesh if source["dry_run"] else None, devices.camera, devices.cell, seed)
+        name, model_kind = truth or f"hardware:{Path(source['cell']).stem}", "hardware"
     else:
-        raise Invalid(f"source.kind: 'sim' or 'replay', got {kind!r}")
+        raise Invalid(f"source.kind: 'sim', 'replay' or 'hardware', got {kind!r}")
     injector = FaultInjector(faults)
     with_faults(cell, injector)
     return SessionParts(name, model_kind, mesh, cell, samples, source, injector)

@@ -56,6 +56,13 @@ class DormantSession:
         )
 
 
+def _release(parts: SessionParts) -> None:
+    """Close the devices of parts no session took (a hardware cell holds its devices until closed)."""
+    close = getattr(parts.cell, "close", None)
+    if callable(close):
+        close()
+
+
 def _dormant(directory: Path) -> DormantSession | None:
     journal = read_journal(directory)
     if journal.deleted:
@@ -146,6 +153,7 @@ class SessionRegistry:
         with self._lock:
             session_id = self._new_id()
             self._resuming.add(session_id)  # reserved while the journal is created outside the lock
+        wb = None
         try:
             journal = None
             if self.settings.journal:
@@ -165,6 +173,10 @@ class SessionRegistry:
             wb = self._session(session_id, parts, planner_config, devices, seed, journal, planner)
             with self._lock:
                 self._sessions[session_id] = wb
+        except BaseException:
+            if wb is None:
+                _release(parts)
+            raise
         finally:
             with self._lock:
                 self._resuming.discard(session_id)
@@ -289,6 +301,7 @@ class SessionRegistry:
         try:
             writer = JournalWriter.reopen(journal)  # first: it locks the journal against a second resumer
         except JournalBusyError as exc:
+            _release(parts)
             raise Conflict(str(exc)) from None
         wb = self._session(dormant.id, parts, config, devices, seed, None, str(header.get("planner", "projection")))
         try:
@@ -297,6 +310,7 @@ class SessionRegistry:
             )
         except (ValueError, KeyError, TypeError) as exc:
             writer.close()
+            _release(parts)
             raise Invalid(f"session {dormant.id}: cannot resume: {exc}") from None
         wb.restore(rebuilt)
         wb.journal = writer

@@ -411,6 +411,9 @@ class Session:
         self.listeners.clear()
         if self.journal is not None:
             self.journal.close()
+        close_devices = getattr(self.cell, "close", None)  # a hardware cell releases its devices
+        if callable(close_devices):
+            close_devices()
 
     # ------------------------------------------------------------------ the steps actions are built from
 

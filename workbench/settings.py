@@ -47,6 +47,12 @@ class WorkbenchSettings:
     devices: DeviceConfig = field(default_factory=DeviceConfig)
     """The simulated devices. ``devices.model`` is the default model (a built-in name or a file
     in models_dir), ``devices.size`` / ``devices.up`` apply to every model file."""
+    cell: str = ""
+    """A cell file (docs/hardware.md): new sessions drive its camera, arm and turntable (source ``hardware``,
+    workbench/hardware.py). "" = simulated sessions. Read when a session is created or resumed."""
+    dry_run: bool = False
+    """With ``cell``: hardware sessions plan, preview and take approvals as usual, but their captures come
+    from the simulator on the cell file's arm model and no device is opened or moved (rehearse a scan)."""
 
     def __post_init__(self) -> None:
         if not integer(self.max_upload_bytes) or self.max_upload_bytes < 1:
@@ -57,6 +63,10 @@ class WorkbenchSettings:
                 raise ValueError(f"server.{name}: must be a number of seconds (0: no limit), got {value!r}")
             if value < 0:
                 raise ValueError(f"server.{name}: must be >= 0 (0: no limit), got {value!r}")
+        if not isinstance(self.cell, str):
+            raise ValueError(f'server.cell: must be the path of a cell file or "", got {self.cell!r}')
+        if not isinstance(self.dry_run, bool):
+            raise ValueError(f"server.dry_run: expected true/false, got {self.dry_run!r}")
         if not isinstance(self.faults, FaultConfig):
             raise ValueError("faults: must be a FaultConfig")
         object.__setattr__(self, "models_dir", Path(self.models_dir))

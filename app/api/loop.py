@@ -17,6 +17,7 @@ from app.schemas import (
     SessionOut,
     StepRequest,
 )
+from workbench.hardware import stop_devices
 from workbench.summaries import plan_summary
 
 router = APIRouter()
@@ -72,6 +73,8 @@ def auto(session: SessionDep, body: Annotated[AutoRequest | None, Body()] = None
 
 @router.post("/sessions/{session_id}/stop", response_model=SessionOut)
 def stop(session: SessionDep) -> dict[str, Any]:
-    """Stop auto mode after the current action."""
+    """Stop auto mode after the current action; on hardware also stop a running move of the arm and the turntable at
+    once (the session then goes to its error state, the arm's last joints in its error)."""
     session.auto.stop()
+    stop_devices(session)
     return session.status()

@@ -256,7 +256,8 @@ function updateButtons() {
   $("auto-why").textContent = terminated ? `Auto is off: the planner stopped (${terminated}). Plan and approve by hand to go on.` :
     (st && it === 0 ? "Auto needs a first view: capture first." : "");
   $("discard").disabled = busy || !st || it === 0 || state === "interrupted";
-  $("stop").hidden = state !== "auto";
+  // Stop: ends auto mode; on hardware it also halts a running move of the arm and the turntable at once
+  $("stop").hidden = !["auto", "moving"].includes(state);
   $("resume").hidden = state !== "interrupted";
   $("resume").disabled = S.inFlight;
   $("retry").hidden = !(state === "error" && st && st.retry);
