@@ -11,11 +11,34 @@ kinematics of the joints the controller reports.
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 from devices.cell import Cell
+from devices.cellfile import CellFile
 from devices.config import CellConfig
-from devices.drivers.ur import URConfig
 from devices.rig import Rig
+
+
+def arm_cell_config(cell: CellFile, base: CellConfig) -> CellConfig:
+    """``base`` with the URDF arm model configured from the cell file (see the table in docs/hardware.md).
+
+    ``T_flange_camera`` = the hand-eye transform, ``base`` / ``base_yaw_deg`` = the arm mount; with a UR arm
+    also its joint limits and ``acceleration_limit_deg`` (at most ``max_joint_acceleration_deg``).
+    ValueError naming the field (a tilted ``devices.arm_base``).
+    """
+    position, yaw = cell.arm_mount()
+    changes: dict[str, Any] = {
+        "T_flange_camera": tuple(tuple(float(v) for v in row) for row in cell.hand_eye.matrix),
+        "base": position,
+        "base_yaw_deg": yaw,
+    }
+    config = cell.arm.config if cell.arm is not None else None
+    if config is not None and hasattr(config, "joint_lower_deg"):
+        changes["joint_lower_deg"] = tuple(config.joint_lower_deg)
+        changes["joint_upper_deg"] = tuple(config.joint_upper_deg)
+    if config is not None and hasattr(config, "max_joint_acceleration_deg"):
+        changes["acceleration_limit_deg"] = min(base.arm.acceleration_limit_deg, config.max_joint_acceleration_deg)
+    return dataclasses.replace(base, kinematics="urdf", arm=dataclasses.replace(base.arm, **changes))
 
 
 def hardware_cell(rig: Rig, cell_config: CellConfig | None = None) -> Cell:
@@ -33,18 +56,8 @@ def hardware_cell(rig: Rig, cell_config: CellConfig | None = None) -> Cell:
     missing = [kind for kind in ("camera", "arm", "turntable") if getattr(rig, kind) is None]
     if missing:
         raise ValueError(f"devices.{missing[0]}: a cell needs a camera, an arm and a turntable")
-    position, yaw_deg = rig.cell.arm_mount()
-    changes: dict[str, object] = {
-        "T_flange_camera": tuple(tuple(float(v) for v in row) for row in rig.cell.hand_eye.matrix),
-        "base": position,
-        "base_yaw_deg": yaw_deg,
-    }
-    driver = rig.cell.arm.config if rig.cell.arm is not None else None
-    if isinstance(driver, URConfig):
-        changes["joint_lower_deg"] = driver.joint_lower_deg
-        changes["joint_upper_deg"] = driver.joint_upper_deg
-    arm_config = dataclasses.replace(cell_config.arm, **changes)  # type: ignore[arg-type]
-    cell_config = dataclasses.replace(cell_config, kinematics="urdf", arm=arm_config)
+    cell_config = arm_cell_config(rig.cell, cell_config)
+    arm_config = cell_config.arm
     kinematics = ArmKinematics(arm_config, cell_config.plate_radius, cell_config.plate_thickness)
     if tuple(kinematics.joint_names) != tuple(rig.arm.joint_names):
         raise ValueError(

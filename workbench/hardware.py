@@ -38,6 +38,7 @@ import trimesh
 from devices.cell import Cell, Motion
 from devices.cellfile import CellFile, load_cell_file
 from devices.config import CameraConfig, CellConfig
+from devices.hwcell import arm_cell_config
 from devices.protocols import DeviceError
 from planner.types import Pose
 from workbench.errors import Conflict, Invalid
@@ -55,28 +56,6 @@ STOP_WAIT = 5.0
 _in_use: dict[str, str] = {}
 """Cell files whose devices an open HardwareCell holds: resolved path -> label of the holder."""
 _in_use_lock = threading.Lock()
-
-
-def arm_cell_config(cell: CellFile, base: CellConfig) -> CellConfig:
-    """``base`` with the URDF arm model configured from the cell file (see the table in docs/hardware.md).
-
-    ``T_flange_camera`` = the hand-eye transform, ``base`` / ``base_yaw_deg`` = the arm mount; with a UR arm
-    also its joint limits and ``acceleration_limit_deg`` (at most ``max_joint_acceleration_deg``).
-    ValueError naming the field (a tilted ``devices.arm_base``).
-    """
-    position, yaw = cell.arm_mount()
-    changes: dict[str, Any] = {
-        "T_flange_camera": tuple(tuple(float(v) for v in row) for row in cell.hand_eye.matrix),
-        "base": position,
-        "base_yaw_deg": yaw,
-    }
-    config = cell.arm.config if cell.arm is not None else None
-    if config is not None and hasattr(config, "joint_lower_deg"):
-        changes["joint_lower_deg"] = tuple(config.joint_lower_deg)
-        changes["joint_upper_deg"] = tuple(config.joint_upper_deg)
-    if config is not None and hasattr(config, "max_joint_acceleration_deg"):
-        changes["acceleration_limit_deg"] = min(base.arm.acceleration_limit_deg, config.max_joint_acceleration_deg)
-    return dataclasses.replace(base, kinematics="urdf", arm=dataclasses.replace(base.arm, **changes))
 
 
 def arm_kinematics(cell: CellFile, config: CellConfig) -> tuple[CellConfig, ArmKinematics]:

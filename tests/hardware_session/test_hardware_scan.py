@@ -42,9 +42,11 @@ CAMERA = CameraConfig(width=160, height=120, fx=140.0, fy=140.0, cx=79.5, cy=59.
 def fast_cell(port: str, allow_auto: bool = False) -> str:
     """The fixture's cell file with an arm quick enough for a test (60 deg/s at full fraction)."""
     k = CAMERA.intrinsics
-    text = cell_toml(port, k, extra="\n[devices.arm_base]\ntranslation = [-0.85, 0.0, 0.0]\n").replace(
-        "max_joint_speed_deg = 30",
-        "max_joint_speed_deg = 60\nspeed_fraction = 1.0\nacceleration_fraction = 1.0\nmax_joint_acceleration_deg = 240",
+    text = cell_toml(
+        port,
+        k,
+        arm_speed="max_joint_speed_deg = 60\nspeed_fraction = 1.0\nacceleration_fraction = 1.0\n"
+        "max_joint_acceleration_deg = 240",
     )
     return text.replace("allow_auto = false", f"allow_auto = {'true' if allow_auto else 'false'}")
 
@@ -155,7 +157,7 @@ def test_supervised_scan_on_hardware_drivers(tmp_path: Path, rig: Any) -> None:
         theta = math.radians(float(rig.grbl.position))
         T_expected = rz(-theta) @ cell.kinematics.camera_pose(q)
         assert close(pose_of(last["pose"]), T_expected, 1e-3, 0.2)
-        assert np.allclose(last["device_state"]["arm_q"], q, atol=1e-3)
+        assert np.allclose(last["device_state"]["arm"]["q"], q, atol=1e-3)
         # ... each where it was asked to be: the view the dry run took there
         for event, dry in zip(caps, dry_poses, strict=True):
             assert close(pose_of(event["pose"]), pose_of(event["requested_pose"]), 2e-3, 0.2)
