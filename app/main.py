@@ -14,6 +14,7 @@ request passes app/security.py first; CORS is installed only when configured.
 from __future__ import annotations
 
 import logging
+import secrets
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -29,7 +30,7 @@ from app.api import router
 from app.docs_ui import install_docs
 from app.errors import status_of
 from app.scene.controller import SceneController
-from app.security import SecurityMiddleware, openapi_security
+from app.security import SecurityMiddleware, install_log_redaction, openapi_security
 from app.serialize import SafeJSONResponse
 from app.settings import AppSettings, check_exposure, viewer_host
 from workbench.errors import WorkbenchError
@@ -59,6 +60,7 @@ def create_app(settings: AppSettings | None = None) -> FastAPI:
     """The workbench app for ``settings`` (defaults: 127.0.0.1:8000, viser on 8080, model l-block)."""
     settings = settings or AppSettings()
     check_exposure(settings)
+    install_log_redaction()
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -101,6 +103,22 @@ def create_app(settings: AppSettings | None = None) -> FastAPI:
     @app.exception_handler(WorkbenchError)
     async def _workbench_error(request: Request, exc: WorkbenchError) -> JSONResponse:
         return JSONResponse({"detail": exc.detail}, status_code=status_of(exc))
+
+    @app.exception_handler(Exception)
+    async def _unexpected(request: Request, exc: Exception) -> JSONResponse:
+        # anything not foreseen: JSON, never text/plain, with an id that finds the traceback in the log
+        error_id = secrets.token_hex(6)
+        log.error(
+            "error %s on %s %s: %s: %s",
+            error_id,
+            request.method,
+            request.url.path,
+            type(exc).__name__,
+            exc,
+            exc_info=exc,
+        )
+        detail = f"internal error {error_id} ({type(exc).__name__}); the server log has the details"
+        return JSONResponse({"detail": detail, "error_id": error_id}, status_code=500)
 
     @app.exception_handler(RequestValidationError)
     async def _validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:

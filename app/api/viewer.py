@@ -23,8 +23,9 @@ def health() -> dict[str, str]:
 def viewer(request: Request, settings: Settings) -> dict[str, Any]:
     """Where the browser finds the viser client: the host the page was loaded from, viser's actual port.
 
-    With a token the URL carries it too (``?token=``), but viser itself checks nothing: on an exposed
-    server it listens on 127.0.0.1 only (unless ``viser_public``), see docs/security.md.
+    The URL never carries the API token (it would end up in viser's logs and the browser history); viser
+    itself checks nothing: on an exposed server it listens on 127.0.0.1 only (unless ``viser_public``),
+    see docs/security.md.
     """
     server = request.app.state.viser
     if server is None:
@@ -37,5 +38,4 @@ def viewer(request: Request, settings: Settings) -> dict[str, Any]:
         note = "the 3D viewer has no authentication, so it listens on 127.0.0.1 only: reach it through an SSH tunnel"
     if ":" in host:
         host = f"[{host}]"
-    query = f"?token={settings.token}" if settings.token else ""
-    return {"url": f"{request.url.scheme}://{host}:{port}/{query}", "port": port, "note": note}
+    return {"url": f"{request.url.scheme}://{host}:{port}/", "port": port, "note": note}  # never the API token
