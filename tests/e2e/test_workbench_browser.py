@@ -194,7 +194,7 @@ def test_resume_and_retry_from_the_page(tmp_path: Path, browser_page: Page) -> N
         "candidates": {"count": 60, "parallels": 4},
         "cluster": {"t_min": 2, "t_max": 6},
     }
-    settings = AppSettings(data_dir=tmp_path / "data", models_dir=tmp_path, scene=False)
+    settings = AppSettings(data_dir=tmp_path / "data", models_dir=tmp_path, scene=False, fault_api=True)
     faults = {"schedule": [{"kind": "capture_failure", "at": 2}]}
     with running_server(settings.replace(port=free_port())) as first:
         api = httpx.Client(base_url=first.url, timeout=60)
