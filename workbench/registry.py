@@ -17,6 +17,7 @@ from devices.config import DeviceConfig
 from devices.faults import FaultConfig
 from planner import PlannerConfig
 from planner.config import from_dict
+from workbench.engine import Engine, JobKilled, offload_rendering, render_spec
 from workbench.errors import Conflict, Invalid, NotFound, StorageFault
 from workbench.factory import SURFACE_SAMPLES, SessionParts, build_parts, session_devices
 from workbench.journal.rebuild import Rebuilt, rebuild
@@ -73,6 +74,12 @@ class SessionRegistry:
         self._resuming: set[str] = set()
         self.on_create: list[Callable[[Session], None]] = []
         self.on_delete: list[Callable[[Session], None]] = []
+        self.engine = (
+            Engine(settings.max_running_jobs, settings.max_idle_workers)
+            if getattr(settings, "workers", False)
+            else None
+        )
+        """The sessions' worker processes (workbench/engine.py); None: heavy work runs in this process."""
         if settings.journal:
             for directory in list_journals(settings.data_dir):
                 if in_use(directory):  # live in another server on the same data directory
@@ -159,6 +166,15 @@ class SessionRegistry:
         self, sid: str, parts: SessionParts, config: PlannerConfig, devices: DeviceConfig, seed: int, journal: Any
     ) -> Session:
         s = self.settings
+        worker = None
+        if self.engine is not None:
+            worker = self.engine.worker(sid, render_spec(parts.cell, devices.cell))
+            offload_rendering(parts.cell, worker, s.capture_budget)
+            try:
+                worker.start()
+            except JobKilled as exc:
+                worker.close()
+                raise StorageFault(f"session {sid}: {exc}") from None
         return Session(
             sid,
             parts,
@@ -168,6 +184,9 @@ class SessionRegistry:
             journal=journal,
             capture_timeout=s.capture_timeout,
             move_timeout=s.move_timeout,
+            worker=worker,
+            plan_budget=s.plan_budget,
+            capture_budget=s.capture_budget,
         )
 
     # ------------------------------------------------------------------ find
@@ -291,6 +310,12 @@ class SessionRegistry:
             writer.close()
 
     def close(self) -> None:
-        """Stop every session's auto mode (shutdown)."""
-        for wb in self.list():
-            wb.close(timeout=10.0)
+        """Kill every running job, stop every session's auto mode, close the journals (shutdown)."""
+        sessions = self.list()
+        for wb in sessions:  # first kill every worker: nothing waits on a long job below
+            if wb.worker is not None:
+                wb.worker.close()
+        for wb in sessions:
+            wb.close(timeout=3.0)
+        if self.engine is not None:
+            self.engine.close()
