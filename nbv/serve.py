@@ -12,7 +12,7 @@ from pathlib import Path
 from app.settings import AppSettings, check_exposure, load_settings
 
 TOKEN_ENV = "NBV_TOKEN"
-GRACE = 2.0
+GRACE = 2
 """Seconds uvicorn lets running requests finish after SIGTERM before it cancels them."""
 
 
