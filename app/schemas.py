@@ -139,7 +139,9 @@ class SessionOut(BaseModel):
     id: str
     model: str
     source: str = Field(description="sim, replay, or journal (an interrupted session not yet resumed)")
-    state: str = Field(description="new, capturing, ready, planning, planned, moving, auto, done, error, interrupted")
+    state: str = Field(
+        description="new, capturing, ready, planning, planned, moving, auto, done, error, interrupted, damaged"
+    )
     iteration: int
     coverage: float | None
     points: int
@@ -270,6 +272,11 @@ class ResumeOut(BaseModel):
     verified: bool = Field(description="every replayed step matched the journal (points, voxels, plans)")
     mismatches: list[str]
     interrupted: str | None = Field(description="plan_id of a decision whose capture never happened; pending again")
+    dropped: list[str] = Field(
+        default_factory=list,
+        description="what a damaged journal lost: the damaged line, event or frame and how much came after it "
+        "(the session resumes from just before it; the whole file is kept as journal.damaged-*.jsonl)",
+    )
 
 
 class FaultRequest(BaseModel):

@@ -28,6 +28,7 @@ from workbench.session import Session
 from workbench.settings import WorkbenchSettings
 from workbench.states import State
 from workbench.summaries import session_status
+from workbench.trash import move_to_trash, prune
 
 __all__ = ["SURFACE_SAMPLES", "DormantSession", "SessionRegistry"]
 log = logging.getLogger(__name__)
@@ -35,15 +36,27 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class DormantSession:
-    """A journaled session of an earlier server process (not loaded): what ``GET /api/sessions`` shows of it."""
+    """A journaled session of an earlier server process (not loaded): what ``GET /api/sessions`` shows of it.
+
+    ``damage`` (a line of the journal is not an event) lists it as ``damaged`` with the reason; resume then
+    recovers everything before the damage and says what was dropped."""
 
     id: str
     directory: Path
     record: SessionRecord
     """Derived from the journal's events (no frame is read)."""
     stopped: float
+    damage: str | None = None
 
     def status(self) -> dict[str, Any]:
+        if self.damage is not None:
+            return session_status(
+                self.record,
+                state=State.DAMAGED,
+                source="journal",
+                error=f"damaged journal: {self.damage}; POST /api/sessions/{self.id}/resume recovers what comes "
+                "before the damage",
+            )
         return session_status(
             self.record,
             state=State.INTERRUPTED,
@@ -53,14 +66,33 @@ class DormantSession:
 
 
 def _dormant(directory: Path) -> DormantSession | None:
+    """The dormant session of a journal folder (None when deleted). ValueError when not even the header reads."""
     journal = read_journal(directory)
     if journal.deleted:
         return None
     record = SessionRecord.from_header(journal.header)
+    damage = journal.damage
+    applied = 0
     for event in journal.events:
-        record.apply(event)
-    stopped = journal.events[-1]["time"] if journal.events else journal.header["time"]
-    return DormantSession(journal.session_id, directory, record, float(stopped))
+        try:
+            record.apply(event)
+        except (KeyError, TypeError, ValueError) as exc:  # an event of the right shape with wrong contents
+            damage = f"event {event.get('seq')} ({event.get('kind')}) cannot be read: {exc!r}"
+            break
+        applied += 1
+    if damage is not None and journal.damage is not None:
+        damage = f"{damage}; {journal.dropped_lines} line(s) from there on are not read"
+    stopped = journal.events[applied - 1]["time"] if applied else journal.header["time"]
+    return DormantSession(journal.session_id, directory, record, float(stopped), damage)
+
+
+def _unreadable(directory: Path, reason: str) -> DormantSession:
+    """A journal whose header cannot be read: listed as damaged, so it does not vanish."""
+    header = {"id": directory.name, "model": {"name": "?"}, "config": {}, "seed": 0, "time": 0.0}
+    with contextlib.suppress(OSError):
+        header["time"] = (directory / "journal.jsonl").stat().st_mtime
+    record = SessionRecord.from_header(header)
+    return DormantSession(directory.name, directory, record, float(header["time"]), f"unreadable: {reason}")
 
 
 class SessionRegistry:
@@ -87,10 +119,14 @@ class SessionRegistry:
                 try:
                     dormant = _dormant(directory)
                 except (ValueError, KeyError, TypeError) as exc:
-                    log.warning("journal %s not listed: %s", directory, exc)
-                    continue
+                    log.warning("journal %s is damaged: %s", directory, exc)
+                    dormant = _unreadable(directory, str(exc))
                 if dormant is not None:
                     self._dormant[dormant.id] = dormant
+                else:  # deleted by an earlier server that kept deleted journals in place
+                    self._trash(directory)
+            with contextlib.suppress(OSError):
+                prune(settings.data_dir, settings.trash_max_bytes, settings.trash_max_age)
 
     # ------------------------------------------------------------------ create
 
@@ -274,11 +310,20 @@ class SessionRegistry:
         except (ValueError, KeyError, TypeError) as exc:
             writer.close()
             raise Invalid(f"session {dormant.id}: cannot resume: {exc}") from None
+        if rebuilt.kept < len(journal.events):  # a damaged event or frame: the journal goes on from before it
+            journal.cut(rebuilt.kept)
+            writer.cut_to(journal)
         wb.restore(rebuilt)
         wb.journal = writer
         writer.append(
-            "resume", verified=not rebuilt.mismatches, mismatches=rebuilt.mismatches, interrupted=rebuilt.interrupted
+            "resume",
+            verified=not rebuilt.mismatches,
+            mismatches=rebuilt.mismatches,
+            interrupted=rebuilt.interrupted,
+            dropped=rebuilt.dropped,
         )
+        if rebuilt.dropped:
+            log.warning("session %s resumed up to the damage; dropped: %s", dormant.id, "; ".join(rebuilt.dropped))
         if rebuilt.mismatches:
             log.warning("session %s resumed with differences: %s", dormant.id, "; ".join(rebuilt.mismatches))
         return wb, rebuilt
@@ -286,28 +331,45 @@ class SessionRegistry:
     # ------------------------------------------------------------------ delete and close
 
     def delete(self, session_id: str) -> None:
-        """Forget a session (live or interrupted). Its journal stays on disk, marked deleted."""
+        """Forget a session (live, interrupted or damaged): its running job is killed, its journal marked deleted
+        and its folder moved to the trash (workbench/trash.py), which keeps it until its age or size limit."""
         with self._lock:
             wb = self._sessions.pop(session_id, None)
             dormant = self._dormant.pop(session_id, None) if wb is None else None
         if wb is None and dormant is None:
             raise NotFound(f"session {session_id!r}: unknown")
+        directory = None
         if wb is not None:
             if wb.journal is not None:
+                directory = wb.journal.directory
                 with contextlib.suppress(OSError):
                     wb.journal.append("deleted")
             wb.close()
             for hook in list(self.on_delete):
                 hook(wb)
         elif dormant is not None:
+            directory = dormant.directory
             try:
                 writer = JournalWriter.reopen(read_journal(dormant.directory))
             except JournalBusyError as exc:
                 with self._lock:
                     self._dormant[session_id] = dormant
                 raise Conflict(str(exc)) from None
-            writer.append("deleted")
-            writer.close()
+            except ValueError:  # unreadable: nothing to mark, it goes to the trash as it is
+                writer = None
+            if writer is not None:
+                writer.append("deleted")
+                writer.close()
+        if directory is not None:
+            self._trash(directory)
+
+    def _trash(self, directory: Path) -> None:
+        """Move a deleted session's folder to the trash and prune the trash (best effort: a disk error is logged)."""
+        try:
+            move_to_trash(directory)
+            prune(self.settings.data_dir, self.settings.trash_max_bytes, self.settings.trash_max_age)
+        except OSError as exc:
+            log.error("trash: cannot move %s: %s", directory, exc)
 
     def close(self) -> None:
         """Kill every running job, stop every session's auto mode, close the journals (shutdown)."""

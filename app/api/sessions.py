@@ -49,6 +49,7 @@ def resume(session_id: str, registry: Registry) -> dict[str, Any]:
         "verified": not rebuilt.mismatches,
         "mismatches": rebuilt.mismatches,
         "interrupted": rebuilt.interrupted,
+        "dropped": rebuilt.dropped,
     }
 
 
