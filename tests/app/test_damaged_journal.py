@@ -104,5 +104,3 @@ def test_a_session_with_an_intact_journal_resumes_with_nothing_dropped(settings:
         assert r["dropped"] == [] and r["verified"] and r["session"]["iteration"] == 3
         assert r["session"]["points"] == states[2]["points"]
     assert not list((settings.data_dir / "sessions" / sid).glob("journal.damaged-*"))
-
-
