@@ -38,6 +38,8 @@ from planner.planner import IntegrationReport, PlanResult
 from workbench.worker import RenderSpec, serve
 
 log = logging.getLogger(__name__)
+SETUP_TIMEOUT = 60.0
+"""Seconds a new worker may take to start and build its render scene."""
 _context: Any = None
 _context_lock = threading.Lock()
 
@@ -48,6 +50,7 @@ def _mp_context() -> Any:
     with _context_lock:
         if _context is None:
             ctx = multiprocessing.get_context("forkserver")
+            # open3d is imported (no thread started by it) but no scene built: a worker builds its own after the fork
             ctx.set_forkserver_preload(["workbench.worker", "devices.sim"])
             _context = ctx
         return _context
@@ -212,9 +215,24 @@ class SessionWorker:
         raise JobKilled(f"{what}: {reason}")
 
     def start(self) -> None:
-        """Start the process now (and ship the render scene), so the session's first job does not wait for it."""
+        """Start the process now if it is not running (and ship the render scene); JobKilled if it cannot start."""
         with self._job_lock:
+            if self._closed:
+                raise JobKilled("the session is closed")
             self._started()
+        self.engine.used(self)
+
+    def start_soon(self) -> None:
+        """Start the process in a background thread (a new session answers at once; its first job waits)."""
+
+        def run() -> None:
+            try:
+                self.start()
+            except JobKilled as exc:  # the first job will try again and report it
+                if not self._closed:
+                    log.warning("session %s: %s", self.name, exc)
+
+        threading.Thread(target=run, name=f"nbv-start-{self.name}", daemon=True).start()
 
     def _started(self) -> tuple[Connection, Any]:
         with self._proc_lock:
@@ -230,10 +248,12 @@ class SessionWorker:
         if self.render_spec is not None:
             try:
                 parent.send(("setup", self.render_spec))
+                if not parent.poll(SETUP_TIMEOUT):
+                    raise OSError(f"no answer within {SETUP_TIMEOUT:g} s")
                 status, result = parent.recv()
-            except (EOFError, OSError):
+            except (EOFError, OSError) as exc:
                 self._kill()
-                raise JobKilled(f"the worker process did not start (exit code {proc.exitcode})") from None
+                raise JobKilled(f"the worker process did not start ({exc or proc.exitcode})") from None
             if status == "error":
                 self._kill()
                 raise result

@@ -17,7 +17,7 @@ from devices.config import DeviceConfig
 from devices.faults import FaultConfig
 from planner import PlannerConfig
 from planner.config import from_dict
-from workbench.engine import Engine, JobKilled, offload_rendering, render_spec
+from workbench.engine import Engine, offload_rendering, render_spec
 from workbench.errors import Conflict, Invalid, NotFound, StorageFault
 from workbench.factory import SURFACE_SAMPLES, SessionParts, build_parts, session_devices
 from workbench.journal.rebuild import Rebuilt, rebuild
@@ -206,11 +206,7 @@ class SessionRegistry:
         if self.engine is not None:
             worker = self.engine.worker(sid, render_spec(parts.cell, devices.cell))
             offload_rendering(parts.cell, worker, s.capture_budget)
-            try:
-                worker.start()
-            except JobKilled as exc:
-                worker.close()
-                raise StorageFault(f"session {sid}: {exc}") from None
+            worker.start_soon()
         return Session(
             sid,
             parts,

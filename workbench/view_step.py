@@ -72,6 +72,8 @@ class ViewStep:
         """
         stored: tuple[str, str] | None = None
         try:
+            if self.worker is not None:
+                self.worker.start()  # a worker that is (re)starting does not count against the device deadlines
             self._wait_for_the_last_move()
             try:
                 call_with_timeout(lambda: self.cell.move_to(pose), self.move_timeout, "cell move", self._stop)
