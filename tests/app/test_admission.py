@@ -79,6 +79,20 @@ def test_the_fan_bomb_is_refused_and_health_answers_throughout(live_server) -> N
     assert [m for m in httpx.get(f"{live_server.url}/api/models").json() if m["kind"] == "upload"] == []
 
 
+def test_an_honest_mesh_renders_in_the_worker_while_health_answers(live_server) -> None:
+    """A mesh inside the limits (328 k triangles): its ray casting holds the GIL, but in the session's worker."""
+    sphere = trimesh.creation.icosphere(subdivisions=7)
+    data = sphere.export(file_type="ply")
+    with httpx.Client(base_url=live_server.url, timeout=120) as api:
+        r = api.post("/api/models", files={"file": ("ball.ply", data, "application/octet-stream")})
+        assert r.status_code == 201, r.text
+        sid = api.post("/api/sessions", json={"model": r.json()["name"], "config": SMALL}).json()["id"]
+        with HealthProbe(live_server.url) as probe:
+            assert api.post(f"/api/sessions/{sid}/capture").status_code == 200
+            assert api.post(f"/api/sessions/{sid}/plan").status_code == 200
+    assert len(probe.samples) >= 2 and not probe.failures and probe.worst < 1.0, (probe.worst, probe.failures)
+
+
 def test_a_large_honest_mesh_is_refused_on_upload_and_on_use(settings: AppSettings, models_dir: Path) -> None:
     sphere = trimesh.creation.icosphere(subdivisions=5)  # 20480 triangles, an honest closed mesh
     sphere.export(models_dir / "sphere.obj")
