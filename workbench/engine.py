@@ -244,6 +244,9 @@ class SessionWorker:
             proc.start()
             child.close()
             self._proc, self._conn = proc, parent
+        if self._closed:  # closed while this process started: it must not outlive its session
+            self._kill()
+            raise JobKilled("the session is closed")
         log.debug("session %s: worker %d started", self.name, proc.pid)
         if self.render_spec is not None:
             try:
