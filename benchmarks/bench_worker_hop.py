@@ -17,6 +17,7 @@ import pickle
 import statistics
 import tempfile
 import time
+from pathlib import Path
 from typing import Any
 
 from workbench.registry import SessionRegistry
@@ -26,7 +27,7 @@ from workbench.settings import WorkbenchSettings
 def run(workers: bool, model: str, views: int, config: dict[str, Any]) -> dict[str, Any]:
     """Times (s) of each plan and approve of one session; its plans' best indices; the planner's pickle size."""
     with tempfile.TemporaryDirectory() as data:
-        registry = SessionRegistry(WorkbenchSettings(data_dir=data, workers=workers))
+        registry = SessionRegistry(WorkbenchSettings(data_dir=Path(data), workers=workers))
         try:
             session = registry.create(model=model, config=config, seed=0)
             if session.worker is not None:
@@ -50,7 +51,7 @@ def run(workers: bool, model: str, views: int, config: dict[str, Any]) -> dict[s
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--model", default="l-block")
     parser.add_argument("--views", type=int, default=4)
     parser.add_argument("--resolution", type=float, default=0.01)

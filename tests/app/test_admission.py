@@ -83,6 +83,7 @@ def test_an_honest_mesh_renders_in_the_worker_while_health_answers(live_server) 
     """A mesh inside the limits (328 k triangles): its ray casting holds the GIL, but in the session's worker."""
     sphere = trimesh.creation.icosphere(subdivisions=7)
     data = sphere.export(file_type="ply")
+    assert isinstance(data, bytes)
     with httpx.Client(base_url=live_server.url, timeout=120) as api:
         r = api.post("/api/models", files={"file": ("ball.ply", data, "application/octet-stream")})
         assert r.status_code == 201, r.text

@@ -39,7 +39,9 @@ _CALLS = itertools.count()
 _ROOT = Path(tempfile.mkdtemp(prefix="nbv-schemathesis-"))
 (_ROOT / "models").mkdir()
 (_ROOT / "models" / "cube.obj").write_text(CUBE_OBJ)
-APP = create_app(AppSettings(scene=False, models_dir=_ROOT / "models", data_dir=_ROOT / "data", capture_timeout=5.0, fault_api=True))
+APP = create_app(
+    AppSettings(scene=False, models_dir=_ROOT / "models", data_dir=_ROOT / "data", capture_timeout=5.0, fault_api=True)
+)
 schema = schemathesis.openapi.from_dict(APP.openapi())  # the document is built without starting the app
 # Positive data (valid by the schema) may still be refused for what no schema can say: a file that is not a
 # mesh or over a mesh limit (413), a config over a cost limit, an unreachable pose (422), the session's state

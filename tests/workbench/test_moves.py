@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -56,7 +58,7 @@ class HangingArm(SimulatedArm):
 
 
 @pytest.fixture
-def registry(tmp_path: Path) -> SessionRegistry:
+def registry(tmp_path: Path) -> Iterator[SessionRegistry]:
     settings = WorkbenchSettings(models_dir=tmp_path / "models", data_dir=tmp_path / "data", move_timeout=0.5)
     registry = SessionRegistry(settings)
     yield registry
@@ -67,7 +69,7 @@ def hang_on_approve(registry: SessionRegistry, brake: float) -> tuple[Session, H
     session = registry.create(config=SMALL)
     session.capture()
     entry = session.plan()
-    faulty = session.cell.arm  # the fault-injection wrapper: stop() reaches the inner arm through it
+    faulty: Any = session.cell.arm  # the fault-injection wrapper: stop() reaches the inner arm through it
     arm = HangingArm(faulty.inner.pose, brake=brake)
     faulty.inner = arm
     with pytest.raises(DeviceFault, match=r"cell move: no answer within 0\.5 s \(timeout; stopped\)"):
