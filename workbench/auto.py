@@ -68,8 +68,9 @@ class AutoRunner:
         return self._stop.is_set()
 
     def stop(self) -> bool:
-        """Stop auto mode: a plan or integration running in the session's worker is killed at once (the session
-        then goes to state error, map unchanged); a move or capture ends first. True when auto mode was running."""
+        """Stop auto mode: a plan or integration running in the session's worker is killed at once (a killed plan
+        just ends auto mode; a killed integration leaves its view step in state error to retry, map unchanged); a
+        move or capture in flight ends first. True when auto mode was running."""
         s = self.session
         with s._lock:
             running = s.state == State.AUTO
