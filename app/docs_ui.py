@@ -9,9 +9,9 @@ files are used, mounted at ``/docs-static``.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from urllib.parse import quote
 
-from fastapi import FastAPI
+from fastapi import FastAPI, Request
 from fastapi.openapi.docs import get_redoc_html, get_swagger_ui_html, get_swagger_ui_oauth2_redirect_html
 from fastapi.responses import HTMLResponse
 from fastapi.staticfiles import StaticFiles
@@ -28,13 +28,19 @@ def assets_dir() -> Path:
 def install_docs(app: FastAPI) -> None:
     """Add ``/docs``, ``/redoc`` and their assets to ``app`` (created with ``docs_url=None, redoc_url=None``)."""
     app.mount(ASSETS_URL, StaticFiles(directory=assets_dir()), name="docs-static")
-    def page(kind: str) -> dict[str, Any]:
-        return {"openapi_url": app.openapi_url or "/openapi.json", "title": f"{app.title} - {kind}"}
+    title = app.title
+
+    def openapi_url(request: Request) -> str:
+        # with a token, /docs?token=... is how a browser opens the page; its fetch of the schema needs it too
+        token = request.query_params.get("token")
+        url = app.openapi_url or "/openapi.json"
+        return url if not token else f"{url}?token={quote(token)}"
 
     @app.get("/docs", include_in_schema=False)
-    def swagger_ui() -> HTMLResponse:
+    def swagger_ui(request: Request) -> HTMLResponse:
         return get_swagger_ui_html(
-            **page("API"),
+            openapi_url=openapi_url(request),
+            title=f"{title} - API",
             swagger_js_url=f"{ASSETS_URL}/swagger-ui-bundle.js",
             swagger_css_url=f"{ASSETS_URL}/swagger-ui.css",
             swagger_favicon_url=f"{ASSETS_URL}/favicon.png",
@@ -46,9 +52,10 @@ def install_docs(app: FastAPI) -> None:
         return get_swagger_ui_oauth2_redirect_html()
 
     @app.get("/redoc", include_in_schema=False)
-    def redoc() -> HTMLResponse:
+    def redoc(request: Request) -> HTMLResponse:
         return get_redoc_html(
-            **page("ReDoc"),
+            openapi_url=openapi_url(request),
+            title=f"{title} - ReDoc",
             redoc_js_url=f"{ASSETS_URL}/redoc.standalone.js",
             redoc_favicon_url=f"{ASSETS_URL}/favicon.png",
             with_google_fonts=False,

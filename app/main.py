@@ -14,6 +14,7 @@ request passes app/security.py first; CORS is installed only when configured.
 from __future__ import annotations
 
 import logging
+import secrets
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -21,15 +22,17 @@ from typing import Any
 
 from fastapi import FastAPI, Request
 from fastapi.encoders import jsonable_encoder
+from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse
 from fastapi.staticfiles import StaticFiles
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from app.api import router
 from app.docs_ui import install_docs
 from app.errors import status_of
 from app.scene.controller import SceneController
-from app.security import SecurityMiddleware, openapi_security
+from app.security import SecurityMiddleware, install_log_redaction, openapi_security
 from app.serialize import SafeJSONResponse
 from app.settings import AppSettings, check_exposure, viewer_host
 from workbench.errors import WorkbenchError
@@ -37,6 +40,16 @@ from workbench.registry import SessionRegistry
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 log = logging.getLogger(__name__)
+
+
+def allowed_methods(app: FastAPI, path: str) -> list[str]:
+    """The methods some route of ``app`` answers on ``path`` (the ``Allow`` header of a 405)."""
+    methods: set[str] = set()
+    for route in app.routes:
+        regex, route_methods = getattr(route, "path_regex", None), getattr(route, "methods", None)
+        if regex is not None and route_methods and regex.match(path):
+            methods |= set(route_methods)
+    return sorted(methods)
 
 
 def create_app(settings: AppSettings | None = None) -> FastAPI:
@@ -47,6 +60,7 @@ def create_app(settings: AppSettings | None = None) -> FastAPI:
         from devices.arm.model import check_arm
 
         check_arm(settings.devices.cell.arm)
+    install_log_redaction()
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -88,6 +102,28 @@ def create_app(settings: AppSettings | None = None) -> FastAPI:
     @app.exception_handler(WorkbenchError)
     async def _workbench_error(request: Request, exc: WorkbenchError) -> JSONResponse:
         return JSONResponse({"detail": exc.detail}, status_code=status_of(exc))
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http_error(request: Request, exc: StarletteHTTPException) -> Any:
+        if exc.status_code == 405:  # Allow: every method of the path, not only those of the first route matched
+            exc.headers = {**(exc.headers or {}), "Allow": ", ".join(allowed_methods(app, request.url.path))}
+        return await http_exception_handler(request, exc)
+
+    @app.exception_handler(Exception)
+    async def _unexpected(request: Request, exc: Exception) -> JSONResponse:
+        # anything not foreseen: JSON, never text/plain, with an id that finds the traceback in the log
+        error_id = secrets.token_hex(6)
+        log.error(
+            "error %s on %s %s: %s: %s",
+            error_id,
+            request.method,
+            request.url.path,
+            type(exc).__name__,
+            exc,
+            exc_info=exc,
+        )
+        detail = f"internal error {error_id} ({type(exc).__name__}); the server log has the details"
+        return JSONResponse({"detail": detail, "error_id": error_id}, status_code=500)
 
     @app.exception_handler(RequestValidationError)
     async def _validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:

@@ -5,15 +5,15 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StrictFloat, StrictInt, model_validator
 
 from planner import Pose
 
 
-def _finite(values: list[float]) -> list[float]:
+def _finite(values: list[float | int]) -> list[float]:
     if not all(math.isfinite(v) for v in values):
         raise ValueError("must be finite numbers")
-    return values
+    return [float(v) for v in values]
 
 
 def _unit(values: list[float]) -> list[float]:
@@ -22,8 +22,12 @@ def _unit(values: list[float]) -> list[float]:
     return values
 
 
-Vec3 = Annotated[list[float], Field(min_length=3, max_length=3), AfterValidator(_finite)]
-Quat = Annotated[list[float], Field(min_length=4, max_length=4), AfterValidator(_finite), AfterValidator(_unit)]
+Number = StrictFloat | StrictInt
+"""A JSON number: 1 and 0.5, never true or "1" (strict types on everything that can move the robot)."""
+Index = Annotated[StrictInt, Field(ge=0)]
+"""A candidate index: a JSON integer >= 0, never true, "1" or 1.0."""
+Vec3 = Annotated[list[Number], Field(min_length=3, max_length=3), AfterValidator(_finite)]
+Quat = Annotated[list[Number], Field(min_length=4, max_length=4), AfterValidator(_finite), AfterValidator(_unit)]
 
 
 class PoseModel(BaseModel):
@@ -43,6 +47,7 @@ class ErrorOut(BaseModel):
     detail: str | list[dict[str, Any]] = Field(
         description="why the request was refused: one sentence, or (422 of a malformed request) pydantic's field errors"
     )
+    error_id: str | None = Field(default=None, description="500 only: the id of the error in the server log")
 
 
 ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
@@ -53,6 +58,7 @@ ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
     409: {"model": ErrorOut, "description": "wrong state, a stale or used plan_id, an interrupted session"},
     413: {"model": ErrorOut, "description": "request body over the size limit"},
     422: {"model": ErrorOut, "description": "bad parameters, an unreachable pose or one inside the object"},
+    500: {"model": ErrorOut, "description": "an unexpected error; error_id finds it in the server log"},
     503: {
         "model": ErrorOut,
         "description": "a device fault or timeout (the session is in state error, map unchanged), or the data "
@@ -109,7 +115,9 @@ class SessionCreate(BaseModel):
         default_factory=dict,
         description='any subset of the planner config, e.g. {"voxel": {"resolution": 0.02}, "cluster": {"t_max": 10}}',
     )
-    seed: int = Field(default=0, ge=0, le=2**32 - 1, description="seeds the planner's fits and the simulated noise")
+    seed: StrictInt = Field(
+        default=0, ge=0, le=2**32 - 1, description="seeds the planner's fits and the simulated noise"
+    )
     planner: str = Field(
         default="projection",
         max_length=40,
@@ -151,7 +159,9 @@ class SessionOut(BaseModel):
         description="sim, replay, hardware (a cell file's devices, or its dry run), "
         "or journal (an interrupted session not yet resumed)"
     )
-    state: str = Field(description="new, capturing, ready, planning, planned, moving, auto, done, error, interrupted")
+    state: str = Field(
+        description="new, capturing, ready, planning, planned, moving, auto, done, error, interrupted, damaged"
+    )
     iteration: int
     coverage: float | None
     points: int
@@ -205,8 +215,8 @@ class ApproveRequest(BaseModel):
     """Exactly one of ``index`` (a candidate of the plan) or ``pose`` (a custom view)."""
 
     model_config = ConfigDict(extra="forbid")
-    plan_id: str = Field(max_length=64)
-    index: int | None = Field(default=None, ge=0)
+    plan_id: str = Field(min_length=1, max_length=64)
+    index: Index | None = None
     pose: PoseModel | None = None
 
     @model_validator(mode="after")
@@ -230,17 +240,17 @@ class IterationOut(BaseModel):
 
 class StepRequest(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    count: int = Field(default=1, ge=1, le=100)
+    count: StrictInt = Field(default=1, ge=1, le=100)
 
 
 class AutoRequest(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    count: int = Field(default=5, ge=1, le=100, description="steps to run unless stopped")
+    count: StrictInt = Field(default=5, ge=1, le=100, description="steps to run unless stopped")
 
 
 class SelectRequest(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    index: int = Field(ge=0)
+    index: Index
 
 
 class CustomPoseRequest(BaseModel):
@@ -252,8 +262,8 @@ class CameraRequest(BaseModel):
     """Either ``candidate`` (look at that candidate from outside the hemisphere) or ``position`` + ``look_at``."""
 
     model_config = ConfigDict(extra="forbid")
-    candidate: int | None = Field(default=None, ge=0)
-    distance: float = Field(default=0.3, gt=0, le=5)
+    candidate: Index | None = None
+    distance: Number = Field(default=0.3, gt=0, le=5)
     position: Vec3 | None = None
     look_at: Vec3 | None = None
 
@@ -300,6 +310,11 @@ class ResumeOut(BaseModel):
     verified: bool = Field(description="every replayed step matched the journal (points, voxels, plans)")
     mismatches: list[str]
     interrupted: str | None = Field(description="plan_id of a decision whose capture never happened; pending again")
+    dropped: list[str] = Field(
+        default_factory=list,
+        description="what a damaged journal lost: the damaged line, event or frame and how much came after it "
+        "(the session resumes from just before it; the whole file is kept as journal.damaged-*.jsonl)",
+    )
 
 
 class FaultRequest(BaseModel):

@@ -21,6 +21,8 @@ installed only when ``cors_origins`` is not empty: closed by default.
 from __future__ import annotations
 
 import hmac
+import logging
+import re
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
@@ -31,6 +33,11 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from app.settings import AppSettings, is_loopback
 
 SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
+PROTECTED_PAGES = frozenset({"/openapi.json", "/docs", "/docs/oauth2-redirect", "/redoc"})
+"""Pages outside ``/api`` that need the token too: the API's description is part of the API."""
+SECRET_PARAMS = ("token", "ticket")
+"""Query parameters the access log never shows."""
+_SECRET_QUERY = re.compile(r"(?i)\b(" + "|".join(SECRET_PARAMS) + r")=[^&\s\"]*")
 UPLOAD_OVERHEAD = 64 * 1024
 """Multipart framing allowed on top of ``max_upload_bytes``."""
 
@@ -95,7 +102,7 @@ class SecurityMiddleware:
             if not same and origin.rstrip("/") not in self.cors:
                 return 403, f"cross-origin request from {origin!r} refused (allowed: this page, cors_origins)"
         path = scope["path"]
-        api = path == "/api" or path.startswith("/api/")
+        api = path == "/api" or path.startswith("/api/") or path in PROTECTED_PAGES
         if self.token is not None and api and method != "OPTIONS" and not self._has_token(scope, headers):
             return 401, "missing or wrong token: send 'Authorization: Bearer <token>' or '?token=<token>'"
         return None
@@ -150,3 +157,27 @@ def openapi_security(schema: dict[str, Any]) -> dict[str, Any]:
     components.setdefault("securitySchemes", {})["bearer"] = {"type": "http", "scheme": "bearer"}
     schema["security"] = [{"bearer": []}]
     return schema
+
+
+def redact(text: str) -> str:
+    """``text`` with the value of every ``token=`` / ``ticket=`` query parameter replaced by ``***``."""
+    return _SECRET_QUERY.sub(lambda m: f"{m.group(1)}=***", text)
+
+
+class RedactSecrets(logging.Filter):
+    """A log filter (on ``uvicorn.access``) that removes tokens from the request line of every record."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if isinstance(record.args, tuple):
+            record.args = tuple(redact(a) if isinstance(a, str) else a for a in record.args)
+        elif isinstance(record.msg, str):
+            record.msg = redact(record.msg)
+        return True
+
+
+def install_log_redaction() -> None:
+    """Add :class:`RedactSecrets` to uvicorn's access and error loggers (once)."""
+    for name in ("uvicorn.access", "uvicorn.error"):
+        logger = logging.getLogger(name)
+        if not any(isinstance(f, RedactSecrets) for f in logger.filters):
+            logger.addFilter(RedactSecrets())

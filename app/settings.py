@@ -68,7 +68,8 @@ class AppSettings(WorkbenchSettings):
     """Bind the 3D viewer to ``viser_host`` even when the API is exposed with a token (viser has no
     authentication; by default it then listens on 127.0.0.1 only)."""
     fault_api: bool = False
-    """Enable the test-only route ``POST /api/sessions/{id}/faults`` that injects a fault now."""
+    """Test flag: allow fault injection over the API (``faults`` in ``POST /api/sessions`` and the route
+    ``POST /api/sessions/{id}/faults`` that injects a fault now). Off: both are refused (422 / 404)."""
     scene: bool = True
     """Start the viser server (tests of the REST API alone may turn it off)."""
     viser_verbose: bool = False

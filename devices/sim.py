@@ -145,6 +145,7 @@ class SimulatedArm:
         self._pose = initial if initial is not None else Pose.identity()
         self.fail_next: Exception | None = None
         self.moves = 0
+        self.stops = 0
 
     @property
     def pose(self) -> Pose:
@@ -159,6 +160,10 @@ class SimulatedArm:
         self._pose = T_base_camera
         self.moves += 1
 
+    def stop(self) -> None:
+        """Stop a move (a simulated move is instant: nothing is moving). ``stops`` counts the calls."""
+        self.stops += 1
+
 
 class SimulatedTurntable:
     """A turntable that turns instantly; ``angle`` is kept wrapped to (-pi, pi]."""
@@ -167,6 +172,7 @@ class SimulatedTurntable:
         self._angle = wrap_angle(angle)
         self.fail_next: Exception | None = None
         self.rotations = 0
+        self.stops = 0
 
     @property
     def angle(self) -> float:
@@ -186,6 +192,10 @@ class SimulatedTurntable:
             raise exc
         self._angle = wrap_angle(float(angle))
         self.rotations += 1
+
+    def stop(self) -> None:
+        """Stop a rotation (a simulated rotation is instant: nothing is turning). ``stops`` counts the calls."""
+        self.stops += 1
 
 
 def make_sim_cell(

@@ -18,13 +18,21 @@ T = TypeVar("T")
 
 
 class DeviceTimeoutError(DeviceError):
-    """A device did not answer within its deadline."""
+    """A device did not answer within its deadline. ``pending`` is set once the abandoned call has ended."""
+
+    def __init__(self, message: str, pending: threading.Event | None = None) -> None:
+        super().__init__(message)
+        self.pending = pending
 
 
-def call_with_timeout(fn: Callable[[], T], timeout: float | None, what: str) -> T:
+def call_with_timeout(
+    fn: Callable[[], T], timeout: float | None, what: str, on_timeout: Callable[[], None] | None = None
+) -> T:
     """``fn()``, or DeviceTimeoutError when it has not returned after ``timeout`` seconds (None or <= 0: no limit).
 
-    Exceptions of ``fn`` are re-raised in the caller.
+    Exceptions of ``fn`` are re-raised in the caller. On a timeout ``on_timeout()`` is called first (a driver's
+    ``stop()``: a move that timed out must not go on); the error's ``pending`` event tells when the abandoned
+    call has really ended, so a retry can wait for it instead of sending a second move.
     """
     if timeout is None or timeout <= 0:
         return fn()
@@ -42,7 +50,14 @@ def call_with_timeout(fn: Callable[[], T], timeout: float | None, what: str) -> 
     thread = threading.Thread(target=run, name=f"device-{what}", daemon=True)
     thread.start()
     if not done.wait(timeout):
-        raise DeviceTimeoutError(f"{what}: no answer within {timeout:g} s (timeout)")
+        stopped = ""
+        if on_timeout is not None:
+            try:
+                on_timeout()
+                stopped = "; stopped"
+            except Exception as exc:  # the stop failed too: say so, the caller still gets the timeout
+                stopped = f"; stop failed: {exc}"
+        raise DeviceTimeoutError(f"{what}: no answer within {timeout:g} s (timeout{stopped})", done)
     if "error" in box:
         raise box["error"]
     return box["value"]

@@ -13,6 +13,7 @@ import threading
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from workbench.engine import JobKilled
 from workbench.errors import Conflict
 from workbench.hardware import auto_refusal
 from workbench.states import Decision, DecisionKind, SessionEvent, State
@@ -65,14 +66,23 @@ class AutoRunner:
         with contextlib.suppress(Exception):  # already recorded as the error state; the thread just ends
             self._run(count, DecisionKind.AUTO)
 
+    @property
+    def stopping(self) -> bool:
+        """Stop was asked and the run has not ended yet."""
+        return self._stop.is_set()
+
     def stop(self) -> bool:
-        """Ask auto mode to stop after the current action. True when auto mode was running."""
+        """Stop auto mode: a plan or integration running in the session's worker is killed at once (a killed plan
+        just ends auto mode; a killed integration leaves its view step in state error to retry, map unchanged); a
+        move or capture in flight ends first. True when auto mode was running."""
         s = self.session
         with s._lock:
             running = s.state == State.AUTO
             if running:
                 self._stop.set()
                 s._emit("auto_stop")
+        if running and s.worker is not None:
+            s.worker.cancel("stopped by the operator")
         return running
 
     def join(self, timeout: float) -> bool:
@@ -97,7 +107,12 @@ class AutoRunner:
             for _ in range(count):
                 if self._stop.is_set() or s.planner.terminated is not None:
                     break
-                entry = s.make_plan()
+                try:
+                    entry = s.make_plan()
+                except JobKilled:
+                    if self._stop.is_set():
+                        break  # Stop killed the plan at once
+                    raise
                 s.notify(SessionEvent.PLANNED)
                 best = entry.plan.best_index
                 if best is None or self._stop.is_set():

@@ -101,7 +101,11 @@ def load_model(settings: WorkbenchSettings, name: str) -> trimesh.Trimesh:
         if info.kind == "builtin":
             return make_builtin(info.name, size)
         assert info.path is not None
-        return load_mesh(info.path, up=settings.devices.up, size=size)
+        limits = settings.mesh_limits
+        limits.check_file(info.path, f"model {name!r}")  # before trimesh spends memory on it
+        mesh = load_mesh(info.path, up=settings.devices.up, size=size)
+        limits.check_mesh(mesh.vertices, mesh.faces, f"model {name!r}")
+        return mesh
     except ValueError as exc:
         raise Invalid(f"model {name!r}: {exc}") from None
 
@@ -114,8 +118,9 @@ def save_upload(settings: WorkbenchSettings, filename: str, data: bytes) -> Mode
 
     The stored name is the sanitised stem plus a content hash, so two uploads
     never overwrite each other and the name carries no path. TooLarge over
-    ``max_upload_bytes``; Invalid for an unsupported or unusable file
-    (nothing is kept then).
+    ``max_upload_bytes`` or beyond ``settings.mesh_limits`` (triangles, vertices,
+    polygon degree, triangles per vertex: workbench/limits.py); Invalid for an
+    unsupported or unusable file (nothing is kept then).
     """
     from devices.mesh import load_mesh
 
@@ -133,10 +138,16 @@ def save_upload(settings: WorkbenchSettings, filename: str, data: bytes) -> Mode
     final = directory / f"{stem}-{digest}{suffix}"
     tmp = directory / f".{stem}-{digest}.part{suffix}"
     tmp.write_bytes(data)
+    what = f"upload {filename!r}"
     try:
-        load_mesh(tmp, up=settings.devices.up, size=settings.devices.size)
+        settings.mesh_limits.check_file(tmp, what)  # a bomb is refused before trimesh loads it
+        mesh = load_mesh(tmp, up=settings.devices.up, size=settings.devices.size)
+        settings.mesh_limits.check_mesh(mesh.vertices, mesh.faces, what)
+    except TooLarge:
+        tmp.unlink(missing_ok=True)
+        raise
     except ValueError as exc:
         tmp.unlink(missing_ok=True)
-        raise Invalid(f"upload {filename!r}: {str(exc).replace(str(tmp), 'file')}") from None
+        raise Invalid(f"{what}: {str(exc).replace(str(tmp), 'file')}") from None
     tmp.replace(final)
     return ModelInfo(UPLOAD_PREFIX + final.name, "upload", f"uploaded {filename}", final)

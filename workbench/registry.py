@@ -19,6 +19,7 @@ from planner import PlannerConfig
 from planner.config import from_dict
 from planner.evaluators import evaluator_names
 from workbench.ceilings import CeilingService
+from workbench.engine import Engine, offload_rendering, render_spec
 from workbench.errors import Conflict, Invalid, NotFound, StorageFault
 from workbench.factory import SURFACE_SAMPLES, SessionParts, build_parts, session_devices
 from workbench.journal.rebuild import Rebuilt, rebuild
@@ -29,7 +30,7 @@ from workbench.session import Session
 from workbench.settings import WorkbenchSettings
 from workbench.states import SessionEvent, State
 from workbench.summaries import session_status
-from workbench.trash import empty_trash, move_to_trash
+from workbench.trash import move_to_trash, prune
 
 __all__ = ["SURFACE_SAMPLES", "DormantSession", "SessionRegistry"]
 log = logging.getLogger(__name__)
@@ -37,7 +38,10 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class DormantSession:
-    """A journaled session of an earlier server process (not loaded): what ``GET /api/sessions`` shows of it."""
+    """A journaled session of an earlier server process (not loaded): what ``GET /api/sessions`` shows of it.
+
+    ``damage`` (a line of the journal is not an event) lists it as ``damaged`` with the reason; resume then
+    recovers everything before the damage and says what was dropped."""
 
     id: str
     directory: Path
@@ -46,8 +50,17 @@ class DormantSession:
     stopped: float
     planner: str = "projection"
     """The header's planner (journals without one: projection)."""
+    damage: str | None = None
 
     def status(self) -> dict[str, Any]:
+        if self.damage is not None:
+            return {"planner": self.planner} | session_status(
+                self.record,
+                state=State.DAMAGED,
+                source="journal",
+                error=f"damaged journal: {self.damage}; POST /api/sessions/{self.id}/resume recovers what comes "
+                "before the damage",
+            )
         return {"planner": self.planner} | session_status(
             self.record,
             state=State.INTERRUPTED,
@@ -64,15 +77,34 @@ def _release(parts: SessionParts) -> None:
 
 
 def _dormant(directory: Path) -> DormantSession | None:
+    """The dormant session of a journal folder (None when deleted). ValueError when not even the header reads."""
     journal = read_journal(directory)
     if journal.deleted:
         return None
     record = SessionRecord.from_header(journal.header)
+    damage = journal.damage
+    applied = 0
     for event in journal.events:
-        record.apply(event)
-    stopped = journal.events[-1]["time"] if journal.events else journal.header["time"]
+        try:
+            record.apply(event)
+        except (KeyError, TypeError, ValueError) as exc:  # an event of the right shape with wrong contents
+            damage = f"event {event.get('seq')} ({event.get('kind')}) cannot be read: {exc!r}"
+            break
+        applied += 1
+    if damage is not None and journal.damage is not None:
+        damage = f"{damage}; {journal.dropped_lines} line(s) from there on are not read"
+    stopped = journal.events[applied - 1]["time"] if applied else journal.header["time"]
     planner = str(journal.header.get("planner", "projection"))
-    return DormantSession(journal.session_id, directory, record, float(stopped), planner)
+    return DormantSession(journal.session_id, directory, record, float(stopped), planner, damage)
+
+
+def _unreadable(directory: Path, reason: str) -> DormantSession:
+    """A journal whose header cannot be read: listed as damaged, so it does not vanish."""
+    header = {"id": directory.name, "model": {"name": "?"}, "config": {}, "seed": 0, "time": 0.0}
+    with contextlib.suppress(OSError):
+        header["time"] = (directory / "journal.jsonl").stat().st_mtime
+    record = SessionRecord.from_header(header)
+    return DormantSession(directory.name, directory, record, float(header["time"]), damage=f"unreadable: {reason}")
 
 
 class SessionRegistry:
@@ -89,18 +121,27 @@ class SessionRegistry:
         self.on_create: list[Callable[[Session], None]] = []
         self.on_delete: list[Callable[[Session], None]] = []
         self.ceilings = CeilingService(settings.data_dir / "ceilings")
+        self.engine = (
+            Engine(settings.max_running_jobs, settings.max_idle_workers)
+            if getattr(settings, "workers", False)
+            else None
+        )
+        """The sessions' worker processes (workbench/engine.py); None: heavy work runs in this process."""
         if settings.journal:
-            empty_trash(settings.data_dir)  # deleted in an earlier run: kept until now
             for directory in list_journals(settings.data_dir):
                 if in_use(directory):  # live in another server on the same data directory
                     continue
                 try:
                     dormant = _dormant(directory)
                 except (ValueError, KeyError, TypeError) as exc:
-                    log.warning("journal %s not listed: %s", directory, exc)
-                    continue
+                    log.warning("journal %s is damaged: %s", directory, exc)
+                    dormant = _unreadable(directory, str(exc))
                 if dormant is not None:
                     self._dormant[dormant.id] = dormant
+                else:  # deleted by an earlier server that kept deleted journals in place
+                    self._trash(directory)
+            with contextlib.suppress(OSError):
+                prune(settings.data_dir, settings.trash_max_bytes, settings.trash_max_age)
 
     # ------------------------------------------------------------------ create
 
@@ -195,6 +236,11 @@ class SessionRegistry:
         evaluator: str = "projection",
     ) -> Session:
         s = self.settings
+        worker = None
+        if self.engine is not None:
+            worker = self.engine.worker(sid, render_spec(parts.cell, devices.cell))
+            offload_rendering(parts.cell, worker, s.capture_budget)
+            worker.start_soon()
         session = Session(
             sid,
             parts,
@@ -205,6 +251,9 @@ class SessionRegistry:
             capture_timeout=s.capture_timeout,
             move_timeout=s.move_timeout,
             evaluator=evaluator,
+            worker=worker,
+            plan_budget=s.plan_budget,
+            capture_budget=s.capture_budget,
         )
         if parts.surface_samples is not None and parts.model_kind != "replay":  # a ground truth in the sim cell
 
@@ -312,11 +361,20 @@ class SessionRegistry:
             writer.close()
             _release(parts)
             raise Invalid(f"session {dormant.id}: cannot resume: {exc}") from None
+        if rebuilt.kept < len(journal.events):  # a damaged event or frame: the journal goes on from before it
+            journal.cut(rebuilt.kept)
+            writer.cut_to(journal)
         wb.restore(rebuilt)
         wb.journal = writer
         writer.append(
-            "resume", verified=not rebuilt.mismatches, mismatches=rebuilt.mismatches, interrupted=rebuilt.interrupted
+            "resume",
+            verified=not rebuilt.mismatches,
+            mismatches=rebuilt.mismatches,
+            interrupted=rebuilt.interrupted,
+            dropped=rebuilt.dropped,
         )
+        if rebuilt.dropped:
+            log.warning("session %s resumed up to the damage; dropped: %s", dormant.id, "; ".join(rebuilt.dropped))
         if rebuilt.mismatches:
             log.warning("session %s resumed with differences: %s", dormant.id, "; ".join(rebuilt.mismatches))
         return wb, rebuilt
@@ -324,41 +382,54 @@ class SessionRegistry:
     # ------------------------------------------------------------------ delete and close
 
     def delete(self, session_id: str) -> None:
-        """Forget a session (live or interrupted). Its journal, marked deleted, moves to the trash folder
-        (workbench/trash.py) until the server restarts."""
+        """Forget a session (live, interrupted or damaged): its running job is killed, its journal marked deleted
+        and its folder moved to the trash (workbench/trash.py), which keeps it until its age or size limit."""
         with self._lock:
             wb = self._sessions.pop(session_id, None)
             dormant = self._dormant.pop(session_id, None) if wb is None else None
         if wb is None and dormant is None:
             raise NotFound(f"session {session_id!r}: unknown")
+        directory = None
         if wb is not None:
             if wb.journal is not None:
+                directory = wb.journal.directory
                 with contextlib.suppress(OSError):
                     wb.journal.append("deleted")
             wb.close()
-            if wb.journal is not None:
-                self._trash(wb.journal.directory)
             for hook in list(self.on_delete):
                 hook(wb)
         elif dormant is not None:
+            directory = dormant.directory
             try:
                 writer = JournalWriter.reopen(read_journal(dormant.directory))
             except JournalBusyError as exc:
                 with self._lock:
                     self._dormant[session_id] = dormant
                 raise Conflict(str(exc)) from None
-            writer.append("deleted")
-            writer.close()
-            self._trash(dormant.directory)
+            except ValueError:  # unreadable: nothing to mark, it goes to the trash as it is
+                writer = None
+            if writer is not None:
+                writer.append("deleted")
+                writer.close()
+        if directory is not None:
+            self._trash(directory)
 
     def _trash(self, directory: Path) -> None:
+        """Move a deleted session's folder to the trash and prune the trash (best effort: a disk error is logged)."""
         try:
-            move_to_trash(self.settings.data_dir, directory)
-        except OSError as exc:  # the journal stays where it was, marked deleted
-            log.warning("session %s: cannot move to the trash (%s)", directory.name, exc)
+            move_to_trash(directory)
+            prune(self.settings.data_dir, self.settings.trash_max_bytes, self.settings.trash_max_age)
+        except OSError as exc:
+            log.error("trash: cannot move %s: %s", directory, exc)
 
     def close(self) -> None:
-        """Stop every session's auto mode (shutdown)."""
-        for wb in self.list():
-            wb.close(timeout=10.0)
+        """Kill every running job, stop every session's auto mode, close the journals (shutdown)."""
+        sessions = self.list()
+        for wb in sessions:  # first kill every worker: nothing waits on a long job below
+            if wb.worker is not None:
+                wb.worker.close()
+        for wb in sessions:
+            wb.close(timeout=3.0)
+        if self.engine is not None:
+            self.engine.close()
         self.ceilings.close()

@@ -36,11 +36,13 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
+from devices.cell import Cell
 from devices.config import DeviceConfig
 from devices.protocols import UnreachableError
 from planner import Planner, PlannerConfig, Pose
 from workbench.auto import AutoRunner
-from workbench.errors import Conflict, Invalid, NotFound, Unreachable
+from workbench.engine import JobKilled, SessionWorker
+from workbench.errors import Conflict, DeviceFault, Invalid, NotFound, Unreachable
 from workbench.factory import SessionParts
 from workbench.journal.rebuild import Rebuilt
 from workbench.journal.store import JournalWriter, make_event
@@ -85,6 +87,9 @@ class Session:
         capture_timeout: float = 30.0,
         move_timeout: float = 120.0,
         evaluator: str = "projection",
+        worker: SessionWorker | None = None,
+        plan_budget: float = 60.0,
+        capture_budget: float = 30.0,
     ) -> None:
         self.id = session_id
         self.model = parts.model
@@ -100,7 +105,12 @@ class Session:
         """The planner's view evaluator (planner/evaluators.py EVALUATORS): "projection", a baseline, "random"."""
         self.planner = Planner(config, evaluator=evaluator)
         self.journal = journal
-        self.step_runner = ViewStep(self.cell, journal, parts.surface_samples, capture_timeout, move_timeout)
+        self.worker = worker
+        """The worker process of the heavy steps (workbench/engine.py); None: they run in this process."""
+        self.plan_budget = plan_budget
+        self.step_runner = ViewStep(
+            self.cell, journal, parts.surface_samples, capture_timeout, move_timeout, worker, capture_budget
+        )
         self.record = SessionRecord(session_id, parts.model, config.to_dict(), seed, time.time())
         self.auto = AutoRunner(self)
         self.listeners: list[Listener] = []
@@ -235,19 +245,34 @@ class Session:
             entry = self.make_plan()
         except Exception:
             with self._lock:
-                self._state = before
+                if self._state == State.PLANNING:  # a killed plan left state error with its reason
+                    self._state = before
             raise
         self.notify(SessionEvent.PLANNED)
         return entry
 
     def make_plan(self) -> PendingPlan:
-        """Plan (the caller claimed a busy state) and publish the plan as pending."""
+        """Plan (the caller claimed a busy state) and publish the plan as pending.
+
+        With a worker the plan runs there under ``plan_budget``; killed (budget, DELETE, Stop), the session goes
+        to state error with the reason (DeviceFault), its map and pending plan unchanged; plan again to go on.
+        """
+        planner = self.planner
         try:
-            plan = plan_in(self.cell, self.planner)
+            if self.worker is None or type(self.cell).is_reachable is not Cell.is_reachable:
+                plan = plan_in(self.cell, planner)
+            else:
+                q = None if self.cell.kinematics is None else self.cell.arm.joint_positions()
+                plan, planner = self.worker.plan(planner, self.cell.config, self.plan_budget, q, self.cell.angle)
         except ValueError as exc:
             raise Conflict(f"session {self.id}: {exc}") from None
+        except JobKilled as exc:
+            if self._state == State.AUTO and self.auto.stopping:
+                raise  # Stop killed the plan: auto mode ends and the session settles, no error
+            self._plan_killed(str(exc))
         entry = PendingPlan(secrets.token_hex(8), plan, time.time())
         with self._lock:
+            self.planner = planner
             if self._pending is not None:
                 self._stale.add(self._pending.plan_id)
             self._pending = self._last = entry
@@ -259,6 +284,15 @@ class Session:
             if self._state != State.AUTO:
                 self._state = State.PLANNED
         return entry
+
+    def _plan_killed(self, reason: str) -> NoReturn:
+        message = f"stopped: {reason}"
+        with self._lock:
+            self._state = State.ERROR
+            self._error = message
+            self._emit("error", message=message, action="plan", restored_plan=None)
+        self.notify(SessionEvent.STATE)
+        raise DeviceFault(f"session {self.id}: {message}. The map is unchanged; state error: plan again")
 
     # ------------------------------------------------------------------ inspect and override
 
@@ -406,7 +440,10 @@ class Session:
         return discard_last_view(self)
 
     def close(self, timeout: float = 30.0) -> None:
-        """Stop auto mode and wait for it (on delete and at shutdown); release hanging devices; close the journal."""
+        """Kill a running job and the worker, stop auto mode and wait for it (on delete and at shutdown); release
+        hanging devices; close the journal."""
+        if self.worker is not None:
+            self.worker.close()
         self.auto.stop_and_join(timeout, release=self.injector.release if self.injector is not None else None)
         self.listeners.clear()
         if self.journal is not None:
@@ -487,6 +524,7 @@ class Session:
 
     def _publish(self, outcome: ViewOutcome, decision: Decision) -> None:
         with self._lock:
+            self.planner = outcome.planner
             stored = outcome.stored
             self._emit(
                 "capture",

@@ -15,6 +15,7 @@ from devices.config import DeviceConfig
 from devices.faults import FaultConfig
 from planner.config import PlannerConfig
 from planner.validate import finite, integer
+from workbench.limits import MeshLimits
 
 
 def default_models_dir() -> Path:
@@ -38,6 +39,26 @@ class WorkbenchSettings:
     """A capture that takes longer fails with a timeout (the session goes to state error), seconds."""
     move_timeout: float = 120.0
     """A cell move (turntable + arm) that takes longer fails with a timeout, seconds."""
+    plan_budget: float = 60.0
+    """A plan (BIC fits, scoring) that takes longer is killed in its worker process; the session goes to state
+    error with the reason, the map unchanged, seconds (0: no limit)."""
+    capture_budget: float = 30.0
+    """Capturing and integrating one view (ray casting, preprocessing, ICP, the voxel map) that takes longer
+    is killed in its worker process like a plan, seconds (0: no limit). The move before it has move_timeout."""
+    workers: bool = True
+    """Run each live session's heavy work (rendering, integration, fitting, scoring) in a worker process that
+    can be killed (workbench/engine.py); False: in the server process (tests of the state machine alone)."""
+    max_running_jobs: int = 0
+    """Heavy jobs running at once over all sessions (others wait their turn); 0: os.cpu_count()."""
+    max_idle_workers: int = 4
+    """Worker processes kept for idle sessions; beyond this the least recently used is stopped (rebuilt from
+    the journal when its session works again)."""
+    mesh_limits: MeshLimits = field(default_factory=MeshLimits)
+    """What a model mesh may cost (triangles, vertices, polygon degree, triangles per vertex): workbench/limits.py."""
+    trash_max_bytes: int = 500 * 1024 * 1024
+    """Deleted sessions wait in ``data_dir/sessions/.trash``; beyond this total size the oldest are removed."""
+    trash_max_age: float = 7 * 24 * 3600.0
+    """A deleted session older than this (seconds) is removed from the trash."""
     journal: bool = True
     """Journal every session under ``data_dir/sessions`` (resume after a crash, ``nbv replay``)."""
     faults: FaultConfig = field(default_factory=FaultConfig)
@@ -57,7 +78,7 @@ class WorkbenchSettings:
     def __post_init__(self) -> None:
         if not integer(self.max_upload_bytes) or self.max_upload_bytes < 1:
             raise ValueError(f"server.max_upload_bytes: must be a positive integer, got {self.max_upload_bytes!r}")
-        for name in ("capture_timeout", "move_timeout"):
+        for name in ("capture_timeout", "move_timeout", "plan_budget", "capture_budget", "trash_max_age"):
             value = getattr(self, name)
             if not finite(value):
                 raise ValueError(f"server.{name}: must be a number of seconds (0: no limit), got {value!r}")
@@ -67,6 +88,19 @@ class WorkbenchSettings:
             raise ValueError(f'server.cell: must be the path of a cell file or "", got {self.cell!r}')
         if not isinstance(self.dry_run, bool):
             raise ValueError(f"server.dry_run: expected true/false, got {self.dry_run!r}")
+        for name in ("max_running_jobs", "max_idle_workers", "trash_max_bytes"):
+            value = getattr(self, name)
+            if not integer(value) or value < 0:
+                raise ValueError(f"server.{name}: must be an integer >= 0, got {value!r}")
+        if isinstance(self.mesh_limits, dict):
+            try:
+                object.__setattr__(self, "mesh_limits", MeshLimits(**self.mesh_limits))
+            except TypeError as exc:
+                raise ValueError(f"server.mesh_limits: {exc}") from None
+        if not isinstance(self.mesh_limits, MeshLimits):
+            raise ValueError("server.mesh_limits: must be a table of MeshLimits fields")
+        if not isinstance(self.workers, bool):
+            raise ValueError(f"server.workers: must be true or false, got {self.workers!r}")
         if not isinstance(self.faults, FaultConfig):
             raise ValueError("faults: must be a FaultConfig")
         object.__setattr__(self, "models_dir", Path(self.models_dir))

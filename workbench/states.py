@@ -26,6 +26,8 @@ class State(StrEnum):
     ERROR = "error"
     INTERRUPTED = "interrupted"
     """Journaled by an earlier server process that stopped; resume rebuilds it (never a live state)."""
+    DAMAGED = "damaged"
+    """Like interrupted, but its journal is damaged; resume recovers what comes before the damage."""
 
 
 BUSY = frozenset({State.CAPTURING, State.PLANNING, State.MOVING, State.AUTO})

@@ -9,8 +9,9 @@ session's error message and the domain error its caller receives.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,6 +21,7 @@ from devices.protocols import DeviceError, UnreachableError
 from devices.timeout import DeviceTimeoutError, call_with_timeout
 from planner import DepthFrame, Planner, Pose, VoxelClass
 from planner.planner import IntegrationReport
+from workbench.engine import JobKilled, SessionWorker
 from workbench.errors import DeviceFault, Unreachable, WorkbenchError
 from workbench.journal.store import JournalWriter
 from workbench.metrics import coverage
@@ -40,6 +42,8 @@ class ViewOutcome:
     voxels: dict[str, int]
     coverage: float | None
     occupied: NDArray[np.float64]
+    planner: Planner
+    """The planner after the view (the session's own, or the copy its worker process integrated into)."""
 
 
 @dataclass
@@ -51,27 +55,70 @@ class ViewStep:
     surface_samples: NDArray[np.float64] | None
     capture_timeout: float
     move_timeout: float
+    worker: SessionWorker | None = None
+    """Where integration (and the simulated camera's rendering) runs; None: in this process."""
+    capture_budget: float = 30.0
+    """The worker's budget for one integration, seconds (0: none)."""
+    _moving: threading.Event | None = field(default=None, repr=False)
+    """Set when the last move that timed out has really ended (None: no such move)."""
 
     def run(self, planner: Planner, pose: Pose, moved: Callable[[], None]) -> ViewOutcome:
         """Take the view at ``T_table_camera = pose`` into ``planner``; ``moved()`` is called once the cell moved.
 
-        Raises whatever the devices, the journal or ``Planner.integrate`` raised (see :func:`failure_of`).
+        A move that timed out was stopped (the devices' ``stop()``); the next run waits until it has really
+        ended before it moves again (DeviceTimeoutError if it does not within ``move_timeout``): never two moves.
+        Raises whatever the devices, the journal, the worker or ``Planner.integrate`` raised (see
+        :func:`failure_of`).
         """
         stored: tuple[str, str] | None = None
         try:
-            call_with_timeout(lambda: self.cell.move_to(pose), self.move_timeout, "cell move")
+            if self.worker is not None:
+                self.worker.start()  # a worker that is (re)starting does not count against the device deadlines
+            self._wait_for_the_last_move()
+            try:
+                call_with_timeout(lambda: self.cell.move_to(pose), self.move_timeout, "cell move", self._stop)
+            except DeviceTimeoutError as exc:
+                self._moving = exc.pending
+                raise
             moved()
-            frame = call_with_timeout(self.cell.capture, self.capture_timeout, "camera capture")
+            try:
+                frame = call_with_timeout(self.cell.capture, self.capture_timeout, "camera capture")
+            except DeviceTimeoutError:
+                if self.worker is not None:
+                    self.worker.cancel("the capture timed out")  # a render still running is killed
+                raise
             if self.journal is not None:
                 stored = self.journal.write_frame(planner.iteration + 1, frame)
-            report = planner.integrate(frame)  # atomic: a ValueError leaves the map as it was
+            if self.worker is None:
+                report, after = planner.integrate(frame), planner  # atomic: a ValueError leaves the map as it was
+            else:
+                report, after = self.worker.integrate(planner, frame, self.capture_budget)  # works on a copy
         except Exception:
             if stored is not None and self.journal is not None:
                 self.journal.discard_frame(stored[0])
             raise
-        cov = None if self.surface_samples is None else float(coverage(self.surface_samples, planner.cloud))
-        occupied = planner.voxel_map.centers(VoxelClass.OCCUPIED)
-        return ViewOutcome(frame, report, stored, voxel_counts(planner), cov, occupied)
+        cov = None if self.surface_samples is None else float(coverage(self.surface_samples, after.cloud))
+        occupied = after.voxel_map.centers(VoxelClass.OCCUPIED)
+        return ViewOutcome(frame, report, stored, voxel_counts(after), cov, occupied, after)
+
+    def _wait_for_the_last_move(self) -> None:
+        moving = self._moving
+        if moving is None:
+            return
+        if not moving.wait(self.move_timeout if self.move_timeout > 0 else None):
+            raise DeviceTimeoutError(
+                f"cell move: the previous move has not ended after {self.move_timeout:g} s more; "
+                "no new move is sent (check the arm)",
+                moving,
+            )
+        self._moving = None
+
+    def _stop(self) -> None:
+        """Stop the arm and the turntable (drivers with a ``stop()``) after a move timed out."""
+        for device in (self.cell.arm, self.cell.turntable):
+            stop = getattr(device, "stop", None)
+            if callable(stop):
+                stop()
 
 
 def failure_of(exc: Exception, session_id: str, restored_plan: bool) -> tuple[str, WorkbenchError | None]:
@@ -82,7 +129,9 @@ def failure_of(exc: Exception, session_id: str, restored_plan: bool) -> tuple[st
     """
     if isinstance(exc, UnreachableError):
         return str(exc), Unreachable(f"session {session_id}: {exc}")
-    if isinstance(exc, DeviceTimeoutError):
+    if isinstance(exc, JobKilled):
+        message = f"stopped: {exc}"
+    elif isinstance(exc, DeviceTimeoutError):
         message = f"device timeout: {exc}"
     elif isinstance(exc, DeviceError):
         message = f"device fault: {exc}"

@@ -10,15 +10,20 @@ from fastapi.responses import JSONResponse
 from app.api.deps import Registry, SessionDep, Settings
 from app.schemas import FaultRequest, ResumeOut, SessionCreate, SessionCreated, SessionOut
 from app.serialize import SafeJSONResponse
-from workbench.errors import Conflict, NotFound
+from workbench.errors import Conflict, Invalid, NotFound
 
 router = APIRouter()
 
 
 @router.post("/sessions", status_code=201, response_model=SessionCreated)
-def create_session(registry: Registry, body: Annotated[SessionCreate | None, Body()] = None) -> dict[str, str]:
-    """A new session (every field optional: the server's default model, planner config, simulated cell)."""
+def create_session(
+    registry: Registry, settings: Settings, body: Annotated[SessionCreate | None, Body()] = None
+) -> dict[str, str]:
+    """A new session (every field optional: the server's default model, planner config, simulated cell).
+    ``faults`` only on a server started with the test flag ``fault_api``."""
     body = body or SessionCreate()
+    if body.faults is not None and not settings.fault_api:
+        raise Invalid("faults: fault injection is disabled on this server (a test flag: [server] fault_api = true)")
     source = None if body.source is None else body.source.model_dump(exclude_none=True)
     session = registry.create(
         body.model, body.config, body.seed, source=source, faults=body.faults, planner=body.planner
@@ -60,6 +65,7 @@ def resume(session_id: str, registry: Registry) -> dict[str, Any]:
         "verified": not rebuilt.mismatches,
         "mismatches": rebuilt.mismatches,
         "interrupted": rebuilt.interrupted,
+        "dropped": rebuilt.dropped,
     }
 
 

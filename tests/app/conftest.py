@@ -26,7 +26,8 @@ def models_dir(tmp_path: Path) -> Path:
 
 @pytest.fixture
 def settings(tmp_path: Path, models_dir: Path) -> AppSettings:
-    return AppSettings(viser_port=0, scene=False, models_dir=models_dir, data_dir=tmp_path / "data")
+    # fault_api: the tests inject faults through the API (a server refuses them without this test flag)
+    return AppSettings(viser_port=0, scene=False, models_dir=models_dir, data_dir=tmp_path / "data", fault_api=True)
 
 
 @pytest.fixture

@@ -156,6 +156,9 @@ def test_auto_mode_runs_and_stops(client: TestClient, new_session) -> None:
     client.post(f"/api/sessions/{sid}/stop")
     assert auto.join(60)
     st = client.get(f"/api/sessions/{sid}").json()
-    assert st["state"] in ("ready", "planned") and st["iteration"] <= 4
+    # Stop kills a running job at once: a plan just ends auto mode; a view step killed mid-integration is a
+    # step to retry (the robot moved; the map is unchanged)
+    assert st["state"] in ("ready", "planned") or (st["state"], st["retry"]) == ("error", "auto"), st
+    assert st["iteration"] <= 4
     kinds = [d["kind"] for d in client.get(f"/api/sessions/{sid}/export").json()["decisions"]]
     assert kinds[:2] == ["auto", "auto"] and set(kinds) == {"auto"}

@@ -135,7 +135,7 @@ def test_a_failed_first_capture_can_be_retried(fault_client: TestClient) -> None
     assert (st["state"], st["iteration"]) == ("ready", 1)
 
 
-def test_the_test_only_route_injects_a_fault_now(fault_client: TestClient, client: TestClient) -> None:
+def test_the_test_only_route_injects_a_fault_now(fault_client: TestClient) -> None:
     sid, plan = planned_with_faults(fault_client, {})
     r = fault_client.post(f"/api/sessions/{sid}/faults", json={"kind": "turntable_error"})
     assert r.status_code == 202
@@ -143,10 +143,17 @@ def test_the_test_only_route_injects_a_fault_now(fault_client: TestClient, clien
     r = fault_client.post(f"/api/sessions/{sid}/approve", json=body)
     assert r.status_code == 503 and "turntable" in r.json()["detail"]
     assert fault_client.post(f"/api/sessions/{sid}/faults", json={"kind": "gremlins"}).status_code == 422
-    # the route does not exist for a server without fault_api
-    sid2 = client.post("/api/sessions", json={"config": SMALL}).json()["id"]
-    r = client.post(f"/api/sessions/{sid2}/faults", json={"kind": "turntable_error"})
-    assert r.status_code == 404 and "disabled" in r.json()["detail"]
+
+
+def test_no_fault_injection_without_the_test_flag(settings: AppSettings) -> None:
+    with TestClient(create_app(settings.replace(fault_api=False)), base_url=BASE_URL) as client:
+        faults = {"camera_timeout": 1.0}
+        r = client.post("/api/sessions", json={"config": SMALL, "faults": faults})
+        assert r.status_code == 422 and "faults" in r.json()["detail"] and "fault_api" in r.json()["detail"]
+        assert client.get("/api/sessions").json() == []
+        sid = client.post("/api/sessions", json={"config": SMALL}).json()["id"]
+        r = client.post(f"/api/sessions/{sid}/faults", json={"kind": "turntable_error"})
+        assert r.status_code == 404 and "disabled" in r.json()["detail"]
 
 
 def test_server_settings_inject_faults_into_every_session(settings: AppSettings) -> None:

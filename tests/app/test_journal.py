@@ -70,8 +70,11 @@ def test_every_step_is_journaled_as_it_happens(client: TestClient, settings: App
     frames = sorted(p.name for p in (settings.data_dir / "sessions" / sid / "frames").iterdir())
     assert frames == ["000001.npz", "000002.npz", "000003.npz"]
     assert client.delete(f"/api/sessions/{sid}").status_code == 204
-    trashed = next((settings.data_dir / "sessions" / "trash").glob(f"{sid}-*"))  # kept until the server restarts
-    assert json.loads((trashed / JOURNAL_FILE).read_text().splitlines()[-1])["kind"] == "deleted"
+    assert not (settings.data_dir / "sessions" / sid).exists()  # moved to the trash, marked deleted
+    (trashed,) = (settings.data_dir / "sessions" / ".trash").iterdir()
+    assert trashed.name.startswith(f"{sid}-")
+    last = json.loads((trashed / JOURNAL_FILE).read_text().splitlines()[-1])
+    assert last["kind"] == "deleted"
 
 
 def test_an_unwritable_data_dir_refuses_new_sessions_clearly(settings: AppSettings) -> None:

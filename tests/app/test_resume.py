@@ -124,7 +124,10 @@ def test_resume_and_delete_errors(settings: AppSettings) -> None:
     (settings.data_dir / "sessions" / "deadbeef" / "journal.jsonl").write_text("not json\nat all\n")
     with server(settings) as b:
         assert b.post("/api/sessions/nope/resume").status_code == 404
-        assert {s["id"] for s in b.get("/api/sessions").json()} == {keep, gone}  # the damaged one is not listed
+        listed = {s["id"]: s["state"] for s in b.get("/api/sessions").json()}
+        assert listed == {keep: "interrupted", gone: "interrupted", "deadbeef": "damaged"}  # listed, not hidden
+        assert b.post("/api/sessions/deadbeef/resume").status_code == 422
+        assert b.delete("/api/sessions/deadbeef").status_code == 204
         assert b.delete(f"/api/sessions/{gone}").status_code == 204
         assert b.get(f"/api/sessions/{gone}").status_code == 404
         assert b.post(f"/api/sessions/{keep}/resume").json()["session"]["state"] == "ready"

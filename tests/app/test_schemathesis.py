@@ -8,7 +8,10 @@ the 404 of an unknown session. Checks: never a 5xx, every answer matches its doc
 type. Examples are derandomized (reproducible). The module's budget is ``BUDGET_SECONDS``.
 
 What it found and what was fixed: error answers (``{"detail": "..."}``) did not match the documented 422
-schema (pydantic's list) -> every error status is now documented with ``ErrorOut``. No 5xx was found.
+schema (pydantic's list) -> every error status is now documented with ``ErrorOut``. No 5xx was found. With
+every default check (issue 17): a 405 listed only the methods of the first route of its path in ``Allow``
+(``GET`` for ``/api/models``, which also takes ``POST``) -> app/main.py lists every method of the path; loose
+types (``true`` or ``"1"`` for an index) were accepted though the schema says integer -> strict types.
 """
 
 from __future__ import annotations
@@ -26,20 +29,28 @@ import pytest
 import schemathesis
 from apphelpers import CUBE_OBJ, SMALL, free_port
 from hypothesis import HealthCheck, Phase, settings
-from schemathesis.checks import not_a_server_error
-from schemathesis.specs.openapi.checks import content_type_conformance, response_schema_conformance
 
 from app.main import create_app
 from app.settings import AppSettings
 
 MAX_EXAMPLES = 15
-BUDGET_SECONDS = 60.0
+BUDGET_SECONDS = 240.0  # all default checks (about 500 requests); measured 137 s at load average 20 on 2 cores
 _CALLS = itertools.count()
 _ROOT = Path(tempfile.mkdtemp(prefix="nbv-schemathesis-"))
 (_ROOT / "models").mkdir()
 (_ROOT / "models" / "cube.obj").write_text(CUBE_OBJ)
-APP = create_app(AppSettings(scene=False, models_dir=_ROOT / "models", data_dir=_ROOT / "data", capture_timeout=5.0))
+APP = create_app(
+    AppSettings(scene=False, models_dir=_ROOT / "models", data_dir=_ROOT / "data", capture_timeout=5.0, fault_api=True)
+)
 schema = schemathesis.openapi.from_dict(APP.openapi())  # the document is built without starting the app
+# Positive data (valid by the schema) may still be refused for what no schema can say: a file that is not a
+# mesh or over a mesh limit (413), a config over a cost limit, an unreachable pose (422), the session's state
+# (409). Every other default check runs with its defaults.
+schema.config.checks.positive_data_acceptance.expected_statuses = [
+    *schema.config.checks.positive_data_acceptance.expected_statuses,
+    "413",
+    "422",
+]
 
 
 @pytest.fixture(scope="module")
@@ -86,10 +97,7 @@ def test_the_api_never_fails_and_keeps_its_schema(case: Any, api: dict[str, Any]
         pick = next(_CALLS) % 3  # new session, planned session, a generated id (deterministic order)
         if pick < 2:
             case.path_parameters["session_id"] = api["sessions"][pick]
-    case.call_and_validate(
-        base_url=api["url"],
-        checks=[not_a_server_error, content_type_conformance, response_schema_conformance],
-    )
+    case.call_and_validate(base_url=api["url"])  # every default check of schemathesis
 
 
 def test_the_sessions_survived_the_fuzzing(api: dict[str, Any]) -> None:

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
 
 import pytest
-from apphelpers import BASE_URL, CUBE_OBJ, SMALL
+from apphelpers import BASE_URL, CUBE_OBJ, SMALL, free_port, running_server
 from fastapi.testclient import TestClient
 
 from app.main import create_app
@@ -66,7 +67,7 @@ def token_client(settings: AppSettings):
 def api_routes(client: TestClient) -> list[tuple[str, str]]:
     """Every (method, path) of the API, from its OpenAPI document (path parameters filled in)."""
     out = []
-    for path, ops in client.get("/openapi.json").json()["paths"].items():
+    for path, ops in client.get("/openapi.json", params={"token": TOKEN}).json()["paths"].items():
         assert path.startswith("/api/"), path
         filled = path.replace("{session_id}", "0000aaaa").replace("{index}", "0")
         out += [(m.upper(), filled) for m in ops]
@@ -89,11 +90,55 @@ def test_every_api_call_needs_the_token(token_client: TestClient) -> None:
     assert "Authorization" in token_client.get("/static/app.js").text
 
 
-def test_the_viewer_link_carries_no_token(token_client: TestClient) -> None:
+def test_the_viewer_link_never_carries_the_token(token_client: TestClient) -> None:
     v = token_client.get("/api/viewer", params={"token": TOKEN}).json()
-    assert TOKEN not in v["url"] and v["url"].startswith("http://127.0.0.1:")  # tabs get single-use tickets
-    spec = token_client.get("/openapi.json").json()
+    assert TOKEN not in str(v) and v["url"].startswith("http://127.0.0.1:")
+    spec = token_client.get("/openapi.json", params={"token": TOKEN}).json()
     assert spec["components"]["securitySchemes"]["bearer"] == {"type": "http", "scheme": "bearer"}
+
+
+def test_docs_and_the_schema_need_the_token(token_client: TestClient) -> None:
+    for path in ("/openapi.json", "/docs", "/redoc"):
+        assert token_client.get(path).status_code == 401, path
+        assert token_client.get(path, headers={"Authorization": f"Bearer {TOKEN}"}).status_code == 200, path
+    page = token_client.get("/docs", params={"token": TOKEN}).text
+    assert "/openapi.json?token=" in page  # the page's own fetch of the schema carries it
+    assert token_client.get("/docs-static/favicon.png").status_code == 200  # assets hold no data
+
+
+def test_the_access_log_never_shows_the_token(live_server_token) -> None:
+    """A real uvicorn writes its access log; the lines that reach the log's handlers carry no token."""
+    import httpx
+
+    class Keep(logging.Handler):
+        def __init__(self) -> None:
+            super().__init__()
+            self.lines: list[str] = []
+
+        def emit(self, record: logging.LogRecord) -> None:
+            self.lines.append(record.getMessage())
+
+    access = logging.getLogger("uvicorn.access")
+    keep, level = Keep(), access.level
+    access.addHandler(keep)
+    access.setLevel(logging.INFO)
+    try:
+        url = live_server_token.url
+        assert httpx.get(f"{url}/api/health", params={"token": TOKEN}).status_code == 200
+        assert httpx.get(f"{url}/api/sessions?x=1&token={TOKEN}&ticket=abc123").status_code == 200
+        assert httpx.get(f"{url}/openapi.json?TOKEN={TOKEN}").status_code == 401  # the name is case-sensitive
+    finally:
+        access.removeHandler(keep)
+        access.setLevel(level)
+    assert len(keep.lines) == 3, keep.lines
+    assert all(TOKEN not in line and "abc123" not in line for line in keep.lines), keep.lines
+    assert all("=***" in line for line in keep.lines), keep.lines
+
+
+@pytest.fixture
+def live_server_token(settings: AppSettings):
+    with running_server(settings.replace(port=free_port(), token=TOKEN)) as live:
+        yield live
 
 
 # ---------------------------------------------------------------------- host, origin, CORS

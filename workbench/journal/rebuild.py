@@ -63,6 +63,10 @@ class Rebuilt:
     interrupted: str | None
     """plan_id of a decision whose capture never happened (the step in flight at the crash)."""
     device_state: dict[str, Any] | None
+    kept: int = 0
+    """Events of the journal replayed (all of them unless one was damaged)."""
+    dropped: list[str] = field(default_factory=list)
+    """What was lost: the damaged event or frame, and how many events after it (empty when nothing was)."""
 
 
 def _close(a: float | None, b: float | None, rtol: float = SCORE_RTOL) -> bool:
@@ -76,7 +80,8 @@ def rebuild(
     cell: Any,
     coverage: Callable[[NDArray[np.float64]], float] | None = None,
 ) -> Rebuilt:
-    """Replay ``journal`` through a fresh Planner. ValueError for a damaged journal or frame.
+    """Replay ``journal`` through a fresh Planner, up to the first damaged event or frame (``Rebuilt.dropped``
+    says what was left out). ValueError when the header itself is unusable.
 
     cell: the session's cell, asked as the session asked it when planning (:func:`workbench.planning.plan_in`).
     coverage: cloud -> coverage of the ground truth, when it is known (simulation).
@@ -93,62 +98,121 @@ def rebuild(
     used: set[str] = set()
     stale: set[str] = set()
     device_state: dict[str, Any] | None = None
-
-    def differ(what: str, recorded: Any, replayed: Any) -> None:
-        mismatches.append(f"{what}: journal {recorded!r}, replay {replayed!r}")
-
-    for ev in without_discarded(journal.events):
-        kind = ev["kind"]
-        if kind == "config":
-            config = config.replace(**ev["changes"])
-            planner.config = config
-            record.apply(ev)
-        elif kind == "capture":
-            it = int(ev["iteration"])
-            report = planner.integrate(journal.frame(ev))
-            voxels = voxel_counts(planner)
-            cov = float(coverage(planner.cloud)) if coverage is not None else None
-            if report.iteration != it:
-                differ(f"capture {it}: iteration", it, report.iteration)
-            if report.n_points_total != ev["points"]:
-                differ(f"capture {it}: points", ev["points"], report.n_points_total)
-            if ev.get("voxels") is not None and voxels != ev["voxels"]:
-                differ(f"capture {it}: voxel counts", ev["voxels"], voxels)
-            if cov is not None and ev.get("coverage") is not None and abs(cov - ev["coverage"]) > COVERAGE_ATOL:
-                differ(f"capture {it}: coverage", ev["coverage"], cov)
-            # a journal of an older build lacks some fields: the replay supplies them, the journal's values win
-            record.apply({**capture_fields(report, voxels, cov), **ev})
-            captures.append(ReplayedCapture(ev, report, voxels, cov))
-            if in_flight is not None:
-                used.add(in_flight.plan_id)
-                in_flight = None
-            device_state = ev.get("device_state")
-        elif kind == "plan":
-            plan = plan_in(cell, planner)
-            best, recorded = best_of(plan), ev.get("best")
-            where = f"plan {ev['plan_id']} (view {plan.iteration})"
-            if (best is None) != (recorded is None):
-                differ(f"{where}: best view", recorded, best)
-            elif best is not None and recorded is not None:
-                if best["index"] != recorded["index"]:
-                    differ(f"{where}: best index", recorded["index"], best["index"])
-                elif not _close(best["score"], recorded["score"]):
-                    differ(f"{where}: best score", recorded["score"], best["score"])
-            entry = PendingPlan(str(ev["plan_id"]), plan, float(ev["time"]))
-            if pending is not None:
-                stale.add(pending.plan_id)
-            pending = last = entry
-            record.apply({**plan_fields(plan), **ev})
-            if captures:
-                captures[-1].plans.append((ev, plan))
-        else:
-            record.apply(ev)
-            if kind in ("decision", "retry") and pending is not None and ev.get("plan_id") == pending.plan_id:
-                in_flight, pending = pending, None
-            elif kind == "error" and in_flight is not None and ev.get("restored_plan") == in_flight.plan_id:
-                pending, in_flight = in_flight, None
+    dropped: list[str] = []
+    if journal.damage is not None:
+        dropped.append(f"{journal.damage}: {journal.dropped_lines} line(s) from there on")
+    kept = 0
+    events = without_discarded(journal.events)
+    for ev in events:
+        try:
+            in_flight, pending, last, config, device_state = _replay_one(
+                ev,
+                journal,
+                planner,
+                record,
+                captures,
+                mismatches,
+                cell,
+                coverage,
+                (in_flight, pending, last, config, device_state),
+                used,
+                stale,
+            )
+        except (ValueError, KeyError, TypeError) as exc:
+            rest = len(events) - kept - 1
+            dropped.insert(0, f"event {ev.get('seq')} ({ev.get('kind')}): {exc}; it and {rest} later event(s) dropped")
+            break
+        kept += 1
     interrupted = None
     if in_flight is not None:  # killed between the decision and its capture: the step never completed
         interrupted = in_flight.plan_id
         pending = in_flight
-    return Rebuilt(planner, config, record, captures, pending, last, used, stale, mismatches, interrupted, device_state)
+    return Rebuilt(
+        planner,
+        config,
+        record,
+        captures,
+        pending,
+        last,
+        used,
+        stale,
+        mismatches,
+        interrupted,
+        device_state,
+        kept,
+        dropped,
+    )
+
+
+_State = tuple[PendingPlan | None, PendingPlan | None, PendingPlan | None, PlannerConfig, dict[str, Any] | None]
+
+
+def _replay_one(
+    ev: dict[str, Any],
+    journal: Journal,
+    planner: Planner,
+    record: SessionRecord,
+    captures: list[ReplayedCapture],
+    mismatches: list[str],
+    cell: Any,
+    coverage: Callable[[NDArray[np.float64]], float] | None,
+    state: _State,
+    used: set[str],
+    stale: set[str],
+) -> _State:
+    """Replay one event; returns (in_flight, pending, last, config, device_state) after it."""
+    in_flight, pending, last, config, device_state = state
+
+    def differ(what: str, recorded: Any, replayed: Any) -> None:
+        mismatches.append(f"{what}: journal {recorded!r}, replay {replayed!r}")
+
+    kind = ev["kind"]
+    if kind == "config":
+        config = config.replace(**ev["changes"])
+        planner.config = config
+        record.apply(ev)
+    elif kind == "capture":
+        it = int(ev["iteration"])
+        report = planner.integrate(journal.frame(ev))
+        voxels = voxel_counts(planner)
+        cov = float(coverage(planner.cloud)) if coverage is not None else None
+        if report.iteration != it:
+            differ(f"capture {it}: iteration", it, report.iteration)
+        if report.n_points_total != ev["points"]:
+            differ(f"capture {it}: points", ev["points"], report.n_points_total)
+        if ev.get("voxels") is not None and voxels != ev["voxels"]:
+            differ(f"capture {it}: voxel counts", ev["voxels"], voxels)
+        if cov is not None and ev.get("coverage") is not None and abs(cov - ev["coverage"]) > COVERAGE_ATOL:
+            differ(f"capture {it}: coverage", ev["coverage"], cov)
+        # a journal of an older build lacks some fields: the replay supplies them, the journal's values win
+        record.apply({**capture_fields(report, voxels, cov), **ev})
+        captures.append(ReplayedCapture(ev, report, voxels, cov))
+        if in_flight is not None:
+            used.add(in_flight.plan_id)
+            in_flight = None
+        device_state = ev.get("device_state")
+    elif kind == "plan":
+        plan = plan_in(cell, planner)
+        best, recorded = best_of(plan), ev.get("best")
+        where = f"plan {ev['plan_id']} (view {plan.iteration})"
+        if (best is None) != (recorded is None):
+            differ(f"{where}: best view", recorded, best)
+        elif best is not None and recorded is not None:
+            if best["index"] != recorded["index"]:
+                differ(f"{where}: best index", recorded["index"], best["index"])
+            elif not _close(best["score"], recorded["score"]):
+                differ(f"{where}: best score", recorded["score"], best["score"])
+        entry = PendingPlan(str(ev["plan_id"]), plan, float(ev["time"]))
+        if pending is not None:
+            stale.add(pending.plan_id)
+        pending = last = entry
+        record.apply({**plan_fields(plan), **ev})
+        if captures:
+            captures[-1].plans.append((ev, plan))
+    else:
+        record.apply(ev)
+        if kind in ("decision", "retry") and pending is not None and ev.get("plan_id") == pending.plan_id:
+            in_flight, pending = pending, None
+        elif kind == "error" and in_flight is not None and ev.get("restored_plan") == in_flight.plan_id:
+            pending, in_flight = in_flight, None
+    return in_flight, pending, last, config, device_state

@@ -82,13 +82,24 @@ class JournalWriter:
     @classmethod
     def reopen(cls, journal: Journal, *, fsync: bool = True) -> JournalWriter:
         """Append to an existing journal, first cutting off a torn last line left by a crash."""
-        path = journal.directory / JOURNAL_FILE
         last = journal.events[-1]["seq"] if journal.events else journal.header["seq"]
         writer = cls(journal.directory, fsync=fsync, seq=int(last) + 1)  # locks first, then repairs
-        if journal.valid_bytes < path.stat().st_size:
-            os.ftruncate(writer._fd, journal.valid_bytes)
-            os.fsync(writer._fd)
+        writer.cut_to(journal)
         return writer
+
+    def cut_to(self, journal: Journal) -> None:
+        """Cut the file after ``journal``'s last event (``valid_bytes``); a damaged journal is first copied aside
+        whole (``keep_damaged_copy``), so what comes after the damage is never lost."""
+        path = self.directory / JOURNAL_FILE
+        if journal.valid_bytes >= path.stat().st_size:
+            return
+        if journal.damage is not None or journal.valid_bytes < journal.full_bytes:
+            keep_damaged_copy(journal)
+        with self._lock:
+            os.ftruncate(self._fd, journal.valid_bytes)
+            os.fsync(self._fd)
+            last = journal.events[-1]["seq"] if journal.events else journal.header["seq"]
+            self._seq = int(last) + 1
 
     def append(self, kind: str, **data: Any) -> dict[str, Any]:
         """Append one event ``{"seq", "time", "kind", **data}`` and make it durable; returns it."""
@@ -126,8 +137,29 @@ class Journal:
     header: dict[str, Any]
     events: list[dict[str, Any]] = field(default_factory=list)
     valid_bytes: int = 0
-    """Length of the file up to the end of the last complete line (a torn tail is past it)."""
+    """Length of the file up to the end of the last complete line (a torn tail or the damage is past it)."""
     torn: bool = False
+    damage: str | None = None
+    """Where a line before the last is not an event (the events after it were not read), None when intact."""
+    dropped_lines: int = 0
+    """Lines from the damage to the end of the file (not read)."""
+    ends: list[int] = field(default_factory=list)
+    """Byte offset of the end of each event's line (``ends[i]`` for ``events[i]``)."""
+
+    header_end: int = 0
+    """Byte offset of the end of the header's line."""
+    full_bytes: int = 0
+    """Length of the file up to the end of its last complete, well-formed line before any cut (a torn tail
+    past it is not worth keeping)."""
+
+    def cut(self, count: int) -> None:
+        """Keep only the first ``count`` events (a resume that stops at a damaged frame); ``valid_bytes`` follows,
+        so :meth:`JournalWriter.reopen` cuts the file there."""
+        if count < len(self.events):
+            self.full_bytes = max(self.full_bytes, self.valid_bytes)
+            self.valid_bytes = self.ends[count - 1] if count > 0 else self.header_end
+            del self.events[count:]
+            del self.ends[count:]
 
     @property
     def session_id(self) -> str:
@@ -152,7 +184,8 @@ def read_journal(directory: str | Path) -> Journal:
     """Read ``directory/journal.jsonl``. ValueError when it is missing, not a journal or of another version.
 
     A last line without its newline, or one that is not JSON, is the torn write of a
-    crash: it is left out (``torn`` is set). A bad line before the last is damage: ValueError.
+    crash: it is left out (``torn`` is set). A bad line before the last is damage: the
+    events before it are read, ``damage`` says where, ``dropped_lines`` counts what follows.
     """
     directory = Path(directory)
     path = directory / JOURNAL_FILE
@@ -161,7 +194,10 @@ def read_journal(directory: str | Path) -> Journal:
     except OSError as exc:
         raise ValueError(f"{directory.name}: no journal ({exc.strerror})") from None
     events: list[dict[str, Any]] = []
+    ends: list[int] = []
     valid = 0
+    damage: str | None = None
+    dropped = 0
     *complete, tail = data.split(b"\n")
     torn = tail != b""  # a last line without its newline: the write was cut
     for i, raw in enumerate(complete):
@@ -173,9 +209,12 @@ def read_journal(directory: str | Path) -> Journal:
             if i == len(complete) - 1:  # garbage in the last line (power loss): also a torn write
                 torn = True
                 break
-            raise ValueError(f"{directory.name}/{JOURNAL_FILE}: line {i + 1} is damaged") from None
+            damage = f"{JOURNAL_FILE} line {i + 1} is damaged"
+            dropped = len(complete) - i + (1 if torn else 0)
+            break
         events.append(event)
         valid += len(raw) + 1
+        ends.append(valid)
     if not events or events[0]["kind"] != "session":
         raise ValueError(f"{directory.name}: not a session journal (no 'session' event first)")
     header = events[0]
@@ -185,7 +224,15 @@ def read_journal(directory: str | Path) -> Journal:
         raise ValueError(
             f"{directory.name}: journal version {header.get('version')!r}; this build reads {JOURNAL_VERSION}"
         )
-    return Journal(directory, header, events[1:], valid, torn)
+    return Journal(directory, header, events[1:], valid, torn, damage, dropped, ends[1:], ends[0], valid)
+
+
+def keep_damaged_copy(journal: Journal) -> Path:
+    """Copy the whole journal file aside (``journal.damaged-<time>.jsonl``) before a resume cuts it at the damage."""
+    source = journal.directory / JOURNAL_FILE
+    target = journal.directory / f"journal.damaged-{time.time_ns()}.jsonl"
+    target.write_bytes(source.read_bytes())
+    return target
 
 
 def in_use(directory: Path) -> bool:

@@ -1,0 +1,176 @@
+"""Heavy work runs in worker processes: the server answers during the heaviest plan the API accepts, DELETE and
+Stop kill a running job at once (the worker's PID is gone), a job over its budget is killed and leaves the
+session in state error with the map unchanged, idle workers are evicted and come back, SIGTERM stops the
+server within 5 s."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+from apphelpers import SMALL, free_port, running_server
+from test_admission import HealthProbe
+
+from app.settings import AppSettings
+
+REPO = Path(__file__).resolve().parents[2]
+HEAVIEST: dict[str, Any] = {
+    "voxel": {"resolution": 0.0034, "max_extent": 1.0},
+    "cluster": {"search": "exhaustive", "t_min": 1, "t_max": 60, "max_iter": 1000, "tol": 1e-8},
+    "candidates": {"count": 833, "parallels": 30},
+}
+"""About the heaviest config the API accepts (300 voxels per axis, 60 exhaustive fits, 100 k projections)."""
+PLAN_HEAVY: dict[str, Any] = {**HEAVIEST, "voxel": {"resolution": 0.01}}
+"""As heavy a plan, a capture 30 times cheaper (100 voxels per axis)."""
+
+
+def pid_gone(pid: int, within: float) -> bool:
+    """The process ``pid`` has ended (or is a zombie) within ``within`` seconds."""
+    deadline = time.monotonic() + within
+    while time.monotonic() < deadline:
+        try:
+            with open(f"/proc/{pid}/stat") as fh:
+                if fh.read().split(") ")[1].startswith("Z"):
+                    return True
+        except FileNotFoundError:
+            return True
+        time.sleep(0.02)
+    return False
+
+
+def busy_worker(live: Any, sid: str, within: float = 30.0) -> int:
+    """The PID of ``sid``'s worker once a job runs there."""
+    worker = live.registry.get(sid).worker
+    deadline = time.monotonic() + within
+    while time.monotonic() < deadline:
+        if worker.busy and worker.pid is not None:
+            return worker.pid
+        time.sleep(0.01)
+    raise AssertionError("no job started in the worker")
+
+
+def in_thread(fn: Any) -> tuple[threading.Thread, dict[str, Any]]:
+    box: dict[str, Any] = {}
+
+    def run() -> None:
+        box["response"] = fn()
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    return thread, box
+
+
+def test_delete_kills_the_heaviest_plan_at_once_while_health_answers(settings: AppSettings) -> None:
+    with (
+        running_server(settings.replace(port=free_port())) as live,
+        httpx.Client(base_url=live.url, timeout=120) as api,
+    ):
+        sid = api.post("/api/sessions", json={"config": HEAVIEST}).json()["id"]
+        assert api.post(f"/api/sessions/{sid}/capture").status_code == 200
+        with HealthProbe(live.url) as probe:
+            thread, box = in_thread(lambda: api.post(f"/api/sessions/{sid}/plan"))
+            pid = busy_worker(live, sid)
+            time.sleep(1.0)  # the plan is well under way
+            t0 = time.monotonic()
+            assert httpx.delete(f"{live.url}/api/sessions/{sid}", timeout=5).status_code == 204
+            assert time.monotonic() - t0 < 1.0
+            assert pid_gone(pid, 1.0), "the worker still runs after DELETE"
+            thread.join(10)
+        assert not thread.is_alive() and box["response"].status_code in (404, 409, 503), box
+        assert not probe.failures and probe.worst < 1.0, (probe.worst, probe.failures)
+        assert httpx.get(f"{live.url}/api/sessions/{sid}").status_code == 404
+
+
+def test_a_plan_over_its_budget_is_killed_and_the_session_goes_on(settings: AppSettings) -> None:
+    with running_server(settings.replace(port=free_port(), plan_budget=0.02)) as live:
+        api = httpx.Client(base_url=live.url, timeout=120)
+        sid = api.post("/api/sessions", json={"config": SMALL}).json()["id"]
+        assert api.post(f"/api/sessions/{sid}/capture").status_code == 200
+        before = api.get(f"/api/sessions/{sid}").json()
+        pid = live.registry.get(sid).worker.pid
+        t0 = time.monotonic()
+        r = api.post(f"/api/sessions/{sid}/plan")
+        assert r.status_code == 503 and "over its budget of 0.02 s" in r.json()["detail"], r.text
+        assert time.monotonic() - t0 < 5.0 and pid_gone(pid, 1.0)
+        st = api.get(f"/api/sessions/{sid}").json()
+        assert st["state"] == "error" and "budget" in st["error"]
+        assert (st["voxels"], st["points"], st["iteration"]) == (before["voxels"], before["points"], 1)
+        assert st["pending_plan"] is None and st["retry"] is None  # no plan came out of the killed job
+        # plan again (a budget that suffices): a fresh worker takes it from the session's state
+        live.registry.get(sid).plan_budget = 60.0
+        r = api.post(f"/api/sessions/{sid}/plan")
+        assert r.status_code == 200 and api.get(f"/api/sessions/{sid}").json()["state"] == "planned", r.text
+
+
+def test_stop_kills_a_running_plan_of_auto_mode(settings: AppSettings) -> None:
+    with (
+        running_server(settings.replace(port=free_port())) as live,
+        httpx.Client(base_url=live.url, timeout=120) as api,
+    ):
+        sid = api.post("/api/sessions", json={"config": PLAN_HEAVY}).json()["id"]
+        assert api.post(f"/api/sessions/{sid}/capture").status_code == 200
+        assert api.post(f"/api/sessions/{sid}/auto", json={"count": 3}).status_code == 202
+        pid = busy_worker(live, sid)
+        t0 = time.monotonic()
+        assert api.post(f"/api/sessions/{sid}/stop").status_code == 200
+        assert pid_gone(pid, 1.0) and time.monotonic() - t0 < 1.5
+        assert live.registry.get(sid).auto.join(10)
+        st = api.get(f"/api/sessions/{sid}").json()
+        assert (st["state"], st["iteration"], st["error"]) == ("ready", 1, None)
+
+
+def test_idle_workers_are_evicted_and_come_back(settings: AppSettings) -> None:
+    with running_server(settings.replace(port=free_port(), max_idle_workers=1)) as live:
+        api = httpx.Client(base_url=live.url, timeout=120)
+        sids = [api.post("/api/sessions", json={"config": SMALL}).json()["id"] for _ in range(2)]
+        for sid in sids:
+            assert api.post(f"/api/sessions/{sid}/capture").status_code == 200
+        workers = [live.registry.get(sid).worker for sid in sids]
+        assert workers[0].pid is None and workers[1].pid is not None  # the older idle one was stopped
+        server_pid = os.getpid()
+        assert workers[1].pid != server_pid
+        r = api.post(f"/api/sessions/{sids[0]}/plan")  # its worker starts again from the session's state
+        assert r.status_code == 200 and workers[0].pid is not None and workers[1].pid is None
+
+
+@pytest.mark.slow
+def test_sigterm_stops_the_server_within_5_s_during_a_plan(tmp_path: Path, models_dir: Path) -> None:
+    port = free_port()
+    cmd = [sys.executable, "-m", "nbv.cli", "serve", "--port", str(port), "--viser-port", "0"]
+    cmd += ["--data-dir", str(tmp_path / "data"), "--models-dir", str(models_dir), "--log-level", "warning"]
+    log = tmp_path / "serve.log"
+    with open(log, "wb") as out:
+        proc = subprocess.Popen(cmd, cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
+    api = httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=120)
+    try:
+        deadline = time.time() + 90
+        while True:
+            try:
+                if api.get("/api/health").status_code == 200:
+                    break
+            except httpx.TransportError:
+                pass
+            assert proc.poll() is None and time.time() < deadline, log.read_text()[-2000:]
+            time.sleep(0.1)
+        sid = api.post("/api/sessions", json={"config": PLAN_HEAVY}).json()["id"]
+        assert api.post(f"/api/sessions/{sid}/capture").status_code == 200
+        in_thread(lambda: httpx.post(f"http://127.0.0.1:{port}/api/sessions/{sid}/plan", timeout=120))
+        time.sleep(1.5)  # the plan runs in the worker
+        t0 = time.monotonic()
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(10)
+        assert time.monotonic() - t0 < 5.0, log.read_text()[-2000:]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+    journal = (tmp_path / "data" / "sessions" / sid / "journal.jsonl").read_text().splitlines()
+    assert any('"capture"' in line for line in journal)  # what happened before the signal is on disk

@@ -1,0 +1,61 @@
+"""Deleted sessions go to the trash (one rename) and leave it by age, then by size, oldest first."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from tests.helpers import SMALL
+from workbench.journal.store import JOURNAL_FILE, list_journals
+from workbench.registry import SessionRegistry
+from workbench.settings import WorkbenchSettings
+from workbench.trash import entries, move_to_trash, prune, trash_dir
+
+
+def fake_session(data_dir: Path, sid: str, size: int) -> Path:
+    directory = data_dir / "sessions" / sid
+    (directory / "frames").mkdir(parents=True)
+    (directory / JOURNAL_FILE).write_text("{}\n")
+    (directory / "frames" / "000001.npz").write_bytes(b"x" * size)
+    return directory
+
+
+def test_prune_removes_by_age_then_by_size_oldest_first(tmp_path: Path) -> None:
+    moved = []
+    for i, sid in enumerate(["0000000a", "0000000b", "0000000c", "0000000d"]):
+        moved.append(move_to_trash(fake_session(tmp_path, sid, 1000 * (i + 1))))
+        time.sleep(0.002)
+    assert [e.session_id for e in entries(tmp_path)] == ["0000000a", "0000000b", "0000000c", "0000000d"]
+    assert not (tmp_path / "sessions" / "0000000a").exists() and list_journals(tmp_path) == []
+    now = entries(tmp_path)[0].deleted + 10.0
+    assert prune(tmp_path, max_bytes=10**9, max_age=3600, now=now) == []
+    (tmp_path / "sessions" / ".trash" / "notes.txt").write_text("not ours")  # never touched
+    removed = prune(tmp_path, max_bytes=8000, max_age=3600, now=now)  # 1+2+3+4 kB (+ journals) > 8 kB
+    assert [e.session_id for e in removed] == ["0000000a", "0000000b"]
+    assert [e.session_id for e in entries(tmp_path)] == ["0000000c", "0000000d"]
+    removed = prune(tmp_path, max_bytes=10**9, max_age=5.0, now=now + 100)
+    assert [e.session_id for e in removed] == ["0000000c", "0000000d"] and entries(tmp_path) == []
+    assert (trash_dir(tmp_path) / "notes.txt").read_text() == "not ours"
+
+
+def test_delete_moves_the_frames_out_and_the_limit_removes_them(tmp_path: Path) -> None:
+    settings = WorkbenchSettings(models_dir=tmp_path / "models", data_dir=tmp_path / "data", trash_max_bytes=1)
+    registry = SessionRegistry(settings)
+    try:
+        session = registry.create(config=SMALL)
+        session.capture()
+        directory = settings.data_dir / "sessions" / session.id
+        assert (directory / "frames" / "000001.npz").is_file()
+        registry.delete(session.id)
+        assert not directory.exists() and entries(settings.data_dir) == []  # over 1 byte: removed at once
+    finally:
+        registry.close()
+    kept = WorkbenchSettings(models_dir=tmp_path / "models", data_dir=tmp_path / "data2")
+    registry = SessionRegistry(kept)
+    try:
+        session = registry.create(config=SMALL)
+        registry.delete(session.id)
+        (entry,) = entries(kept.data_dir)
+        assert entry.session_id == session.id and (entry.path / JOURNAL_FILE).is_file()
+    finally:
+        registry.close()
