@@ -43,7 +43,7 @@ def test_hits_and_depths_match_the_exact_ray_test() -> None:
     rng = np.random.default_rng(3)
     differing, total = 0, 0
     for trial in range(60):
-        R = Rotation.random(random_state=trial).as_matrix()
+        R = Rotation.random(rng=np.random.default_rng(trial)).as_matrix()
         e = ellipsoid(rng.normal(0, 0.3, 3) + np.array([0, 0, 1.0]), rng.uniform(0.05, 0.6, 3), rotation=R)
         frags = rasterize([e], [AT_ORIGIN], SMALL, 64, 48)
         ref = ray_hits(e, AT_ORIGIN, SMALL)
