@@ -43,9 +43,15 @@ def candidate(session: SessionDep, index: int) -> dict[str, Any]:
     responses={200: {"content": {"image/png": {}}}},
 )
 def projection_png(session: SessionDep, index: int) -> Response:
-    """The ellipsoids projected into this candidate's camera: frontier red, occupied blue, fill by weight."""
-    from app.scene.projection_image import render_projection
+    """The ellipsoids projected into this candidate's camera (frontier red, occupied blue, fill by weight); for
+    ``projection-zbuffer`` its z-buffer raster (visible frontier red, hidden dark red, occupied blue)."""
+    from app.scene.projection_image import render_projection, render_zbuffer
 
     entry = session.plan_for()
-    png = render_projection(entry.plan, session.candidate_of(entry, index), session.cell.intrinsics)
+    i = session.candidate_of(entry, index)
+    if session.evaluator == "projection-zbuffer":  # what its score counts: the z-buffer raster
+        config = session.config
+        png = render_zbuffer(entry.plan, i, session.cell.intrinsics, config.zbuffer, config.voxel.resolution)
+    else:
+        png = render_projection(entry.plan, i, session.cell.intrinsics)
     return Response(png, media_type="image/png", headers={"Cache-Control": "no-store"})

@@ -10,6 +10,7 @@ is listed in the footer (it has no ellipse outline).
 from __future__ import annotations
 
 import io
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -109,3 +110,45 @@ def render_projection(plan: PlanResult, index: int, intrinsics: Intrinsics) -> b
     buf = io.BytesIO()
     image.save(buf, format="PNG")
     return buf.getvalue()
+
+
+ZBUFFER_COLORS = {
+    "visible": (220, 40, 40),
+    "hidden": (110, 40, 40),
+    "occupied": (60, 110, 200),
+    "none": (245, 245, 245),
+}
+"""Pixel colours of the z-buffer inspector image: frontier counted in V, frontier hidden behind occupied,
+occupied only, nothing."""
+
+
+def render_zbuffer(plan: PlanResult, index: int, intrinsics: Intrinsics, config: Any, resolution: float) -> bytes:
+    """PNG of what ``projection-zbuffer`` counts for candidate ``index``: its raster (``zbuffer.width`` x
+    ``zbuffer.height``) scaled up, visible frontier red, hidden frontier dark red, occupied blue; the legend
+    and the share of frontier pixels that count are written under it."""
+    from planner.visibility import zbuffer_image
+
+    image = zbuffer_image(plan.ellipsoids, plan.candidates[index].T_world_camera, intrinsics, config, resolution)
+    h, w = image.visible.shape
+    rgb = np.empty((h, w, 3), dtype=np.uint8)
+    rgb[:] = ZBUFFER_COLORS["none"]
+    frontier = image.frontier_owner >= 0
+    rgb[image.occupied_owner >= 0] = ZBUFFER_COLORS["occupied"]
+    rgb[frontier & ~image.visible] = ZBUFFER_COLORS["hidden"]
+    rgb[image.visible] = ZBUFFER_COLORS["visible"]
+    scale = max(1, 480 // w)
+    raster = Image.fromarray(rgb).resize((w * scale, h * scale), Image.Resampling.NEAREST)
+    canvas = Image.new("RGB", (raster.width, raster.height + 36), "white")
+    canvas.paste(raster, (0, 0))
+    draw = ImageDraw.Draw(canvas)
+    n_front, n_vis = int(frontier.sum()), int(image.visible.sum())
+    draw.text(
+        (6, raster.height + 4),
+        f"candidate {index}: {n_vis} of {n_front} frontier pixels in front of every occupied one (red) count;"
+        " dark red: hidden, blue: occupied",
+        fill=(0, 0, 0),
+        font=ImageFont.load_default(),
+    )
+    out = io.BytesIO()
+    canvas.save(out, format="PNG")
+    return out.getvalue()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import io
 
 import numpy as np
-from apphelpers import registry_of
+from apphelpers import SMALL, registry_of
 from fastapi.testclient import TestClient
 from PIL import Image
 
@@ -162,3 +162,19 @@ def test_auto_mode_runs_and_stops(client: TestClient, new_session) -> None:
     assert st["iteration"] <= 4
     kinds = [d["kind"] for d in client.get(f"/api/sessions/{sid}/export").json()["decisions"]]
     assert kinds[:2] == ["auto", "auto"] and set(kinds) == {"auto"}
+
+
+def test_a_zbuffer_session_explains_its_score_with_its_raster(client: TestClient) -> None:
+    """projection-zbuffer per session: its inspector image is the z-buffer raster the score counts, and the
+    red (visible frontier) pixels of the best view are the candidate's frontier terms."""
+    sid = client.post("/api/sessions", json={"config": SMALL, "planner": "projection-zbuffer"}).json()["id"]
+    client.post(f"/api/sessions/{sid}/capture")
+    best = client.post(f"/api/sessions/{sid}/plan").json()["best"]["index"]
+    assert client.get(f"/api/sessions/{sid}").json()["planner"] == "projection-zbuffer"
+    r = client.get(f"/api/sessions/{sid}/candidates/{best}/projection.png")
+    assert r.status_code == 200 and r.headers["content-type"] == "image/png"
+    img = np.asarray(Image.open(io.BytesIO(r.content)).convert("RGB"))
+    red = np.all(img == (220, 40, 40), axis=-1)
+    assert img.shape[1] == 480 and red.sum() > 0  # a 40 x 30 raster scaled 12 x, some frontier counts
+    detail = client.get(f"/api/sessions/{sid}/candidates/{best}").json()
+    assert detail["frontier"] > 0 and any(t["kind"] == "frontier" and t["pixels"] > 0 for t in detail["ellipsoids"])
