@@ -16,7 +16,8 @@ sample is *seen* by a view when
 - the ray reaches it unoccluded (nothing nearer than ``occlusion_tolerance`` before it), and
 - the camera samples the surface there densely enough: the pixel footprint on the surface,
   ``z / (f |cos theta|)`` (``theta`` between the ray and the surface normal), is at most
-  ``2 * coverage_radius``, so a scanned point lies within the coverage radius of the sample.
+  ``max_footprint`` (only surfaces seen almost edge-on are left out: the union of many views
+  fills the gaps one grazing view leaves).
 
 Coverage counts a sample when a scanned point lies within ``coverage_radius`` of it, so a
 sample that no view sees directly is still covered next to a seen patch of surface (behind a
@@ -61,6 +62,12 @@ class CeilingConfig:
     """Seed of the ceiling's surface samples: fixed, so every seed of a bench shares one ceiling."""
     occlusion_tolerance: float = 0.001
     """A hit nearer than this before the sample does not hide it (the sample's own triangle), metres."""
+    max_footprint: float = 0.04
+    """A view counts a point only where one pixel spans at most this much of the surface, metres
+    (``z / (f |cos theta|)``). Eight times the coverage radius, not two: one view that sees a slope at a
+    grazing angle leaves gaps between its rows of points, but the many neighbouring views that see it
+    the same way fill them (with twice the radius, fertility's grazing base was 8 points short of the
+    render-based reference; with eight times, suzanne agrees on 99.7 % of samples, not 99.3 %)."""
     probe_spacing: float = 0.0015
     """Mean spacing of the probes, metres: the denser sampling that stands for the seen surface next to a
     sample no view sees (area / spacing^2 probes, at most ``max_probes``)."""
@@ -74,7 +81,7 @@ class CeilingConfig:
     """Rays per open3d call (bounds the memory: 24 bytes a ray)."""
 
     def __post_init__(self) -> None:
-        for name in ("coverage_radius", "occlusion_tolerance", "probe_spacing"):
+        for name in ("coverage_radius", "occlusion_tolerance", "probe_spacing", "max_footprint"):
             v = getattr(self, name)
             require(finite(v) and v >= 0, f"ceiling.{name}: must be >= 0, got {v!r}")
         require(self.coverage_radius > 0, f"ceiling.coverage_radius: must be > 0, got {self.coverage_radius!r}")
@@ -256,7 +263,7 @@ def seen_by_any(
         ok &= (u >= -0.5) & (u < camera.width - 0.5) & (v >= -0.5) & (v < camera.height - 0.5)
         dist = np.linalg.norm(d_world, axis=1)
         cos = np.abs(np.einsum("ij,ij->i", d_world, normals[todo])) / np.maximum(dist, 1e-12)
-        ok &= z <= 2.0 * config.coverage_radius * f * cos  # footprint z / (f cos) <= 2 r
+        ok &= z <= config.max_footprint * f * cos  # the pixel footprint z / (f cos) on the surface
         ok &= dist > config.occlusion_tolerance
         if not np.any(ok):
             continue

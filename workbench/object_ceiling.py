@@ -36,7 +36,7 @@ from workbench.ceiling import (
     visibility_ceiling,
 )
 
-CEILING_VERSION = 2
+CEILING_VERSION = 3
 """Bumped whenever the computation changes, so old cache entries are not reused."""
 
 

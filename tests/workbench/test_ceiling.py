@@ -111,3 +111,16 @@ def test_cache_is_shared_and_keyed_by_placement(tmp_path: Path) -> None:
 def test_bad_config_names_the_field(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=f"ceiling.{field}"):
         CeilingConfig(**{field: value})  # type: ignore[arg-type]
+
+
+def test_footprint_rule_drops_a_nearly_edge_on_surface() -> None:
+    _, mesh = resolve_model("box")
+    scene = OcclusionScene(mesh, 0.2, 0.02)
+    points, normals = samples_with_normals(mesh, 4000, 0)
+    view = Pose.look_at(np.array([0.6, 0.0, 0.105]), np.array([0.0, 0.0, 0.05]))  # 5 mm above the top's plane
+    top = normals[:, 2] > 0.9  # cos ~ 0.008: one pixel spans ~10 cm of the top face
+    strict = seen_by_any(scene, points, normals, [view], CameraConfig(), 0.002)
+    loose = seen_by_any(scene, points, normals, [view], CameraConfig(), 0.002, CeilingConfig(max_footprint=1.0))
+    assert top.sum() > 100
+    assert not strict[top].any()
+    assert loose[top].mean() > 0.9  # nothing hides it: only the footprint rule left it out
