@@ -11,8 +11,8 @@ from collections import defaultdict
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from nbv.bench_metrics import THRESHOLDS, Paired, RunMetrics, mean_std, paired_comparison, run_metrics
 from nbv.runs import RunOutcome
+from workbench.scan_metrics import THRESHOLDS, Paired, RunMetrics, mean_std, paired_comparison, run_metrics
 
 Row = dict[str, Any]
 

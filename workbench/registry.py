@@ -354,9 +354,7 @@ class SessionRegistry:
             raise Conflict(str(exc)) from None
         wb = self._session(dormant.id, parts, config, devices, seed, None, str(header.get("planner", "projection")))
         try:
-            rebuilt = rebuild(
-                journal, wb.cell, None if samples is None else lambda c: coverage(samples, c)
-            )
+            rebuilt = rebuild(journal, wb.cell, None if samples is None else lambda c: coverage(samples, c))
         except (ValueError, KeyError, TypeError) as exc:
             writer.close()
             _release(parts)

@@ -50,6 +50,7 @@ from workbench.limits import check_config
 from workbench.planning import plan_in
 from workbench.record import SessionRecord
 from workbench.region import ObjectRegion
+from workbench.scan_metrics import ceiling_metrics
 from workbench.states import (
     BUSY,
     CAN_PLAN,
@@ -170,7 +171,7 @@ class Session:
         if request is not None:
             request()
         with self._lock:
-            return {**self.record.metrics(), "ceiling": self.ceiling}
+            return {**self.record.metrics(), **ceiling_metrics(self.record.iterations, self.ceiling)}
 
     def export(self) -> dict[str, Any]:
         """The whole session as one JSON document."""

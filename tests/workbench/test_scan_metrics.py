@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from nbv.bench_metrics import (
+from workbench.scan_metrics import (
     THRESHOLDS,
     area_under_curve,
     mean_std,

@@ -143,3 +143,22 @@ def paired_comparison(
     wins = sum(1 for d in diffs if sign * d > tie)
     losses = sum(1 for d in diffs if sign * d < -tie)
     return Paired(n, mean, low, high, wins, n - wins - losses, losses)
+
+
+def ceiling_metrics(iterations: Sequence[Mapping[str, object]], ceiling: float | None) -> dict[str, object]:
+    """What a session reports against its ceiling: ``{"ceiling", "coverage_ratio": [...] per view, "auc",
+    "views_to_90", "views_to_95", "views_to_98"}`` over the views taken so far (None without a ceiling or a
+    view with a coverage).
+
+    iterations: the session record's iterations (each with a ``coverage``, None without ground truth).
+    """
+    coverage = [float(c) for c in (it.get("coverage") for it in iterations) if isinstance(c, int | float)]
+    out: dict[str, object] = {"ceiling": ceiling, "coverage_ratio": None, "auc": None}
+    out |= {f"views_to_{round(100 * t)}": None for t in THRESHOLDS}
+    if ceiling is None or not coverage:
+        return out
+    metrics = run_metrics(coverage, ceiling, len(coverage))
+    out["coverage_ratio"] = ratio_curve(coverage, ceiling, len(coverage))
+    out["auc"] = metrics.auc
+    out |= {f"views_to_{round(100 * t)}": v for t, v in zip(THRESHOLDS, metrics.views_to, strict=True)}
+    return out
