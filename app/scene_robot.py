@@ -210,3 +210,75 @@ def ghost_pose(arm: ArmModel, q: NDArray[np.float64], angle: float) -> Pose:
     Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     T = arm.camera_pose(q)
     return Pose(Rz @ T.rotation, Rz @ T.translation)
+
+
+def demo(port: int = 0, model: str = "mug") -> tuple[Any, RobotScene, Any]:
+    """A viser server showing the UR5 cell: ``model`` (a built-in name or a mesh path) on the plate, the arm at its
+    first view, the ghost and the camera path of the move to another view. Returns (server, scene, motion)."""
+    import viser
+
+    from devices.builtins import resolve_model
+    from devices.sim import make_sim_cell
+
+    _, mesh = resolve_model(model, up="y", size=0.2)
+    cell = make_sim_cell(mesh)
+    assert cell.kinematics is not None
+    server = viser.ViserServer(host="127.0.0.1", port=port)
+    server.scene.set_up_direction("+z")
+    server.scene.add_mesh_simple(
+        "/object", np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces), color=(200, 190, 170)
+    )
+    server.scene.add_mesh_simple(
+        "/plate", *_plate(cell.config.plate_radius, cell.config.plate_thickness), color=(120, 120, 130)
+    )
+    robot = RobotScene(server, cell.kinematics.model)
+    robot.show(cell.arm.joint_positions(), cell.angle)
+    e, a = math.radians(35.0), math.radians(70.0)
+    target = Pose.look_at(
+        0.45 * np.array([math.cos(e) * math.cos(a), math.cos(e) * math.sin(a), math.sin(e)]) + [0, 0, 0.1], [0, 0, 0.1]
+    )
+    motion = cell.plan_motion(target)
+    assert motion.q is not None and motion.trajectory is not None
+    robot.show_ghost(motion.q, motion.angle)
+    robot.show_path(motion.trajectory, motion.angle)  # the arm moves once the plate has turned
+    return server, robot, motion
+
+
+def _plate(radius: float, thickness: float) -> tuple[NDArray[np.float32], NDArray[np.int32]]:
+    import trimesh
+
+    plate = trimesh.creation.cylinder(radius=radius, height=thickness, sections=64)
+    plate.apply_translation((0.0, 0.0, -0.5 * thickness))
+    return np.asarray(plate.vertices, np.float32), np.asarray(plate.faces, np.int32)
+
+
+def screenshot(out: str, model: str) -> None:
+    """Save a PNG of :func:`demo` from headless Chromium (the docs' picture of the arm)."""
+    from playwright.sync_api import sync_playwright
+
+    server, _, _ = demo(0, model)
+
+    @server.on_client_connect
+    def _(client: Any) -> None:
+        client.camera.position = (0.05, -1.15, 0.62)
+        client.camera.look_at = (-0.12, 0.12, 0.16)
+
+    args = ["--headless", "--no-sandbox", "--use-gl=angle", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path="/usr/bin/chromium", args=args)
+        page = browser.new_page(viewport={"width": 1200, "height": 800})
+        page.goto(f"http://127.0.0.1:{server.get_port()}/")
+        time.sleep(12.0)  # SwiftShader: meshes load and render
+        for label in ("button.mantine-Notification-closeButton",):
+            if page.locator(label).count():
+                page.locator(label).first.click()
+        time.sleep(1.0)
+        page.screenshot(path=out)
+        browser.close()
+    server.stop()
+
+
+if __name__ == "__main__":
+    import sys
+
+    screenshot(sys.argv[1] if len(sys.argv) > 1 else "docs/arm.png", sys.argv[2] if len(sys.argv) > 2 else "mug")

@@ -312,29 +312,36 @@ class Cell:
         return frame.with_pose(self._perturb(self.pose))
 
     def device_state(self) -> dict[str, Any]:
-        """What a resumed session needs to continue exactly: the pose-noise RNG state, the plate angle, the arm's
-        joints, and the camera's ``device_state()`` (its noise RNG, or a replay camera's position), JSON-ready."""
-        state: dict[str, Any] = {"pose_noise": self._rng.bit_generator.state, "plate_angle": self.turntable.angle}
-        if self.kinematics is not None:  # the joints: the next IK and plate choice start from where the arm is
-            state["arm_q"] = [float(v) for v in self.arm.joint_positions()]
+        """What a resumed session needs to continue exactly: the pose-noise RNG state, the camera's
+        ``device_state()`` (its noise RNG, or a replay camera's position) and, for a URDF arm, its joints and the
+        plate angle (a resumed session moves on from the same configuration, so it picks the same IK branches).
+        JSON-ready."""
+        state: dict[str, Any] = {"pose_noise": self._rng.bit_generator.state}
         camera_state = getattr(self.camera, "device_state", None)
         if callable(camera_state):
             state["camera"] = camera_state()
+        if self.kinematics is not None:
+            state["arm"] = {"q": [float(v) for v in self.arm.joint_positions()], "angle": float(self.turntable.angle)}
         return state
 
     def restore_device_state(self, state: dict[str, Any]) -> None:
-        """Undo :meth:`device_state`: the next capture draws the noise it would have drawn. ValueError if malformed."""
+        """Undo :meth:`device_state`: the next capture draws the noise it would have drawn; a simulated arm and
+        turntable are put back where they were (a real one is not: it moves only by trajectories).
+        ValueError if malformed."""
         try:
             if "pose_noise" in state:
                 self._rng.bit_generator.state = state["pose_noise"]
-            if "plate_angle" in state:
-                self.turntable.rotate_to(float(state["plate_angle"]))
-            reset = getattr(self.arm, "reset", None)
-            if "arm_q" in state and callable(reset):
-                reset(np.asarray(state["arm_q"], dtype=np.float64))
             restore = getattr(self.camera, "restore_device_state", None)
             if "camera" in state and callable(restore):
                 restore(state["camera"])
+            arm_state = state.get("arm")
+            reset_arm, reset_table = getattr(self.arm, "reset", None), getattr(self.turntable, "reset", None)
+            if self.kinematics is not None and arm_state is not None and callable(reset_arm) and callable(reset_table):
+                q = np.array(arm_state["q"], dtype=np.float64)
+                if q.shape != (len(self.arm.joint_names),) or not np.all(np.isfinite(q)):
+                    raise ValueError(f"arm joints {arm_state['q']!r}")
+                reset_arm(q)
+                reset_table(float(arm_state["angle"]))
         except (TypeError, KeyError, ValueError) as exc:
             raise ValueError(f"device state: cannot restore ({exc})") from None
 

@@ -172,6 +172,12 @@ class SimulatedTurntable:
     def angle(self) -> float:
         return self._angle
 
+    def reset(self, angle: float) -> None:
+        """Put the plate at ``angle`` without a rotation (start-up, or a resumed session)."""
+        if not isinstance(angle, int | float) or not math.isfinite(angle):
+            raise ValueError(f"angle: must be a finite number (radians), got {angle!r}")
+        self._angle = wrap_angle(float(angle))
+
     def rotate_to(self, angle: float) -> None:
         if not isinstance(angle, int | float) or not math.isfinite(angle):
             raise ValueError(f"angle: must be a finite number (radians), got {angle!r}")
@@ -208,7 +214,7 @@ def make_sim_cell(
         from devices.arm.kinematics import ArmKinematics
 
         kinematics = ArmKinematics(cell_config.arm, cell_config.plate_radius, cell_config.plate_thickness)
-        joint_arm = SimulatedJointArm(kinematics.joint_names, kinematics.home)
+        joint_arm = SimulatedJointArm(kinematics.joint_names, kinematics.home, pose_of=kinematics.camera_pose)
         arm = joint_arm
 
         def pose_source() -> Pose:

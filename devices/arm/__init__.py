@@ -2,7 +2,7 @@
 ruckig), and a simulated joint arm.
 
 - ``config``      ArmConfig (URDF, flange, hand-eye, mount, limits, planning settings)
-- ``model``       load_arm -> ArmModel (Pinocchio model with the mount and the camera frame)
+- ``model``       load_arm -> ArmModel (Pinocchio model with the mount and the camera frame); check_arm for start-up
 - ``collision``   CollisionWorld (links vs plate, table, object box, themselves)
 - ``ik``          damped least squares IK with joint limits
 - ``reach``       ArmReach: plate angle + IK + collisions per view, with the reason
@@ -14,5 +14,6 @@ Importing ``devices.arm`` loads no Pinocchio, coal, OMPL or ruckig (the modules 
 """
 
 from devices.arm.config import ArmConfig
+from devices.arm.model import check_arm
 
-__all__ = ["ArmConfig"]
+__all__ = ["ArmConfig", "check_arm"]

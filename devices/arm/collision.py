@@ -18,11 +18,14 @@ from __future__ import annotations
 
 import math
 import re
+import threading
 
 import numpy as np
 from numpy.typing import NDArray
 
 from devices.arm.model import ArmModel
+
+_HULL_LOCK = threading.Lock()
 
 FAR_AWAY = np.array([0.0, 0.0, -1e3])
 """Where the object box waits while there is no object model (nothing collides with it there)."""
@@ -42,11 +45,13 @@ class CollisionWorld:
         model = arm.model
         geometry = arm.geometry.copy()
         self._arm_geoms = list(range(geometry.ngeoms))
-        for i in self._arm_geoms:  # convex hulls: conservative, and ~50x faster than mesh BVHs against boxes
-            mesh = geometry.geometryObjects[i].geometry
-            if isinstance(mesh, coal.BVHModelBase):
-                mesh.buildConvexHull(True, "Qt")
-                geometry.geometryObjects[i].geometry = mesh.convex
+        with _HULL_LOCK:  # the meshes are shared with the (cached) arm model and other worlds
+            for i in self._arm_geoms:  # convex hulls: conservative, and ~50x faster than mesh BVHs against boxes
+                mesh = geometry.geometryObjects[i].geometry
+                if isinstance(mesh, coal.BVHModelBase):
+                    if mesh.convex is None:
+                        mesh.buildConvexHull(True, "Qt")
+                    geometry.geometryObjects[i].geometry = mesh.convex
         table = arm.config.table_height
         bottom = min(table, -plate_thickness) if table < 0 else -plate_thickness
         plate = pin.GeometryObject(

@@ -11,6 +11,7 @@ The mount is baked into the Pinocchio model, so its forward kinematics give ``T_
 
 from __future__ import annotations
 
+import functools
 import importlib.metadata
 import math
 from dataclasses import dataclass
@@ -116,8 +117,13 @@ def mount_pose(arm_base: tuple[float, float, float], base_yaw_deg: float) -> Pos
     return Pose(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), np.asarray(arm_base, dtype=np.float64))
 
 
+@functools.lru_cache(maxsize=8)
 def load_arm(config: ArmConfig, arm_base: tuple[float, float, float]) -> ArmModel:
-    """Build the arm of ``config`` mounted at ``arm_base`` (base frame, metres). ValueError naming the field."""
+    """Build the arm of ``config`` mounted at ``arm_base`` (base frame, metres). ValueError naming the field.
+
+    Cached per (config, base) in the process (many sessions share one cell geometry): the returned model is
+    never changed after loading; users make their own ``model.createData()`` / geometry copies.
+    """
     import coal  # pyright: ignore[reportMissingImports]  (under cmeel.prefix)
     import pinocchio as pin  # pyright: ignore[reportMissingImports]  (under cmeel.prefix)
 
@@ -212,3 +218,10 @@ def _limits(config: ArmConfig, model: Any) -> tuple[NDArray[np.float64], NDArray
 def _first_line(exc: BaseException) -> str:
     text = str(exc).strip().splitlines()
     return text[0] if text else type(exc).__name__
+
+
+def check_arm(config: ArmConfig) -> None:
+    """Load the arm of ``config`` once (cached) so a bad URDF, SRDF or flange frame fails at start-up with its
+    one-line ``ValueError`` naming the field, not when the first session is made. Call it with
+    ``CellConfig.arm`` when ``CellConfig.kinematics`` is 'urdf'."""
+    load_arm(config, config.base)

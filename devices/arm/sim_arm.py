@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from devices.protocols import DeviceError
 from devices.trajectory import JointTrajectory
+from planner.types import Pose
 
 START_TOLERANCE = 1e-3
 """A trajectory must start within this many radians (every joint) of the arm's configuration."""
@@ -26,6 +27,7 @@ class SimulatedJointArm:
 
     real_time: play trajectories at their own speed (times ``time_scale``), else jump to the end at once.
     on_progress: called with (t, q) at every trajectory point reached (t seconds, q (n,)).
+    pose_of: forward kinematics, q -> ``T_base_camera``; gives the arm a ``pose`` like a pose arm's (optional).
     """
 
     def __init__(
@@ -36,6 +38,7 @@ class SimulatedJointArm:
         real_time: bool = False,
         time_scale: float = 1.0,
         on_progress: Callable[[float, NDArray[np.float64]], None] | None = None,
+        pose_of: Callable[[NDArray[np.float64]], Pose] | None = None,
     ) -> None:
         self._names = tuple(joint_names)
         q = np.asarray(q, dtype=np.float64)
@@ -47,6 +50,7 @@ class SimulatedJointArm:
         self.real_time = real_time
         self.time_scale = float(time_scale)
         self.on_progress = on_progress
+        self.pose_of = pose_of
         self.fail_next: Exception | None = None
         self.moves = 0
         self._lock = threading.Lock()
@@ -55,6 +59,13 @@ class SimulatedJointArm:
     @property
     def joint_names(self) -> tuple[str, ...]:
         return self._names
+
+    @property
+    def pose(self) -> Pose:
+        """``T_base_camera`` of the current joints (needs ``pose_of``)."""
+        if self.pose_of is None:
+            raise AttributeError("pose: this joint arm has no forward kinematics (pose_of)")
+        return self.pose_of(self.joint_positions())
 
     def joint_positions(self) -> NDArray[np.float64]:
         with self._lock:

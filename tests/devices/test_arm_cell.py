@@ -153,3 +153,17 @@ def test_the_joint_arm_refuses_a_trajectory_that_starts_elsewhere(cell) -> None:
         arm.execute(motion.trajectory)
     with pytest.raises(ValueError, match=r"^q: expected"):
         SimulatedJointArm(cell.arm.joint_names, np.zeros(3))
+
+
+def test_device_state_brings_a_resumed_cell_to_the_same_joints(l_block) -> None:
+    a, b = make_sim_cell(l_block), make_sim_cell(l_block)
+    a.move_to(view(40, 100))
+    state = a.device_state()
+    assert len(state["arm"]["q"]) == 6 and state["arm"]["angle"] == a.angle
+    b.restore_device_state(state)
+    np.testing.assert_array_equal(b.joint_positions(), a.joint_positions())
+    assert b.angle == a.angle and b.turntable.rotations == 0 and b.arm.moves == 0
+    np.testing.assert_allclose(b.arm.pose.matrix, a.arm.pose.matrix)  # a joint arm's pose: its forward kinematics
+    with pytest.raises(ValueError, match=r"^device state: cannot restore"):
+        b.restore_device_state({"arm": {"q": [0.0, 1.0], "angle": 0.0}})
+    np.testing.assert_array_equal(b.joint_positions(), a.joint_positions())  # nothing half-restored

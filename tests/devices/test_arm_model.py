@@ -70,6 +70,16 @@ def test_unloadable_urdf_is_refused(tmp_path: Path) -> None:
         load_arm(ArmConfig(srdf=str(tmp_path / "missing.srdf")), (-0.85, 0.0, 0.0))
 
 
+def test_check_arm_fails_at_start_up_with_the_field(tmp_path: Path) -> None:
+    from devices.arm import check_arm
+
+    check_arm(ArmConfig())  # the default loads
+    with pytest.raises(ValueError, match=r"^arm\.flange_frame: no frame 'flange'"):
+        check_arm(ArmConfig(flange_frame="flange"))
+    with pytest.raises(ValueError, match=r"^arm\.urdf: no such file"):
+        check_arm(ArmConfig(urdf=str(tmp_path / "none.urdf")))
+
+
 def test_missing_flange_frame_is_refused() -> None:
     with pytest.raises(ValueError, match=r"^arm\.flange_frame: no frame 'gripper' in ur5_robot\.urdf"):
         load_arm(ArmConfig(flange_frame="gripper"), (-0.85, 0.0, 0.0))
