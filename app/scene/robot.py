@@ -10,7 +10,7 @@ this view). Nodes (stable names, under ``root``, ``/robot`` by default):
 - ``/robot/path``: the camera's path along a trajectory, a polyline (:meth:`RobotScene.show_path`).
 
 :meth:`RobotScene.animate` plays a :class:`devices.trajectory.JointTrajectory` on the arm (or the ghost, for a
-preview before approval) in a thread; it returns at once and ``stop()`` ends it. The lead wires it into sessions.
+preview before approval) in a thread; it returns at once and ``stop()`` ends it. app/scene/arm.py wires it into the per-tab scenes.
 """
 
 from __future__ import annotations
