@@ -145,6 +145,21 @@ class RobotScene:
         )
         return points
 
+    def node_names(self) -> list[str]:
+        """The arm's top nodes now in the scene: ``/robot/arm``, and ``/robot/ghost`` / ``/robot/path`` when shown."""
+        names = [f"{self.root}/arm"]
+        if self._frames["ghost"].visible:
+            names.append(f"{self.root}/ghost")
+        if self._path is not None:
+            names.append(f"{self.root}/path")
+        return names
+
+    @property
+    def animating(self) -> bool:
+        """Whether an animation is playing."""
+        thread = self._thread
+        return thread is not None and thread.is_alive()
+
     # ------------------------------------------------------------------ animation
 
     def animate(
