@@ -28,7 +28,6 @@ def assets_dir() -> Path:
 def install_docs(app: FastAPI) -> None:
     """Add ``/docs``, ``/redoc`` and their assets to ``app`` (created with ``docs_url=None, redoc_url=None``)."""
     app.mount(ASSETS_URL, StaticFiles(directory=assets_dir()), name="docs-static")
-
     def page(kind: str) -> dict[str, Any]:
         return {"openapi_url": app.openapi_url or "/openapi.json", "title": f"{app.title} - {kind}"}
 
