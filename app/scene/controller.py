@@ -35,7 +35,7 @@ from planner import Pose
 from workbench.errors import Conflict, Invalid, NotFound, Unreachable, WorkbenchError
 from workbench.registry import SessionRegistry
 from workbench.session import Session
-from workbench.states import SessionEvent
+from workbench.states import SessionEvent, State
 
 log = logging.getLogger(__name__)
 
@@ -167,10 +167,13 @@ class SceneController:
                 if v.session_id == wb.id and v.drawing is not None:
                     v.drawing.update(data)
         arm = self.arm_of(wb)
-        if arm is None:
-            return
-        target = None if event == SessionEvent.CAPTURED else arm.target(data)
-        for robot in self._robots_of(wb.id):
+        robots = self._robots_of(wb.id)
+        if arm is None or not robots:
+            return  # no tab shows this session's arm: plan no move for it
+        # in auto mode the next move starts at once: no ghost (the arm animates each executed move)
+        show_target = event != SessionEvent.CAPTURED and wb.state != State.AUTO
+        target = arm.target(data) if show_target else None
+        for robot in robots:
             if event == SessionEvent.CAPTURED:
                 arm.after_capture(robot)
             else:

@@ -157,3 +157,26 @@ def test_a_reach_sphere_cell_draws_no_arm(settings: AppSettings, planned_session
             assert math.isfinite(arm["plate_angle"])
         finally:
             raw.ws.close()
+
+
+def test_a_custom_pose_gets_the_ghost_or_its_reason(scene_client: TestClient, planned_session) -> None:
+    sid, plan = planned_session(scene_client)
+    vid, raw = connect(scene_client, sid)
+    try:
+        wb = session_of(scene_client, sid)
+        # the planner's choice as a custom pose: reachable, the ghost's camera on it
+        pose = plan["best"]["pose"]
+        assert scene_client.put(f"/api/sessions/{sid}/custom_pose", json={"pose": pose}).json()["reachable"]
+        target = scene_client.get(f"/api/sessions/{sid}/arm").json()["target"]
+        assert target["kind"] == "custom" and target["index"] is None and target["reachable"]
+        ghost = ghost_pose(wb.cell.kinematics.model, np.array(target["joints"]), target["plate_angle"])
+        np.testing.assert_allclose(ghost.translation, pose["position"], atol=2e-3)
+        assert wait_for(lambda: "/robot/ghost" in nodes(scene_client, vid))
+        # two metres out: no ghost, no path, the reason
+        far = {"position": [2.0, 0.0, 0.3], "wxyz": pose["wxyz"]}
+        assert scene_client.put(f"/api/sessions/{sid}/custom_pose", json={"pose": far}).json()["reachable"] is False
+        target = scene_client.get(f"/api/sessions/{sid}/arm").json()["target"]
+        assert target["kind"] == "custom" and target["reachable"] is False and target["reason"]
+        assert not {"/robot/ghost", "/robot/path"} & set(nodes(scene_client, vid))
+    finally:
+        raw.ws.close()
