@@ -21,7 +21,7 @@ from devices.arm.model import ArmModel
 from devices.cell import Motion
 from devices.protocols import UnreachableError
 from planner import PlanResult, Pose
-from workbench.states import SceneData
+from workbench.states import BUSY, SceneData
 
 _URDFS: dict[int, Any] = {}
 _URDF_LOCK = threading.Lock()
@@ -103,7 +103,9 @@ class SessionArm:
         return robot
 
     def target(self, data: SceneData) -> ArmTarget | None:
-        """The move to the selected target of ``data`` (planned once per selection); None without a plan."""
+        """The move to the selected target of ``data`` (planned once per selection); None without a plan, and
+        None while the session is busy (moving, planning, auto) unless it was planned already: the arm's
+        kinematics are the session's then."""
         sel = selected_target(data)
         if sel is None:
             return None
@@ -111,6 +113,8 @@ class SessionArm:
         with self._lock:
             if self._target is not None and self._target.key == key:
                 return self._target
+            if self.wb.state in BUSY:
+                return None
             try:
                 motion, reason = self.cell.plan_motion(pose), None
             except UnreachableError as exc:
@@ -122,10 +126,12 @@ class SessionArm:
 
     def unreachable_reasons(self, plan: PlanResult) -> dict[int, str]:
         """{candidate index: the cell's reason} for the candidates ``plan`` found unreachable (computed once per
-        plan, in candidate order so that neighbours warm-start each other's IK)."""
+        plan, in candidate order so that neighbours warm-start each other's IK; {} while the session is busy)."""
         with self._lock:
             if self._reasons_of is plan:
                 return dict(self._reasons)
+            if self.wb.state in BUSY:
+                return {}
             reasons = plan.ineligible_reasons
             indices = [i for i, r in enumerate(reasons) if r == "unreachable"]
             checks = self.cell.reachability_many([plan.candidates[i].T_world_camera for i in indices])

@@ -238,7 +238,7 @@ async function onStatus(st, event) {
   }
   const custom = st.custom_pose ? st.custom_pose.pose.position.join(",") + st.custom_pose.pose.wxyz : "";
   const armKey = `${st.iteration}/${planId}/${st.selected}/${custom}`;
-  if (armKey !== S.armKey && S.viewer && !["capturing", "planning", "moving"].includes(st.state)) {
+  if (armKey !== S.armKey && S.viewer && !["capturing", "planning", "moving", "auto"].includes(st.state)) {
     S.armKey = armKey;
     await loadArm();
   }

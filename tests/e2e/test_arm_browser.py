@@ -41,7 +41,7 @@ def test_arm_preview_and_approve(live_server: LiveServer, browser_context: Brows
         return sum(n.startswith(root) for n in meshes())
 
     tab.wait(lambda: links("/robot/arm/") >= 7 and links("/robot/ghost/") >= 7, timeout_ms=60_000)
-    assert any(m.get("name") == "/robot/path" for m in tab.messages())
+    tab.wait(lambda: any(m.get("name") == "/robot/path" for m in tab.messages()))
     arm = api.get(f"/api/sessions/{sid}/arm").json()
     q0 = arm["joints"]
     assert arm["target"]["index"] == best and arm["target"]["reachable"]
