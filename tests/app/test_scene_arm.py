@@ -15,7 +15,9 @@ from fastapi.testclient import TestClient
 from app.main import create_app
 from app.scene.robot import ghost_pose
 from app.settings import AppSettings
+from devices.arm.config import ArmConfig
 from devices.config import CellConfig, DeviceConfig
+from devices.protocols import UnreachableError
 from tests.viewer_wire import RawViewer, wait_for
 
 REASON_PREFIXES = ("no_ik", "joint_limit", "collision:", "no_path", "unreachable")
@@ -86,24 +88,36 @@ def test_the_arm_is_drawn_with_the_ghost_of_the_planners_choice(scene_client: Te
         raw.ws.close()
 
 
-def test_an_unreachable_selection_has_no_ghost_and_its_reason(scene_client: TestClient, planned_session) -> None:
-    sid, _ = planned_session(scene_client)
-    vid, raw = connect(scene_client, sid)
+def highest_first(plan: Any) -> list[int]:
+    return sorted(range(len(plan.candidates)), key=lambda i: -plan.candidates[i].position[2])
+
+
+def unreachable(cell: Any, index: int, plan: Any) -> bool:
     try:
-        arm = scene_client.get(f"/api/sessions/{sid}/arm").json()
-        if not arm["unreachable"]:
-            pytest.fail("the default cell should leave some of the hemisphere unreachable")
-        index = int(next(iter(arm["unreachable"])))
-        assert scene_client.put(f"/api/sessions/{sid}/selection", json={"index": index}).status_code == 200
-        target = scene_client.get(f"/api/sessions/{sid}/arm").json()["target"]
-        assert target["index"] == index and target["reachable"] is False
-        assert target["reason"] and "unreachable" in target["reason"]
-        assert "/robot/ghost" not in nodes(scene_client, vid) and "/robot/path" not in nodes(scene_client, vid)
-        r = scene_client.post(f"/api/sessions/{sid}/arm/preview")
-        assert r.status_code == 422 and "unreachable" in r.json()["detail"]
-        assert not robot_of(scene_client, vid).animating
-    finally:
-        raw.ws.close()
+        cell.plan_motion(plan.candidates[index].T_world_camera)
+    except UnreachableError:
+        return True
+    return False
+
+
+def test_an_unreachable_selection_has_no_ghost_and_its_reason(settings: AppSettings, planned_session) -> None:
+    far = DeviceConfig(cell=CellConfig(arm=ArmConfig(base=(-1.0, 0.0, 0.0))))  # the hemisphere's top out of reach
+    with TestClient(create_app(settings.replace(scene=True, devices=far)), base_url="http://127.0.0.1") as client:
+        sid, _ = planned_session(client)
+        vid, raw = connect(client, sid)
+        try:
+            wb = session_of(client, sid)
+            index = next(i for i in highest_first(wb.pending.plan) if unreachable(wb.cell, i, wb.pending.plan))
+            assert client.put(f"/api/sessions/{sid}/selection", json={"index": index}).status_code == 200
+            target = client.get(f"/api/sessions/{sid}/arm").json()["target"]
+            assert target["index"] == index and target["reachable"] is False
+            assert target["reason"] and "unreachable" in target["reason"]
+            assert "/robot/ghost" not in nodes(client, vid) and "/robot/path" not in nodes(client, vid)
+            r = client.post(f"/api/sessions/{sid}/arm/preview")
+            assert r.status_code == 422 and "unreachable" in r.json()["detail"]
+            assert not robot_of(client, vid).animating
+        finally:
+            raw.ws.close()
 
 
 def test_preview_animates_the_ghost_and_approve_animates_the_arm(scene_client: TestClient, planned_session) -> None:
