@@ -137,6 +137,8 @@ class Cell:
         self.pose_noise_rotation = math.radians(pose_noise_rotation_deg)
         self._rng = np.random.default_rng(seed)
         self._arm_base = np.asarray(self.config.arm_base, dtype=np.float64)
+        self.last_motion: Motion | None = None
+        """The motion of the last :meth:`move_to` that started (the 3D view animates its trajectory)."""
 
     # ------------------------------------------------------------------ geometry
 
@@ -295,6 +297,7 @@ class Cell:
         new angle; a fault during the trajectory leaves the arm where it stopped.
         """
         motion = self.plan_motion(T_table_camera)
+        self.last_motion = motion
         self.turntable.rotate_to(motion.angle)
         if motion.trajectory is not None:
             self.arm.execute(motion.trajectory)

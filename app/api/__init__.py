@@ -13,9 +13,9 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from app.api import candidates, events, loop, models, scene, sessions, viewer
+from app.api import arm, candidates, events, loop, models, scene, sessions, viewer
 from app.schemas import ERROR_RESPONSES
 
 router = APIRouter(prefix="/api", responses=ERROR_RESPONSES)
-for module in (viewer, models, sessions, loop, candidates, scene, events):
+for module in (viewer, models, sessions, loop, candidates, scene, events, arm):
     router.include_router(module.router)

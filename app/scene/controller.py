@@ -24,16 +24,18 @@ from typing import Any
 import numpy as np
 import viser
 
+from app.scene.arm import ArmTarget, SessionArm
 from app.scene.camera import client_cameras
 from app.scene.drawing import SessionDrawing
 from app.scene.geometry import COLORS, DEFAULT_LAYERS, SCALE_PERCENTILES, VIRIDIS, candidate_colors, outward_camera
 from app.scene.guard import install_guard
+from app.scene.robot import RobotScene
 from app.scene.tickets import Ticket, TicketBook
 from planner import Pose
-from workbench.errors import Invalid, NotFound, WorkbenchError
+from workbench.errors import Conflict, Invalid, NotFound, Unreachable, WorkbenchError
 from workbench.registry import SessionRegistry
 from workbench.session import Session
-from workbench.states import SessionEvent
+from workbench.states import SessionEvent, State
 
 log = logging.getLogger(__name__)
 
@@ -54,6 +56,8 @@ class Viewer:
     layers: dict[str, bool] = field(default_factory=lambda: dict(DEFAULT_LAYERS))
     client: viser.ClientHandle | None = None
     drawing: SessionDrawing | None = None
+    robot: RobotScene | None = None
+    """The arm in this viewer's scene (``/robot/...``), when the session's cell has an arm model."""
 
 
 class SceneController:
@@ -77,6 +81,7 @@ class SceneController:
         self._viewers: dict[str, Viewer] = {}
         self._bound: dict[int, Ticket] = {}  # client id -> ticket, between the handshake and viser's client
         self._watched: set[str] = set()
+        self._arms: dict[str, SessionArm] = {}
         server.scene.set_up_direction("+z")
         server.scene.configure_default_lights(enabled=True, cast_shadow=False)
         server.initial_camera.position = (0.95, -0.8, 0.75)
@@ -132,13 +137,26 @@ class SceneController:
             if wb.id not in self._watched:
                 self._watched.add(wb.id)
                 wb.listeners.append(self._on_event)
-            v.drawing.update(wb.scene_data())
+            data = wb.scene_data()
+            v.drawing.update(data)
+        arm = self.arm_of(wb)
+        if arm is not None:
+            target = arm.target(data)
+            robot = arm.new_scene(client)
+            arm.show_target(robot, target)
+            with self._lock:
+                v.robot = robot
 
     def _on_client_gone(self, client: viser.ClientHandle) -> None:
         with self._lock:
             self._bound.pop(client.client_id, None)
-            for key in [k for k, v in self._viewers.items() if v.client is client]:
+            gone = [k for k, v in self._viewers.items() if v.client is client]
+            robots = [self._viewers[k].robot for k in gone]
+            for key in gone:
                 del self._viewers[key]
+        for robot in robots:
+            if robot is not None:
+                robot.stop()
 
     def _on_event(self, wb: Session, event: SessionEvent) -> None:
         if event not in REDRAW_EVENTS:
@@ -148,14 +166,62 @@ class SceneController:
             for v in self._viewers.values():
                 if v.session_id == wb.id and v.drawing is not None:
                     v.drawing.update(data)
+        arm = self.arm_of(wb)
+        robots = self._robots_of(wb.id)
+        if arm is None or not robots:
+            return  # no tab shows this session's arm: plan no move for it
+        # in auto mode the next move starts at once: no ghost (the arm animates each executed move)
+        show_target = event != SessionEvent.CAPTURED and wb.state != State.AUTO
+        target = arm.target(data) if show_target else None
+        for robot in robots:
+            if event == SessionEvent.CAPTURED:
+                arm.after_capture(robot)
+            else:
+                arm.show_target(robot, target)
 
     def _on_session_deleted(self, wb: Session) -> None:
         with self._lock:
             self._watched.discard(wb.id)
+            self._arms.pop(wb.id, None)
             for v in [v for v in self._viewers.values() if v.session_id == wb.id]:
                 if v.drawing is not None:
                     v.drawing.clear()
                 v.drawing = None
+                if v.robot is not None:
+                    v.robot.remove()
+                v.robot = None
+
+    # ------------------------------------------------------------------ the arm
+
+    def arm_of(self, wb: Session) -> SessionArm | None:
+        """The arm of ``wb`` as the views show it (None when its cell has no arm model)."""
+        if wb.cell.kinematics is None:
+            return None
+        with self._lock:
+            arm = self._arms.get(wb.id)
+            if arm is None or arm.wb is not wb:
+                arm = self._arms[wb.id] = SessionArm(wb)
+            return arm
+
+    def _robots_of(self, session_id: str) -> list[RobotScene]:
+        with self._lock:
+            return [v.robot for v in self._viewers.values() if v.session_id == session_id and v.robot is not None]
+
+    def preview(self, wb: Session, speed: float = 1.0) -> tuple[ArmTarget, int]:
+        """Animate the move to ``wb``'s selected target on the ghost in every tab showing ``wb``; returns the
+        target and the number of tabs animating. Conflict without an arm, a pending plan or a reachable target."""
+        arm = self.arm_of(wb)
+        if arm is None:
+            raise Conflict(f"session {wb.id}: its cell has no arm model to preview")
+        target = arm.target(wb.scene_data())
+        if target is None:
+            raise Conflict(f"session {wb.id}: no pending plan to preview a move of (plan first)")
+        if target.motion is None or target.motion.trajectory is None:
+            raise Unreachable(f"preview: the selected target is unreachable ({target.reason})")
+        robots = self._robots_of(wb.id)
+        for robot in robots:
+            robot.animate(target.motion.trajectory, target.motion.angle, ghost=True, speed=speed)
+        return target, len(robots)
 
     @staticmethod
     def _selector(wb: Session) -> Any:
@@ -211,7 +277,7 @@ class SceneController:
                 "session": v.session_id,
                 "connected": d is not None,
                 "layers": dict(v.layers),
-                "nodes": [] if d is None else d.node_names(),
+                "nodes": ([] if d is None else d.node_names()) + ([] if v.robot is None else v.robot.node_names()),
                 "colormap": [list(c) for c in VIRIDIS],
                 "score_range": list(lo_hi),
                 "colors": {

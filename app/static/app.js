@@ -12,6 +12,8 @@ const S = {
   status: null, // last pushed status of it
   planId: null, // plan whose candidates are listed
   selectedShown: undefined, // the selection the table and inspector show (what Approve sends)
+  arm: null, // GET /api/sessions/ID/arm: the arm, the move to the selection, unreachable candidates' reasons
+  armKey: null,
   metricsKey: null,
   inFlight: false,
   viewer: null, // this tab's viewer id (layers, camera)
@@ -234,6 +236,12 @@ async function onStatus(st, event) {
     P.renderTable(st.selected, pick);
     await loadInspector(st.selected);
   }
+  const custom = st.custom_pose ? st.custom_pose.pose.position.join(",") + st.custom_pose.pose.wxyz : "";
+  const armKey = `${st.iteration}/${planId}/${st.selected}/${custom}`;
+  if (armKey !== S.armKey && S.viewer && !["capturing", "planning", "moving", "auto"].includes(st.state)) {
+    S.armKey = armKey;
+    await loadArm();
+  }
   const key = `${st.iteration}/${planId}`;
   if (key !== S.metricsKey && !["capturing", "planning", "moving", "interrupted"].includes(st.state)) {
     S.metricsKey = key;
@@ -251,6 +259,9 @@ function updateButtons() {
   $("capture").disabled = busy || !st || !(state === "new" || (state === "error" && it === 0));
   $("plan").disabled = busy || !st || it === 0 || !["ready", "planned", "done", "error"].includes(state);
   $("approve").disabled = busy || !st || state !== "planned" || st.selected === null;
+  const target = S.arm && S.arm.target;
+  $("preview").hidden = !(S.arm && S.arm.has_arm);
+  $("preview").disabled = busy || !st || state !== "planned" || !target || !target.reachable;
   const terminated = st && st.terminated;
   $("auto").disabled = busy || !st || it === 0 || !!terminated || !["ready", "planned"].includes(state);
   $("auto-why").textContent = terminated ? `Auto is off: the planner stopped (${terminated}). Plan and approve by hand to go on.` :
@@ -296,6 +307,38 @@ async function loadCandidates() {
   P.Table.items = S.planId ? await api("GET", `/api/sessions/${S.session}/candidates`) : [];
   P.renderTable(S.status ? S.status.selected : null, pick);
   if (S.viewer) P.renderLegend(await api("GET", `/api/scene/${S.viewer}`));
+}
+
+// The arm (a cell with an arm model): where the selected view takes it, or why it cannot; the table's
+// "unreachable" rows get the cell's reason (no_ik, joint_limit, collision:<link>:<obstacle>).
+async function loadArm() {
+  try {
+    S.arm = await api("GET", `/api/sessions/${S.session}/arm`);
+  } catch (e) {
+    S.arm = null;
+  }
+  const box = $("arm");
+  const arm = S.arm;
+  box.hidden = !(arm && arm.has_arm);
+  if (arm && arm.has_arm) {
+    const t = arm.target;
+    const what = t ? (t.kind === "custom" ? "the custom pose" : `candidate ${t.index}`) : null;
+    box.textContent = !t ? "arm: no view selected" : t.reachable
+      ? `arm: move to ${what} in ${t.duration.toFixed(1)} s (plate ${(t.plate_angle * 180 / Math.PI).toFixed(0)}°, ${t.path_method || "path"})`
+      : `arm: ${what} is ${t.reason}`;
+    box.className = "small " + (t && !t.reachable ? "error" : "muted");
+    let changed = false;
+    for (const c of P.Table.items) {
+      const why = arm.unreachable[String(c.index)];
+      if (why && c.reason === "unreachable") { c.reason = `unreachable: ${why}`; changed = true; }
+    }
+    if (changed) P.renderTable(S.selectedShown, pick);
+  }
+  updateButtons();
+}
+
+function preview() {
+  return action("previewing the move", () => api("POST", `/api/sessions/${S.session}/arm/preview`));
 }
 
 async function loadInspector(selected) {
@@ -357,6 +400,7 @@ function wire() {
   $("capture").addEventListener("click", post("capturing the first view", "capture"));
   $("plan").addEventListener("click", post("planning", "plan"));
   $("approve").addEventListener("click", approveShown);
+  $("preview").addEventListener("click", preview);
   $("approve-custom").addEventListener("click", () => action("moving to the custom pose", () => {
     const st = S.status;
     return api("POST", `/api/sessions/${S.session}/approve`, { plan_id: st.pending_plan.plan_id, pose: st.custom_pose.pose });

@@ -49,6 +49,7 @@ function renderTable(selected, onPick) {
     tr.dataset.index = c.index;
     tr.className = (c.best ? "best " : "") + (c.eligible ? "" : "ineligible ") + (c.index === selected ? "selected" : "");
     const why = c.eligible ? "yes" : esc(c.reason || "no");
+    if (!c.eligible && c.reason) tr.title = `not eligible: ${c.reason}`;
     tr.innerHTML = `<td>${c.index}</td><td>${num(c.score)}</td><td>${num(c.frontier)}</td><td>${num(c.occupied)}</td>` +
       `<td>S${c.sector}</td><td class="why">${why}</td>`;
     tr.addEventListener("click", () => onPick(c.index));

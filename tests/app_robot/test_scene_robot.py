@@ -8,7 +8,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from app.scene_robot import RobotScene, ghost_pose
+from app.scene.robot import RobotScene, ghost_pose
 from devices.arm.config import ArmConfig
 from devices.arm.kinematics import ArmKinematics
 from devices.arm.motion import time_path

@@ -10,7 +10,7 @@ this view). Nodes (stable names, under ``root``, ``/robot`` by default):
 - ``/robot/path``: the camera's path along a trajectory, a polyline (:meth:`RobotScene.show_path`).
 
 :meth:`RobotScene.animate` plays a :class:`devices.trajectory.JointTrajectory` on the arm (or the ghost, for a
-preview before approval) in a thread; it returns at once and ``stop()`` ends it. The lead wires it into sessions.
+preview before approval) in a thread; it returns at once and ``stop()`` ends it. app/scene/arm.py wires it into the per-tab scenes.
 """
 
 from __future__ import annotations
@@ -144,6 +144,21 @@ class RobotScene:
             f"{self.root}/path", points=segments, colors=PATH_COLOR, thickness=3.0, thickness_units="screen"
         )
         return points
+
+    def node_names(self) -> list[str]:
+        """The arm's top nodes now in the scene: ``/robot/arm``, and ``/robot/ghost`` / ``/robot/path`` when shown."""
+        names = [f"{self.root}/arm"]
+        if self._frames["ghost"].visible:
+            names.append(f"{self.root}/ghost")
+        if self._path is not None:
+            names.append(f"{self.root}/path")
+        return names
+
+    @property
+    def animating(self) -> bool:
+        """Whether an animation is playing."""
+        thread = self._thread
+        return thread is not None and thread.is_alive()
 
     # ------------------------------------------------------------------ animation
 

@@ -1,0 +1,74 @@
+"""The arm in the workbench page (real Chromium, live server, the UR5 sim cell): the tab's viewer receives the arm
+and the ghost of the planner's choice under /robot (decoded viser frames), the page says where the move goes
+and why unreachable candidates are unreachable, Preview motion plays the move on the ghost (the real arm stays),
+Approve executes it and the arm's joints animate in the view."""
+
+from __future__ import annotations
+
+import httpx
+import numpy as np
+from playwright.sync_api import BrowserContext, expect
+
+from tests.e2e.test_workbench_browser import Tab, _state
+from tests.helpers import SMALL
+from tests.servers import LiveServer
+
+REASONS = ("no_ik", "joint_limit", "collision:", "no_path")
+
+
+def _updates(tab: Tab, prefix: str, start: int) -> int:
+    """How many messages after frame ``start`` move or re-pose nodes under ``prefix`` (joint updates)."""
+    return sum(
+        1
+        for m in tab.messages(start)
+        if str(m.get("name", "")).startswith(prefix) and m.get("type", "").startswith(("SetPosition", "SetOrientation"))
+    )
+
+
+def test_arm_preview_and_approve(live_server: LiveServer, browser_context: BrowserContext) -> None:
+    api = httpx.Client(base_url=live_server.url, timeout=120)
+    sid = api.post("/api/sessions", json={"model": "l-block", "config": SMALL}).json()["id"]
+    api.post(f"/api/sessions/{sid}/capture")
+    best = api.post(f"/api/sessions/{sid}/plan").json()["best"]["index"]
+    tab = Tab(browser_context, f"{live_server.url}/?session={sid}")
+    _state(tab, "planned")
+
+    # the viewer's frames carry the arm's and the ghost's link meshes
+    def meshes() -> set[str]:
+        return {str(m["name"]) for m in tab.messages() if m.get("type") in ("GlbMessage", "MeshMessage")}
+
+    def links(root: str) -> int:
+        return sum(n.startswith(root) for n in meshes())
+
+    tab.wait(lambda: links("/robot/arm/") >= 7 and links("/robot/ghost/") >= 7, timeout_ms=60_000)
+    tab.wait(lambda: any(m.get("name") == "/robot/path" for m in tab.messages()))
+    arm = api.get(f"/api/sessions/{sid}/arm").json()
+    q0 = arm["joints"]
+    assert arm["target"]["index"] == best and arm["target"]["reachable"]
+
+    # the page: where the move goes; unreachable rows carry the cell's reason
+    expect(tab.page.locator("#arm")).to_contain_text(f"arm: move to candidate {best} in", timeout=30_000)
+    items = tab.page.evaluate("window.Panels.Table.items")
+    unreachable = [c for c in items if not c["eligible"] and c["reason"].startswith("unreachable")]
+    # (how many the plan finds unreachable depends on the cell and the planner's sectors; often a few)
+    assert all(c["reason"].startswith("unreachable: ") for c in unreachable)
+    assert all(c["reason"][len("unreachable: ") :].startswith(REASONS) for c in unreachable)
+    assert {str(c["index"]) for c in unreachable} == set(arm["unreachable"])
+
+    # Preview motion: the ghost's joints move, the arm's and the real joints do not
+    mark = len(tab.frames)
+    expect(tab.page.locator("#preview")).to_be_enabled()
+    tab.page.click("#preview")
+    tab.wait(lambda: _updates(tab, "/robot/ghost/", mark) > 20)
+    assert _updates(tab, "/robot/arm/", mark) == 0
+    np.testing.assert_allclose(api.get(f"/api/sessions/{sid}/arm").json()["joints"], q0)
+
+    # Approve: the sim arm executes the move, the arm in the view animates to the new joints
+    tab.page.wait_for_timeout(float(arm["target"]["duration"]) * 1000 + 500)  # the preview ends
+    mark = len(tab.frames)
+    tab.page.click("#approve")
+    expect(tab.page.locator("#iteration")).to_have_text("2", timeout=60_000)
+    tab.wait(lambda: _updates(tab, "/robot/arm/", mark) > 20)
+    q1 = api.get(f"/api/sessions/{sid}/arm").json()["joints"]
+    np.testing.assert_allclose(q1, arm["target"]["joints"], atol=1e-6)
+    assert not np.allclose(q1, q0)
