@@ -140,8 +140,8 @@ class SessionRegistry:
                     self._dormant[dormant.id] = dormant
                 else:  # deleted by an earlier server that kept deleted journals in place
                     self._trash(directory)
-            with contextlib.suppress(OSError):
-                prune(settings.data_dir, settings.trash_max_bytes, settings.trash_max_age)
+            with contextlib.suppress(OSError):  # deleted in an earlier run: kept until this restart (issue 12)
+                prune(settings.data_dir, 0, settings.trash_max_age)
 
     # ------------------------------------------------------------------ create
 

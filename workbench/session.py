@@ -260,7 +260,8 @@ class Session:
         """
         planner = self.planner
         try:
-            if self.worker is None or type(self.cell).is_reachable is not Cell.is_reachable:
+            in_cell = self.cell.kinematics is not None  # an arm: its IK search state must be the one moves use
+            if self.worker is None or in_cell or type(self.cell).is_reachable is not Cell.is_reachable:
                 plan = plan_in(self.cell, planner)
             else:
                 q = None if self.cell.kinematics is None else self.cell.arm.joint_positions()

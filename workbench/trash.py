@@ -1,4 +1,5 @@
-"""Deleted sessions wait in a trash folder, then go: ``data_dir/sessions/.trash/<id>-<deleted ns>``.
+"""Deleted sessions wait in a trash folder until the server restarts, or sooner at its age or size limit:
+``data_dir/sessions/.trash/<id>-<deleted ns>``.
 
 ``DELETE /api/sessions/{id}`` marks the journal ``deleted`` and moves the session's folder (journal and frames)
 here with one rename; :func:`prune` removes what is older than ``trash_max_age`` and then the oldest until the

@@ -38,7 +38,9 @@ def main(out: str = "docs/workbench-arm.png", width: int = 1600, height: int = 1
                 if "/robot/ghost" in api.get(f"/api/scene/{viewer}").json()["nodes"]:
                     break
                 page.wait_for_timeout(200)
-            api.post(f"/api/scene/{viewer}/camera", json={"position": [0.3, -0.95, 0.62], "look_at": [-0.22, 0.02, 0.17]})
+            api.post(
+                f"/api/scene/{viewer}/camera", json={"position": [0.3, -0.95, 0.62], "look_at": [-0.22, 0.02, 0.17]}
+            )
             close = page.frame_locator("#viewer").locator("button.mantine-Notification-closeButton")
             if close.count():
                 close.first.dispatch_event("click")  # under the page's layer bar (a headless-only warning)

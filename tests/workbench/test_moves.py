@@ -59,7 +59,13 @@ class HangingArm(SimulatedArm):
 
 @pytest.fixture
 def registry(tmp_path: Path) -> Iterator[SessionRegistry]:
-    settings = WorkbenchSettings(models_dir=tmp_path / "models", data_dir=tmp_path / "data", move_timeout=0.5)
+    from devices.config import CellConfig, DeviceConfig
+
+    # the hanging arm replaces a pose-driven arm: the reach-sphere cell's
+    devices = DeviceConfig(cell=CellConfig(kinematics="reach_sphere"))
+    settings = WorkbenchSettings(
+        models_dir=tmp_path / "models", data_dir=tmp_path / "data", move_timeout=0.5, devices=devices
+    )
     registry = SessionRegistry(settings)
     yield registry
     registry.close()

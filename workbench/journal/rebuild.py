@@ -11,6 +11,7 @@ in ``Rebuilt.mismatches``. Used by ``POST /api/sessions/{id}/resume`` and ``nbv 
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -191,6 +192,10 @@ def _replay_one(
             used.add(in_flight.plan_id)
             in_flight = None
         device_state = ev.get("device_state")
+        restore = getattr(cell, "restore_device_state", None)
+        if device_state is not None and callable(restore):  # the next plan sees the arm where the session had it
+            with contextlib.suppress(ValueError):
+                restore(device_state)
     elif kind == "plan":
         plan = plan_in(cell, planner)
         best, recorded = best_of(plan), ev.get("best")
