@@ -149,7 +149,7 @@ def test_without_a_ticket_or_from_a_foreign_origin_nothing_is_received_and_click
             for owner in ("", "0", "1", "2", "3", "4"):  # whatever scope it pretends to click in
                 raw.send(click_message("/candidates", k, owner))
         # a real, bound viewer proves clicks do arrive when they may
-        _, good = open_viewer(scene_client, sid)
+        good_body, good = open_viewer(scene_client, sid)
         try:
             wait_for(lambda: "/candidates" in session_nodes(good.messages()))
             owner = owner_of(good.messages(), "/candidates")
@@ -157,15 +157,16 @@ def test_without_a_ticket_or_from_a_foreign_origin_nothing_is_received_and_click
             good.send(click_message("/nonexistent", 0, owner))  # a round trip on the good socket after it
             wait_for(lambda: False, timeout=0.5)
             assert scene_client.get(f"/api/sessions/{sid}").json()["selected"] == best
-            for raw in (bare, foreign, noorigin):
-                assert session_nodes(raw.messages()) == set()
+            for name, raw in (("bare", bare), ("foreign", foreign), ("noorigin", noorigin)):
+                assert session_nodes(raw.messages()) == set(), name
             good.send(click_message("/candidates", k, owner_of(good.messages(), "/candidates")))
             assert wait_for(lambda: scene_client.get(f"/api/sessions/{sid}").json()["selected"] == k)
         finally:
             good.close()
-        # a used ticket binds nothing a second time
+        # a used ticket (the good viewer's) binds nothing a second time; the foreign viewer's ticket was never
+        # redeemed (its Origin was refused first), so it is not the one to try
         again = RawViewer(
-            f"ws://127.0.0.1:{port}/?ticket={body['url'].split('ticket%3D')[1]}", f"http://127.0.0.1:{port}"
+            f"ws://127.0.0.1:{port}/?ticket={good_body['url'].split('ticket%3D')[1]}", f"http://127.0.0.1:{port}"
         )
         try:
             for owner in ("", "0", "1", "2", "3", "4", "5"):

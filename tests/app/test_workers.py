@@ -20,6 +20,11 @@ from apphelpers import SMALL, free_port, running_server
 from test_admission import HealthProbe
 
 from app.settings import AppSettings
+from devices.config import CellConfig, DeviceConfig
+
+SPHERE = DeviceConfig(cell=CellConfig(kinematics="reach_sphere"))
+"""Plans run in the worker for a cell without an arm model; a session with the UR5 plans in the server
+process (its IK search state must be the one its moves use), so these tests use the reach-sphere cell."""
 
 REPO = Path(__file__).resolve().parents[2]
 HEAVIEST: dict[str, Any] = {
@@ -70,7 +75,7 @@ def in_thread(fn: Any) -> tuple[threading.Thread, dict[str, Any]]:
 
 def test_delete_kills_the_heaviest_plan_at_once_while_health_answers(settings: AppSettings) -> None:
     with (
-        running_server(settings.replace(port=free_port())) as live,
+        running_server(settings.replace(port=free_port(), devices=SPHERE)) as live,
         httpx.Client(base_url=live.url, timeout=120) as api,
     ):
         sid = api.post("/api/sessions", json={"config": HEAVIEST}).json()["id"]
@@ -90,7 +95,7 @@ def test_delete_kills_the_heaviest_plan_at_once_while_health_answers(settings: A
 
 
 def test_a_plan_over_its_budget_is_killed_and_the_session_goes_on(settings: AppSettings) -> None:
-    with running_server(settings.replace(port=free_port(), plan_budget=0.02)) as live:
+    with running_server(settings.replace(port=free_port(), plan_budget=0.02, devices=SPHERE)) as live:
         api = httpx.Client(base_url=live.url, timeout=120)
         sid = api.post("/api/sessions", json={"config": SMALL}).json()["id"]
         assert api.post(f"/api/sessions/{sid}/capture").status_code == 200
@@ -112,7 +117,7 @@ def test_a_plan_over_its_budget_is_killed_and_the_session_goes_on(settings: AppS
 
 def test_stop_kills_a_running_plan_of_auto_mode(settings: AppSettings) -> None:
     with (
-        running_server(settings.replace(port=free_port())) as live,
+        running_server(settings.replace(port=free_port(), devices=SPHERE)) as live,
         httpx.Client(base_url=live.url, timeout=120) as api,
     ):
         sid = api.post("/api/sessions", json={"config": PLAN_HEAVY}).json()["id"]
@@ -128,7 +133,7 @@ def test_stop_kills_a_running_plan_of_auto_mode(settings: AppSettings) -> None:
 
 
 def test_idle_workers_are_evicted_and_come_back(settings: AppSettings) -> None:
-    with running_server(settings.replace(port=free_port(), max_idle_workers=1)) as live:
+    with running_server(settings.replace(port=free_port(), max_idle_workers=1, devices=SPHERE)) as live:
         api = httpx.Client(base_url=live.url, timeout=120)
         sids = [api.post("/api/sessions", json={"config": SMALL}).json()["id"] for _ in range(2)]
         for sid in sids:
@@ -146,6 +151,8 @@ def test_sigterm_stops_the_server_within_5_s_during_a_plan(tmp_path: Path, model
     port = free_port()
     cmd = [sys.executable, "-m", "nbv.cli", "serve", "--port", str(port), "--viser-port", "0"]
     cmd += ["--data-dir", str(tmp_path / "data"), "--models-dir", str(models_dir), "--log-level", "warning"]
+    (tmp_path / "sphere.toml").write_text('[devices.cell]\nkinematics = "reach_sphere"\n')  # plans in the worker
+    cmd += ["--config", str(tmp_path / "sphere.toml")]
     log = tmp_path / "serve.log"
     with open(log, "wb") as out:
         proc = subprocess.Popen(cmd, cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
