@@ -139,7 +139,7 @@ def test_without_a_ticket_or_from_a_foreign_origin_nothing_is_received_and_click
     best = plan["best"]["index"]
     k = (best + 7) % 60
     bare = RawViewer(f"ws://127.0.0.1:{port}/", f"http://127.0.0.1:{port}")
-    body, foreign = open_viewer(scene_client, sid, origin="http://evil.example")
+    _, foreign = open_viewer(scene_client, sid, origin="http://evil.example")
     noorigin = RawViewer(f"ws://127.0.0.1:{port}/?ticket=made-up", None)
     try:
         wait_for(lambda: foreign.closed is not None and noorigin.closed is not None, timeout=5)
