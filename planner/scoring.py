@@ -103,13 +103,28 @@ def score_views(
     score = frontier - occupied
     for a in (ranks, weights, weighted):
         a.setflags(write=False)
+    return view_scores(candidates, mask, score, frontier, occupied, ranks, weights, pixels, weighted)
+
+
+def view_scores(
+    candidates: Sequence[Candidate],
+    eligible: NDArray[np.bool_],
+    score: NDArray[np.float64],
+    frontier: NDArray[np.float64],
+    occupied: NDArray[np.float64],
+    ranks: NDArray[np.int64],
+    weights: NDArray[np.float64],
+    pixels: NDArray[np.float64],
+    weighted: NDArray[np.float64],
+) -> tuple[ViewScore, ...]:
+    """One :class:`ViewScore` per candidate from (C,) totals and (C, E) per-ellipsoid terms (row i: candidate i)."""
     return tuple(
         ViewScore(
             index=c.index,
             score=float(score[i]),
             frontier=float(frontier[i]),
             occupied=float(occupied[i]),
-            eligible=bool(mask[i]),
+            eligible=bool(eligible[i]),
             ranks=ranks[i],
             weights=weights[i],
             pixels=pixels[i],

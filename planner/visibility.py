@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from planner.config import ZBufferConfig
-from planner.scoring import depth_ranks
+from planner.scoring import depth_ranks, view_scores
 from planner.types import Candidate, Ellipsoid, Intrinsics, Pose, ViewScore
 from planner.zbuffer import Fragments, rasterize
 
@@ -197,20 +197,7 @@ def score_visible_frontier(
     for a in (ranks, w, pixels, weighted):
         a.setflags(write=False)
     score = frontier + config.hidden_weight * occupied
-    return tuple(
-        ViewScore(
-            index=c.index,
-            score=float(score[i]),
-            frontier=float(frontier[i]),
-            occupied=float(occupied[i]),
-            eligible=bool(mask[i]),
-            ranks=ranks[i],
-            weights=w[i],
-            pixels=pixels[i],
-            weighted=weighted[i],
-        )
-        for i, c in enumerate(candidates)
-    )
+    return view_scores(candidates, mask, score, frontier, occupied, ranks, w, pixels, weighted)
 
 
 @dataclass(frozen=True, eq=False)

@@ -148,12 +148,10 @@ class SessionWorker:
 
     # ------------------------------------------------------------------ jobs
 
-    def plan(
-        self, planner: Planner, cell: CellConfig, budget: float, q: Any = None, angle: float = 0.0
-    ) -> tuple[PlanResult, Planner]:
-        """:func:`workbench.planning.plan_in` a device-less cell of ``cell``'s geometry (an arm at joints ``q``,
-        the plate at ``angle``) in the worker: (plan, the planner after it)."""
-        return self.call("plan", (planner, cell, q, angle), budget, "plan")
+    def plan(self, planner: Planner, cell: CellConfig, budget: float) -> tuple[PlanResult, Planner]:
+        """:func:`workbench.planning.plan_in` a device-less cell of ``cell``'s geometry in the worker: (plan, the
+        planner after it)."""
+        return self.call("plan", (planner, cell), budget, "plan")
 
     def integrate(self, planner: Planner, frame: DepthFrame, budget: float) -> tuple[IntegrationReport, Planner]:
         """``planner.integrate(frame)`` in the worker: (report, the planner after it)."""

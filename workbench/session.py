@@ -264,8 +264,7 @@ class Session:
             if self.worker is None or in_cell or type(self.cell).is_reachable is not Cell.is_reachable:
                 plan = plan_in(self.cell, planner)
             else:
-                q = None if self.cell.kinematics is None else self.cell.arm.joint_positions()
-                plan, planner = self.worker.plan(planner, self.cell.config, self.plan_budget, q, self.cell.angle)
+                plan, planner = self.worker.plan(planner, self.cell.config, self.plan_budget)
         except ValueError as exc:
             raise Conflict(f"session {self.id}: {exc}") from None
         except JobKilled as exc:

@@ -43,22 +43,10 @@ class RenderSpec:
     plate_thickness: float
 
 
-class _ArmState:
-    """The arm and the plate as a planning cell reads them (``joint_positions()``, ``angle``): the session's
-    joints and plate angle, sent with each plan (an arm's IK is seeded from them)."""
-
-    def __init__(self) -> None:
-        self.q: Any = None
-        self.angle = 0.0
-
-    def joint_positions(self) -> Any:
-        return self.q
-
-
 class _Worker:
     def __init__(self) -> None:
         self.camera: Any = None
-        self.geometry: dict[CellConfig, tuple[Cell, _ArmState]] = {}
+        self.geometry: dict[CellConfig, Cell] = {}
 
     def setup(self, spec: RenderSpec) -> None:
         import trimesh
@@ -75,14 +63,12 @@ class _Worker:
             raise RuntimeError("worker: render before setup")
         return self.camera.render(pose)
 
-    def reach(self, config: CellConfig, q: Any, angle: float) -> Cell:
-        """A cell of no devices: its geometry and, for an arm, its kinematics at joints ``q`` and plate ``angle``."""
+    def reach(self, config: CellConfig) -> Cell:
+        """A cell of no devices: only its geometry (``is_reachable`` reads ``config`` alone; a session with an arm
+        model plans in the server, see ``Session.make_plan``)."""
         if config not in self.geometry:
-            state = _ArmState()
-            self.geometry[config] = (Cell(cast(Any, None), cast(Any, state), cast(Any, state), config), state)
-        cell, state = self.geometry[config]
-        state.q, state.angle = q, angle
-        return cell
+            self.geometry[config] = Cell(cast(Any, None), cast(Any, None), cast(Any, None), config)
+        return self.geometry[config]
 
     def run(self, kind: str, payload: Any) -> Any:
         if kind == "setup":
@@ -90,8 +76,8 @@ class _Worker:
         if kind == "render":
             return self.render(payload)
         if kind == "plan":
-            planner, config, q, angle = cast(tuple[Planner, CellConfig, Any, float], payload)
-            plan = plan_in(self.reach(config, q, angle), planner)  # as in the server: the arm's box, move costs
+            planner, config = cast(tuple[Planner, CellConfig], payload)
+            plan = plan_in(self.reach(config), planner)
             return plan, planner
         if kind == "integrate":
             planner, frame = cast(tuple[Planner, DepthFrame], payload)
