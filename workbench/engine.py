@@ -51,7 +51,7 @@ def _mp_context() -> Any:
         if _context is None:
             ctx = multiprocessing.get_context("forkserver")
             # open3d is imported (no thread started by it) but no scene built: a worker builds its own after the fork
-            ctx.set_forkserver_preload(["workbench.worker", "devices.sim"])
+            ctx.set_forkserver_preload(["workbench.worker", "devices.sim", "devices.arm.kinematics"])
             _context = ctx
         return _context
 
@@ -148,10 +148,13 @@ class SessionWorker:
 
     # ------------------------------------------------------------------ jobs
 
-    def plan(self, planner: Planner, cell: CellConfig, budget: float) -> tuple[PlanResult, Planner]:
-        """:func:`workbench.planning.plan_in` a device-less cell of ``cell``'s geometry in the worker: (plan, the
-        planner after it)."""
-        return self.call("plan", (planner, cell), budget, "plan")
+    def plan(
+        self, planner: Planner, cell: CellConfig, budget: float, q: Any = None, angle: float = 0.0
+    ) -> tuple[PlanResult, Planner]:
+        """:func:`workbench.planning.plan_in` a device-less cell of ``cell``'s geometry in the worker (for an arm
+        model: its kinematics, the arm at joints ``q`` (n,), the plate at ``angle``): (plan, the planner after
+        it)."""
+        return self.call("plan", (planner, cell, q, angle), budget, "plan")
 
     def integrate(self, planner: Planner, frame: DepthFrame, budget: float) -> tuple[IntegrationReport, Planner]:
         """``planner.integrate(frame)`` in the worker: (report, the planner after it)."""

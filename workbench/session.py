@@ -260,11 +260,13 @@ class Session:
         """
         planner = self.planner
         try:
-            in_cell = self.cell.kinematics is not None  # an arm: its IK search state must be the one moves use
-            if self.worker is None or in_cell or type(self.cell).is_reachable is not Cell.is_reachable:
+            if self.worker is None or type(self.cell).is_reachable is not Cell.is_reachable:
                 plan = plan_in(self.cell, planner)
-            else:
-                plan, planner = self.worker.plan(planner, self.cell.config, self.plan_budget)
+            else:  # the worker's cell has this cell's geometry, arm model, joints and plate angle
+                q, angle = self.cell.joint_positions(), self.cell.angle
+                plan, planner = self.worker.plan(planner, self.cell.config, self.plan_budget, q, angle)
+                if planner.voxel_map.bbox is not None:
+                    self.cell.set_object_box(planner.voxel_map.bbox)  # the box the worker's verdicts used
         except ValueError as exc:
             raise Conflict(f"session {self.id}: {exc}") from None
         except JobKilled as exc:

@@ -7,7 +7,9 @@ and a fresh worker takes up the next job. Jobs:
 
 - ``("render", RenderSpec)`` once per process, then ``("render", T_table_camera)``: (H, W) float32 depth of the
   simulated camera (open3d ``cast_rays``, which holds the GIL for the whole image);
-- ``("plan", (planner, cell_config))``: ``(PlanResult, planner)``, reachability by the cell's geometry;
+- ``("plan", (planner, cell_config, q, angle))``: ``(PlanResult, planner)``, reachability by the cell's geometry
+  and, for an arm model, its kinematics with the arm at joints ``q`` and the plate at ``angle`` (the same
+  verdicts as the server's cell: reachability is a pure function of the view and the object box);
 - ``("integrate", (planner, frame))``: ``(IntegrationReport, planner)``.
 
 This module imports the planner and (on the first render) open3d; the server imports it only to name the
@@ -43,10 +45,32 @@ class RenderSpec:
     plate_thickness: float
 
 
+class _ArmState:
+    """The arm and the plate as a planning cell reads them (``joint_positions()``, ``angle``): the session's
+    joints and plate angle, sent with each plan (move costs start there). It moves nothing."""
+
+    def __init__(self, joint_names: tuple[str, ...], q: NDArray[np.float64]) -> None:
+        self.joint_names = joint_names
+        self.q = q
+        self.angle = 0.0
+
+    def joint_positions(self) -> NDArray[np.float64]:
+        return self.q
+
+    def execute(self, trajectory: object) -> None:
+        raise RuntimeError("worker: a planning cell does not move")
+
+    def stop(self) -> None:
+        pass
+
+    def rotate_to(self, angle: float) -> None:
+        raise RuntimeError("worker: a planning cell does not move")
+
+
 class _Worker:
     def __init__(self) -> None:
         self.camera: Any = None
-        self.geometry: dict[CellConfig, Cell] = {}
+        self.geometry: dict[CellConfig, tuple[Cell, _ArmState | None]] = {}
 
     def setup(self, spec: RenderSpec) -> None:
         import trimesh
@@ -63,12 +87,23 @@ class _Worker:
             raise RuntimeError("worker: render before setup")
         return self.camera.render(pose)
 
-    def reach(self, config: CellConfig) -> Cell:
-        """A cell of no devices: only its geometry (``is_reachable`` reads ``config`` alone; a session with an arm
-        model plans in the server, see ``Session.make_plan``)."""
+    def reach(self, config: CellConfig, q: NDArray[np.float64] | None, angle: float) -> Cell:
+        """A cell of no devices: ``config``'s geometry and, for an arm model (``q`` given), its kinematics (built
+        once per worker) with the arm at joints ``q`` (n,) and the plate at ``angle`` (rad)."""
         if config not in self.geometry:
-            self.geometry[config] = Cell(cast(Any, None), cast(Any, None), cast(Any, None), config)
-        return self.geometry[config]
+            if q is None:
+                self.geometry[config] = (Cell(cast(Any, None), cast(Any, None), cast(Any, None), config), None)
+            else:
+                from devices.arm.kinematics import ArmKinematics
+
+                kinematics = ArmKinematics(config.arm, config.plate_radius, config.plate_thickness)
+                state = _ArmState(kinematics.joint_names, np.asarray(q, dtype=np.float64))
+                cell = Cell(cast(Any, None), state, cast(Any, state), config, kinematics=kinematics)
+                self.geometry[config] = (cell, state)
+        cell, state = self.geometry[config]
+        if state is not None and q is not None:
+            state.q, state.angle = np.asarray(q, dtype=np.float64), float(angle)
+        return cell
 
     def run(self, kind: str, payload: Any) -> Any:
         if kind == "setup":
@@ -76,8 +111,8 @@ class _Worker:
         if kind == "render":
             return self.render(payload)
         if kind == "plan":
-            planner, config = cast(tuple[Planner, CellConfig], payload)
-            plan = plan_in(self.reach(config), planner)
+            planner, config, q, angle = cast(tuple[Planner, CellConfig, Any, float], payload)
+            plan = plan_in(self.reach(config, q, angle), planner)  # as in the server: the arm's box, move costs
             return plan, planner
         if kind == "integrate":
             planner, frame = cast(tuple[Planner, DepthFrame], payload)

@@ -5,6 +5,7 @@ server within 5 s."""
 
 from __future__ import annotations
 
+import copy
 import os
 import signal
 import subprocess
@@ -15,16 +16,13 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+import numpy as np
 import pytest
 from apphelpers import SMALL, free_port, running_server
 from test_admission import HealthProbe
 
 from app.settings import AppSettings
-from devices.config import CellConfig, DeviceConfig
-
-SPHERE = DeviceConfig(cell=CellConfig(kinematics="reach_sphere"))
-"""Plans run in the worker for a cell without an arm model; a session with the UR5 plans in the server
-process (its IK search state must be the one its moves use), so these tests use the reach-sphere cell."""
+from workbench.planning import plan_in
 
 REPO = Path(__file__).resolve().parents[2]
 HEAVIEST: dict[str, Any] = {
@@ -75,7 +73,7 @@ def in_thread(fn: Any) -> tuple[threading.Thread, dict[str, Any]]:
 
 def test_delete_kills_the_heaviest_plan_at_once_while_health_answers(settings: AppSettings) -> None:
     with (
-        running_server(settings.replace(port=free_port(), devices=SPHERE)) as live,
+        running_server(settings.replace(port=free_port())) as live,
         httpx.Client(base_url=live.url, timeout=120) as api,
     ):
         sid = api.post("/api/sessions", json={"config": HEAVIEST}).json()["id"]
@@ -95,7 +93,7 @@ def test_delete_kills_the_heaviest_plan_at_once_while_health_answers(settings: A
 
 
 def test_a_plan_over_its_budget_is_killed_and_the_session_goes_on(settings: AppSettings) -> None:
-    with running_server(settings.replace(port=free_port(), plan_budget=0.02, devices=SPHERE)) as live:
+    with running_server(settings.replace(port=free_port(), plan_budget=0.02)) as live:
         api = httpx.Client(base_url=live.url, timeout=120)
         sid = api.post("/api/sessions", json={"config": SMALL}).json()["id"]
         assert api.post(f"/api/sessions/{sid}/capture").status_code == 200
@@ -117,7 +115,7 @@ def test_a_plan_over_its_budget_is_killed_and_the_session_goes_on(settings: AppS
 
 def test_stop_kills_a_running_plan_of_auto_mode(settings: AppSettings) -> None:
     with (
-        running_server(settings.replace(port=free_port(), devices=SPHERE)) as live,
+        running_server(settings.replace(port=free_port())) as live,
         httpx.Client(base_url=live.url, timeout=120) as api,
     ):
         sid = api.post("/api/sessions", json={"config": PLAN_HEAVY}).json()["id"]
@@ -133,7 +131,7 @@ def test_stop_kills_a_running_plan_of_auto_mode(settings: AppSettings) -> None:
 
 
 def test_idle_workers_are_evicted_and_come_back(settings: AppSettings) -> None:
-    with running_server(settings.replace(port=free_port(), max_idle_workers=1, devices=SPHERE)) as live:
+    with running_server(settings.replace(port=free_port(), max_idle_workers=1)) as live:
         api = httpx.Client(base_url=live.url, timeout=120)
         sids = [api.post("/api/sessions", json={"config": SMALL}).json()["id"] for _ in range(2)]
         for sid in sids:
@@ -151,8 +149,6 @@ def test_sigterm_stops_the_server_within_5_s_during_a_plan(tmp_path: Path, model
     port = free_port()
     cmd = [sys.executable, "-m", "nbv.cli", "serve", "--port", str(port), "--viser-port", "0"]
     cmd += ["--data-dir", str(tmp_path / "data"), "--models-dir", str(models_dir), "--log-level", "warning"]
-    (tmp_path / "sphere.toml").write_text('[devices.cell]\nkinematics = "reach_sphere"\n')  # plans in the worker
-    cmd += ["--config", str(tmp_path / "sphere.toml")]
     log = tmp_path / "serve.log"
     with open(log, "wb") as out:
         proc = subprocess.Popen(cmd, cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
@@ -181,3 +177,34 @@ def test_sigterm_stops_the_server_within_5_s_during_a_plan(tmp_path: Path, model
             proc.wait(10)
     journal = (tmp_path / "data" / "sessions" / sid / "journal.jsonl").read_text().splitlines()
     assert any('"capture"' in line for line in journal)  # what happened before the signal is on disk
+
+
+def test_an_arm_session_plans_in_its_worker_with_the_servers_verdicts(settings: AppSettings) -> None:
+    """The default cell (the UR5): each plan runs in the worker (its job count grows) and equals the plan the
+    server's own cell makes of the same map (eligibility, reasons, scores, the best view), and the approved
+    best view moves the arm: no ``no_ik`` for a candidate the worker found reachable."""
+    with (
+        running_server(settings.replace(port=free_port())) as live,
+        httpx.Client(base_url=live.url, timeout=120) as api,
+    ):
+        sid = api.post("/api/sessions", json={"config": SMALL}).json()["id"]
+        session = live.registry.get(sid)
+        assert session.cell.kinematics is not None
+        assert api.post(f"/api/sessions/{sid}/capture").status_code == 200
+        unreachable = 0
+        for _ in range(3):
+            jobs, before = session.worker.jobs, copy.deepcopy(session.planner)
+            plan = api.post(f"/api/sessions/{sid}/plan").json()
+            assert session.worker.jobs == jobs + 1, "the plan did not run in the worker"
+            theirs = session.pending.plan
+            mine = plan_in(session.cell, before)
+            assert theirs.best_index == mine.best_index == plan["best"]["index"] is not None
+            assert [s.eligible for s in theirs.scores] == [s.eligible for s in mine.scores]
+            assert theirs.ineligible_reasons == mine.ineligible_reasons
+            np.testing.assert_allclose([s.score for s in theirs.scores], [s.score for s in mine.scores])
+            unreachable += theirs.ineligible_reasons.count("unreachable")
+            r = api.post(
+                f"/api/sessions/{sid}/approve", json={"plan_id": plan["plan_id"], "index": plan["best"]["index"]}
+            )
+            assert r.status_code == 200, r.text
+        assert unreachable > 0  # the arm's reach left candidates out: the worker used the arm, not a sphere
