@@ -124,6 +124,11 @@ class SessionCreate(BaseModel):
         description="the view evaluator: projection (the paper's), a ray-casting baseline, or random "
         "(GET /api/planners lists them)",
     )
+    progress_id: str | None = Field(
+        default=None,
+        pattern=r"^[A-Za-z0-9_-]{8,64}$",
+        description="names this create: its progress on /api/events?create=ID, DELETE /api/creations/ID cancels it",
+    )
 
 
 class SessionCreated(BaseModel):
@@ -152,6 +157,18 @@ class CustomPoseOut(BaseModel):
     reason: str
 
 
+class ProgressOut(BaseModel):
+    operation: str = Field(description="plan, create")
+    stage: str = Field(description='what runs now, e.g. "reachability", "fit occupied", "reading the mesh"')
+    step: int = Field(description="the stage's number, 1-based")
+    steps: int = Field(description="the operation's stages")
+    done: int = Field(description="items of the stage done (candidates, values of T, ...)")
+    total: int = Field(description="items of the stage (0: not counted)")
+    percent: float = Field(description="of the whole operation, each stage counting the same")
+    elapsed: float = Field(description="seconds since the operation started")
+    stoppable: bool = Field(description="POST .../stop (a plan) or DELETE /api/creations/{id} (a create) ends it")
+
+
 class SessionOut(BaseModel):
     id: str
     model: str
@@ -176,6 +193,7 @@ class SessionOut(BaseModel):
     moves: int
     seed: int
     planner: str = Field(default="projection", description="the view evaluator this session plans with")
+    progress: ProgressOut | None = Field(default=None, description="the long operation running now, if any")
 
 
 class CandidateOut(BaseModel):

@@ -13,6 +13,7 @@ Read top-down against the paper:
 - ``projection``, ``scoring``                          §III-E dual quadric -> conic, rank weights, F
 - ``partitions``                                       §III-F global longitude partitions
 - ``evaluators``, ``planner``                          Algorithm 1
+- ``progress``                                         where a running plan is (stage k of n), for a caller
 """
 
 from typing import TYPE_CHECKING, Any

@@ -22,7 +22,7 @@ EM algebra are in :mod:`planner.mixture`.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from contextlib import AbstractContextManager
 
 import numpy as np
@@ -57,16 +57,27 @@ def bic_gap(chosen_bic: float, sweep: Mapping[int, float], n_points: int) -> flo
     return (chosen_bic - min(sweep.values())) / n_points
 
 
-def select_mixture(points_vox: NDArray[np.float64], config: ClusterConfig, warm: Mixture | None = None) -> Selection:
-    """Choose T and fit the GMM; ``warm`` (voxel units) seeds the fast search. points_vox: (N, 3), N >= 1."""
+def select_mixture(
+    points_vox: NDArray[np.float64],
+    config: ClusterConfig,
+    warm: Mixture | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> Selection:
+    """Choose T and fit the GMM; ``warm`` (voxel units) seeds the fast search. points_vox: (N, 3), N >= 1.
+
+    progress: called with ``(done, total)`` values of T as the exhaustive search fits them; the fast search (a
+    few tens of milliseconds) reports only its end."""
     n = points_vox.shape[0]
     t_lo, t_hi = t_range(n, config)
     if config.search == "exhaustive":
-        fits = _sklearn_fits(points_vox, range(t_lo, t_hi + 1), config)
+        fits = _sklearn_fits(points_vox, range(t_lo, t_hi + 1), config, progress)
         best = min(fits, key=lambda t: fits[t][0])
         return Selection(fits[best][1], fits[best][0], {t: b for t, (b, _) in fits.items()})
     with single_thread_blas():  # tiny GEMMs: thread hand-offs cost more than they save (3-10x slower)
-        return FastSearch(points_vox, config, t_lo, t_hi).run(warm)
+        selection = FastSearch(points_vox, config, t_lo, t_hi).run(warm)
+    if progress is not None:
+        progress(1, 1)
+    return selection
 
 
 _controller: list = []
@@ -88,16 +99,24 @@ def _checked_resolution(resolution: float) -> float:
 
 
 def _sklearn_fits(
-    x: NDArray[np.float64], t_values: Iterable[int], cfg: ClusterConfig
+    x: NDArray[np.float64],
+    t_values: Iterable[int],
+    cfg: ClusterConfig,
+    progress: Callable[[int, int], None] | None = None,
 ) -> dict[int, tuple[float, Mixture]]:
     from sklearn.mixture import GaussianMixture
 
     out: dict[int, tuple[float, Mixture]] = {}
-    for t in sorted(set(t_values)):
+    ts = sorted(set(t_values))
+    for i, t in enumerate(ts):
+        if progress is not None:
+            progress(i, len(ts))
         kw = {"reg_covar": cfg.reg_covar_voxels, "max_iter": cfg.max_iter, "tol": cfg.tol, "random_state": cfg.seed}
         gm = GaussianMixture(t, covariance_type="full", **kw).fit(x)
         out[t] = (
             float(gm.bic(x)),
             Mixture(np.asarray(gm.weights_), np.asarray(gm.means_), np.asarray(gm.covariances_)),
         )
+    if progress is not None:
+        progress(len(ts), len(ts))
     return out

@@ -23,6 +23,7 @@ change a little between iterations, so a few EM runs near the previous T suffice
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -93,20 +94,26 @@ class EllipsoidFitter:
         """The last chosen mixture, in voxel units (points / resolution), or None."""
         return self._mixture
 
-    def fit(self, points_world: ArrayLike) -> tuple[tuple[Ellipsoid, ...], ClusterFit]:
-        """Ellipsoids of the clusters of ``points_world`` (N, 3) voxel centres, and the model selection."""
+    def fit(
+        self, points_world: ArrayLike, progress: Callable[[int, int], None] | None = None
+    ) -> tuple[tuple[Ellipsoid, ...], ClusterFit]:
+        """Ellipsoids of the clusters of ``points_world`` (N, 3) voxel centres, and the model selection.
+
+        progress: ``(done, total)`` values of T fitted (the exhaustive search; the fast one reports its end)."""
         p = checked_points("points_world", points_world)
         with clustering.single_thread_blas():
-            return self._fit(p)
+            return self._fit(p, progress)
 
-    def _fit(self, p: NDArray[np.float64]) -> tuple[tuple[Ellipsoid, ...], ClusterFit]:
+    def _fit(
+        self, p: NDArray[np.float64], progress: Callable[[int, int], None] | None = None
+    ) -> tuple[tuple[Ellipsoid, ...], ClusterFit]:
         t0 = time.perf_counter()
         n = p.shape[0]
         if n == 0:
             self.last_timings = {"cluster": 0.0, "ellipsoids": 0.0}
             return (), ClusterFit(self.kind, 0, (), 0, 0.0)
         x = p / self.resolution
-        sel = clustering.select_mixture(x, self.config, self._mixture)
+        sel = clustering.select_mixture(x, self.config, self._mixture, progress)
         self._mixture = sel.mixture
         labels = assign(x, sel.mixture)
         t1 = time.perf_counter()

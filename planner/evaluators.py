@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 from planner.config import PlannerConfig
 from planner.ellipsoids import EllipsoidFitter
 from planner.frontier_age import FrontierAge, ellipsoid_weights
+from planner.progress import StageFn, ignore
 from planner.scoring import score_views
 from planner.types import Candidate, ClusterFit, Ellipsoid, Intrinsics, ViewScore, VoxelClass
 from planner.visibility import score_visible_frontier
@@ -32,6 +33,7 @@ class EvaluationContext:
     """What an evaluator may look at.
 
     eligible: (C,) bool, candidates the partition rule and reachability allow.
+    progress: ``(stage, done, total)`` for the evaluator's stages (its ``stages`` attribute names them).
     """
 
     voxel_map: VoxelMap
@@ -39,6 +41,7 @@ class EvaluationContext:
     intrinsics: Intrinsics
     eligible: NDArray[np.bool_]
     rng: np.random.Generator
+    progress: StageFn = ignore
 
 
 @dataclass(frozen=True, eq=False)
@@ -52,7 +55,11 @@ class Evaluation:
 
 
 class ViewEvaluator(Protocol):
-    """Scores every candidate of a context; higher is better."""
+    """Scores every candidate of a context; higher is better.
+
+    An evaluator may name the stages it reports through ``ctx.progress`` in a ``stages`` tuple (in order);
+    without it a plan shows one stage, "evaluate".
+    """
 
     name: str
 
@@ -65,6 +72,7 @@ class ProjectionEvaluator:
     """The paper's method: GMM + BIC clusters, MVEE ellipsoids, projected conics with rank weights."""
 
     name = "projection"
+    stages = ("fit occupied", "fit frontier", "score")
 
     def __init__(self, config: PlannerConfig) -> None:
         self.config = config
@@ -85,7 +93,11 @@ class ProjectionEvaluator:
         fits: list[ClusterFit] = []
         for kind, cls in (("occupied", VoxelClass.OCCUPIED), ("frontier", VoxelClass.FRONTIER)):
             fitter = self._fitters[kind]
-            found, fit = fitter.fit(ctx.voxel_map.centers(cls))
+            stage = f"fit {kind}"
+            ctx.progress(stage, 0, 1)
+            found, fit = fitter.fit(
+                ctx.voxel_map.centers(cls), lambda done, total, s=stage: ctx.progress(s, done, total)
+            )
             ellipsoids.extend(found)
             fits.append(fit)
             for stage in ("cluster", "ellipsoids"):
@@ -94,6 +106,7 @@ class ProjectionEvaluator:
 
     def evaluate(self, ctx: EvaluationContext) -> Evaluation:
         ellipsoids, fits, timings = self.fit(ctx)
+        ctx.progress("score", 0, len(ctx.candidates))
         t0 = time.perf_counter()
         scores = score_views(ellipsoids, ctx.candidates, ctx.intrinsics, self.config.scoring, ctx.eligible)
         timings["score"] = time.perf_counter() - t0
@@ -127,6 +140,7 @@ class ZBufferEvaluator(ProjectionEvaluator):
 
     def evaluate(self, ctx: EvaluationContext) -> Evaluation:
         ellipsoids, fits, timings = self.fit(ctx)
+        ctx.progress("score", 0, len(ctx.candidates))
         t0 = time.perf_counter()
         weights = self.frontier_weights(ctx, ellipsoids)
         scores = score_visible_frontier(

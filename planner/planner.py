@@ -35,6 +35,7 @@ from planner.partitions import (
 )
 from planner.partitions import select_best as select_best_view
 from planner.preprocess import preprocess_frame, voxel_downsample
+from planner.progress import ProgressFn, Stages
 from planner.registration import RegistrationResult, register
 from planner.types import Candidate, DepthFrame, Intrinsics, PlanResult, Pose, VoxelClass
 from planner.voxel_map import VoxelMap
@@ -192,6 +193,7 @@ class Planner:
         self,
         reachable: Callable[[Pose], bool] | None = None,
         move_cost: Callable[[Sequence[Candidate], NDArray[np.bool_]], NDArray[np.float64]] | None = None,
+        progress: ProgressFn | None = None,
     ) -> PlanResult:
         """Score every candidate and pick the next best view.
 
@@ -199,14 +201,28 @@ class Planner:
         move_cost: (candidates, eligible (C,) bool) -> (C,) seconds each move would take (inf = unknown), from
         the caller (the planner never sees the arm); asked only when ``selection.move_cost_weight`` > 0, and
         then the choice trades F against it (:func:`planner.partitions.select_with_move_cost`).
+        progress: called with a :class:`planner.progress.PlanProgress` at each stage (candidates,
+        reachability, the evaluator's stages, move costs, select) and as its items are done.
         Raises ValueError before the first frame.
         """
         if self.iteration == 0 or self.voxel_map.bbox is None or self.intrinsics is None:
             raise ValueError("plan: no frame has been integrated yet; capture one first")
         cfg = self.config
         timings: dict[str, float] = {}
+        weight = cfg.selection.move_cost_weight
+        stages = Stages(
+            [
+                "candidates",
+                *(["reachability"] if reachable is not None else []),
+                *getattr(self.evaluator, "stages", ("evaluate",)),
+                *(["move costs"] if weight > 0 and move_cost is not None else []),
+                "select",
+            ],
+            progress,
+        )
 
         t0 = time.perf_counter()
+        stages("candidates", 0, 1)
         bbox = self.voxel_map.bbox
         candidates, center, radius = propose_candidates(bbox, cfg.candidates, cfg.partitions)
         timings["candidates"] = time.perf_counter() - t0
@@ -223,7 +239,9 @@ class Planner:
         in_sector = np.array([c.sector in allowed for c in candidates], dtype=bool)
         reach = np.ones(len(candidates), dtype=bool)
         if reachable is not None:
-            reach = np.array([bool(reachable(c.T_world_camera)) for c in candidates], dtype=bool)
+            for i, c in enumerate(candidates):
+                stages("reachability", i, len(candidates))
+                reach[i] = bool(reachable(c.T_world_camera))
         eligible = in_sector & reach
         fresh = self._not_revisited(candidates, center, eligible)
         eligible &= fresh
@@ -231,18 +249,20 @@ class Planner:
         timings["select"] = time.perf_counter() - t0
 
         evaluation = self.evaluator.evaluate(
-            EvaluationContext(self.voxel_map, candidates, self.intrinsics, eligible, self._rng)
+            EvaluationContext(self.voxel_map, candidates, self.intrinsics, eligible, self._rng, stages)
         )
         timings.update(evaluation.timings)
 
         t0 = time.perf_counter()
         move_costs = None
-        weight = cfg.selection.move_cost_weight
         if weight > 0 and move_cost is not None:
             eligible_now = np.array([s.eligible for s in evaluation.scores], dtype=bool)
+            stages("move costs", 0, int(eligible_now.sum()))
             move_costs = np.asarray(move_cost(candidates, eligible_now), dtype=np.float64)
+            stages("select", 0, 1)
             best = select_with_move_cost(evaluation.scores, move_costs, weight)
         else:
+            stages("select", 0, 1)
             best = select_best_view(evaluation.scores)
         timings["select"] += time.perf_counter() - t0
 
@@ -266,6 +286,7 @@ class Planner:
             ineligible_reasons=reasons,
         )
         self.last_plan = plan
+        stages("select", 1, 1)
         return plan
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -87,10 +88,13 @@ def find_model(settings: WorkbenchSettings, name: str) -> ModelInfo:
     raise NotFound(f"model {name!r}: unknown (known: {known})")
 
 
-def load_model(settings: WorkbenchSettings, name: str) -> trimesh.Trimesh:
+def load_model(
+    settings: WorkbenchSettings, name: str, stage: Callable[[str], None] = lambda name: None
+) -> trimesh.Trimesh:
     """The placed mesh (on the plate, scaled to ``devices.size``) of model ``name``.
 
-    NotFound for an unknown name, Invalid for a file that is not a usable mesh.
+    NotFound for an unknown name, Invalid for a file that is not a usable mesh. stage: told each stage as it
+    starts (checking the file, reading the mesh, checking the mesh); it may raise to cancel.
     """
     from devices.builtins import make_builtin
     from devices.mesh import load_mesh
@@ -102,8 +106,11 @@ def load_model(settings: WorkbenchSettings, name: str) -> trimesh.Trimesh:
             return make_builtin(info.name, size)
         assert info.path is not None
         limits = settings.mesh_limits
+        stage("checking the file")
         limits.check_file(info.path, f"model {name!r}")  # before trimesh spends memory on it
+        stage("reading the mesh")
         mesh = load_mesh(info.path, up=settings.devices.up, size=size)
+        stage("checking the mesh")
         limits.check_mesh(mesh.vertices, mesh.faces, f"model {name!r}")
         return mesh
     except ValueError as exc:

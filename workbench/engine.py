@@ -35,6 +35,7 @@ from devices.cell import Cell
 from devices.config import CellConfig
 from planner import DepthFrame, Planner, Pose
 from planner.planner import IntegrationReport, PlanResult
+from planner.progress import ProgressFn
 from workbench.worker import RenderSpec, serve
 
 log = logging.getLogger(__name__)
@@ -149,12 +150,18 @@ class SessionWorker:
     # ------------------------------------------------------------------ jobs
 
     def plan(
-        self, planner: Planner, cell: CellConfig, budget: float, q: Any = None, angle: float = 0.0
+        self,
+        planner: Planner,
+        cell: CellConfig,
+        budget: float,
+        q: Any = None,
+        angle: float = 0.0,
+        on_progress: ProgressFn | None = None,
     ) -> tuple[PlanResult, Planner]:
         """:func:`workbench.planning.plan_in` a device-less cell of ``cell``'s geometry in the worker (for an arm
         model: its kinematics, the arm at joints ``q`` (n,), the plate at ``angle``): (plan, the planner after
-        it)."""
-        return self.call("plan", (planner, cell, q, angle), budget, "plan")
+        it). ``on_progress`` hears the plan's stages (sent by the worker at most every 0.1 s within a stage)."""
+        return self.call("plan", (planner, cell, q, angle), budget, "plan", on_progress)
 
     def integrate(self, planner: Planner, frame: DepthFrame, budget: float) -> tuple[IntegrationReport, Planner]:
         """``planner.integrate(frame)`` in the worker: (report, the planner after it)."""
@@ -168,8 +175,11 @@ class SessionWorker:
 
         return render
 
-    def call(self, kind: str, payload: Any, budget: float, what: str) -> Any:
-        """Run one job; its result, or the job's own exception, or JobKilled (budget, cancel, a dead worker)."""
+    def call(
+        self, kind: str, payload: Any, budget: float, what: str, on_progress: Callable[[Any], None] | None = None
+    ) -> Any:
+        """Run one job; its result, or the job's own exception, or JobKilled (budget, cancel, a dead worker).
+        ``on_progress`` gets what the job reports on the way (``("progress", value)`` messages)."""
         with self._job_lock:
             if self._closed:
                 raise JobKilled(f"{what}: the session is closed")
@@ -179,14 +189,14 @@ class SessionWorker:
                 raise JobKilled(f"{what}: {self._reason or 'cancelled'}")
             self.busy = True
             try:
-                return self._run(kind, payload, budget, what)
+                return self._run(kind, payload, budget, what, on_progress)
             finally:
                 self.busy = False
                 self.jobs += 1
                 self.engine.release()
                 self.engine.used(self)
 
-    def _run(self, kind: str, payload: Any, budget: float, what: str) -> Any:
+    def _run(self, kind: str, payload: Any, budget: float, what: str, on_progress: Callable[[Any], None] | None) -> Any:
         conn, proc = self._started()
         try:
             conn.send((kind, payload))
@@ -205,6 +215,10 @@ class SessionWorker:
                     status, result = conn.recv()
                 except (EOFError, OSError):
                     break  # killed while answering
+                if status == "progress":
+                    if on_progress is not None:
+                        on_progress(result)
+                    continue
                 if status == "error":
                     raise result
                 return result

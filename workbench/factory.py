@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -66,11 +67,15 @@ def list_recordings(settings: WorkbenchSettings) -> list[str]:
     return sorted(p.name for p in root.iterdir() if RECORDING_NAME.match(p.name) and p.is_dir() and not p.is_symlink())
 
 
-def ground_truth(settings: WorkbenchSettings, name: str, seed: int) -> tuple[trimesh.Trimesh, NDArray[np.float64]]:
-    """The mesh of model ``name`` and ``SURFACE_SAMPLES`` points on it (seeded). NotFound / Invalid."""
+def ground_truth(
+    settings: WorkbenchSettings, name: str, seed: int, stage: Callable[[str], None] = lambda name: None
+) -> tuple[trimesh.Trimesh, NDArray[np.float64]]:
+    """The mesh of model ``name`` and ``SURFACE_SAMPLES`` points on it (seeded). NotFound / Invalid.
+    stage: told each stage as it starts."""
     from devices.mesh import sample_surface
 
-    mesh = load_model(settings, name)
+    mesh = load_model(settings, name, stage)
+    stage("sampling its surface")
     try:
         return mesh, sample_surface(mesh, SURFACE_SAMPLES, seed=seed)
     except ValueError as exc:
@@ -112,8 +117,11 @@ def build_parts(
     seed: int,
     devices: DeviceConfig,
     faults: FaultConfig,
+    stage: Callable[[str], None] = lambda name: None,
 ) -> SessionParts:
-    """The object and the (fault-injecting) devices of a session. 404/422 with a clear message on bad input."""
+    """The object and the (fault-injecting) devices of a session. 404/422 with a clear message on bad input.
+
+    stage: told each stage as it starts (``workbench.progress.CREATE_STAGES``); it may raise to cancel."""
     from devices.sim import make_sim_cell
 
     source = dict(source or {"kind": "hardware" if settings.cell else "sim"})
@@ -124,7 +132,8 @@ def build_parts(
             info = find_model(settings, name)
         except NotFound as exc:  # a bad parameter of this request, not an unknown resource
             raise Invalid(exc.detail) from None
-        mesh, samples = ground_truth(settings, name, seed)
+        mesh, samples = ground_truth(settings, name, seed, stage)
+        stage("building the cell")
         try:
             cell = make_sim_cell(mesh, devices.camera, devices.cell, seed=seed)
         except ValueError as exc:
@@ -138,6 +147,7 @@ def build_parts(
         if truth is not None:
             with contextlib.suppress(NotFound, Invalid):  # gone: no coverage, the replay still works
                 mesh, samples = ground_truth(settings, truth, seed)
+        stage("building the cell")
         try:
             cell = ReplayCell(frames, devices.cell, source.get("mode", "sequence"))
         except ValueError as exc:
@@ -155,6 +165,7 @@ def build_parts(
             except NotFound as exc:
                 raise Invalid(f"source.truth: {exc.detail}") from None
             mesh, samples = ground_truth(settings, truth, seed)
+        stage("building the cell")
         cell = hardware_cell(source, mesh if source["dry_run"] else None, devices.camera, devices.cell, seed)
         name, model_kind = truth or f"hardware:{Path(source['cell']).stem}", "hardware"
     else:

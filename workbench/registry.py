@@ -19,6 +19,7 @@ from planner import PlannerConfig
 from planner.config import from_dict
 from planner.evaluators import evaluator_names
 from workbench.ceilings import CeilingService
+from workbench.creations import Creation, Creations
 from workbench.engine import Engine, offload_rendering, render_spec
 from workbench.errors import Conflict, Invalid, NotFound, StorageFault
 from workbench.factory import SURFACE_SAMPLES, SessionParts, build_parts, session_devices
@@ -121,6 +122,8 @@ class SessionRegistry:
         self.on_create: list[Callable[[Session], None]] = []
         self.on_delete: list[Callable[[Session], None]] = []
         self.ceilings = CeilingService(settings.data_dir / "ceilings")
+        self.creations = Creations()
+        """Creates in flight that a page follows (``progress_id``) and may cancel."""
         self.engine = (
             Engine(settings.max_running_jobs, settings.max_idle_workers)
             if getattr(settings, "workers", False)
@@ -176,10 +179,13 @@ class SessionRegistry:
         source: dict[str, Any] | None = None,
         faults: dict[str, Any] | None = None,
         planner: str = "projection",
+        progress_id: str | None = None,
     ) -> Session:
         """A new session. 422 for a bad config, model, source, fault setting or planner; 404 for an unknown recording.
 
         planner: the view evaluator (``planner.evaluators.evaluator_names()``), journaled in the header.
+        progress_id: names this create for its progress and its cancellation (:attr:`creations`); cancelled,
+        it raises Conflict at its next stage and leaves nothing.
         """
         planner_config = self.planner_config(config, seed)
         if planner not in evaluator_names():
@@ -188,8 +194,27 @@ class SessionRegistry:
             fault_config = self.settings.faults if faults is None else FaultConfig.from_dict(faults)
         except ValueError as exc:
             raise Invalid(str(exc)) from None
+        with self.creations.run(progress_id) as creation:
+            return self._create(planner_config, model, seed, source, fault_config, planner, creation)
+
+    def _create(
+        self,
+        planner_config: PlannerConfig,
+        model: str | None,
+        seed: int,
+        source: dict[str, Any] | None,
+        fault_config: FaultConfig,
+        planner: str,
+        creation: Creation,
+    ) -> Session:
         name = model or self.settings.devices.model
-        parts = build_parts(self.settings, name, source, seed, session_devices(self.settings, name, seed), fault_config)
+        devices = session_devices(self.settings, name, seed)
+        parts = build_parts(self.settings, name, source, seed, devices, fault_config, creation.stage)
+        try:
+            creation.stage("starting the session")
+        except Conflict:
+            _release(parts)
+            raise
         devices = session_devices(self.settings, parts.model, seed)
         with self._lock:
             session_id = self._new_id()

@@ -48,6 +48,7 @@ from workbench.journal.rebuild import Rebuilt
 from workbench.journal.store import JournalWriter, make_event
 from workbench.limits import check_config
 from workbench.planning import plan_in
+from workbench.progress import Progress, Tracker
 from workbench.record import SessionRecord
 from workbench.region import ObjectRegion
 from workbench.scan_metrics import ceiling_metrics
@@ -135,6 +136,9 @@ class Session:
         """The reachable-coverage ceiling of a simulated session, once computed (workbench/ceilings.py)."""
         self.request_ceiling: Callable[[], None] | None = None
         """Starts computing ``ceiling`` (set by the registry for sessions with a ground truth)."""
+        self.progress = Tracker(self._on_progress)
+        """The long operation running now (a plan: its stages as the planner reports them)."""
+        self._stop_plan = False  # Stop asked for the running plan
 
     # ------------------------------------------------------------------ reading
 
@@ -150,19 +154,31 @@ class Session:
         """The session summary of ``GET /api/sessions/{id}``."""
         with self._lock:
             failed = self._failed
-            return {"planner": self.evaluator} | session_status(
-                self.record,
-                state=self._state,
-                source=str(self.source.get("kind", "sim")),
-                pending=self._pending,
-                selected=self._selected,
-                custom=self._custom,
-                error=self._error or self._journal_error,
-                retry=None if failed is None or self._state != State.ERROR else str(failed.decision.kind),
-                terminated=self._terminated,
-                auto_remaining=self.auto.remaining if self._state == State.AUTO else 0,
-                moves=self.moves,
+            return (
+                {"planner": self.evaluator}
+                | session_status(
+                    self.record,
+                    state=self._state,
+                    source=str(self.source.get("kind", "sim")),
+                    pending=self._pending,
+                    selected=self._selected,
+                    custom=self._custom,
+                    error=self._error or self._journal_error,
+                    retry=None if failed is None or self._state != State.ERROR else str(failed.decision.kind),
+                    terminated=self._terminated,
+                    auto_remaining=self.auto.remaining if self._state == State.AUTO else 0,
+                    moves=self.moves,
+                )
+                | {"progress": self.progress_json()}
             )
+
+    def progress_json(self) -> dict[str, Any] | None:
+        """``ProgressOut`` of the running long operation, or None."""
+        current = self.progress.current
+        return None if current is None else current.to_json()
+
+    def _on_progress(self, progress: Progress | None) -> None:
+        self.notify(SessionEvent.PROGRESS)
 
     def metrics(self) -> dict[str, Any]:
         """Per-iteration series for the charts, the BIC curves of the last plan, and the reachable-coverage
@@ -248,6 +264,7 @@ class Session:
             with self._lock:
                 if self._state == State.PLANNING:  # a killed plan left state error with its reason
                     self._state = before
+            self.notify(SessionEvent.STATE)
             raise
         self.notify(SessionEvent.PLANNED)
         return entry
@@ -259,12 +276,17 @@ class Session:
         to state error with the reason (DeviceFault), its map and pending plan unchanged; plan again to go on.
         """
         planner = self.planner
+        in_worker = self.worker is not None and type(self.cell).is_reachable is Cell.is_reachable
+        self._stop_plan = False
+        self.progress.begin("plan", stoppable=in_worker)
         try:
-            if self.worker is None or type(self.cell).is_reachable is not Cell.is_reachable:
-                plan = plan_in(self.cell, planner)
+            if self.worker is None or not in_worker:
+                plan = plan_in(self.cell, planner, self.progress.plan)
             else:  # the worker's cell has this cell's geometry, arm model, joints and plate angle
                 q, angle = self.cell.joint_positions(), self.cell.angle
-                plan, planner = self.worker.plan(planner, self.cell.config, self.plan_budget, q, angle)
+                plan, planner = self.worker.plan(
+                    planner, self.cell.config, self.plan_budget, q, angle, on_progress=self.progress.plan
+                )
                 if planner.voxel_map.bbox is not None:
                     self.cell.set_object_box(planner.voxel_map.bbox)  # the box the worker's verdicts used
         except ValueError as exc:
@@ -272,7 +294,14 @@ class Session:
         except JobKilled as exc:
             if self._state == State.AUTO and self.auto.stopping:
                 raise  # Stop killed the plan: auto mode ends and the session settles, no error
+            if self._stop_plan:  # plan() puts the state back; map and pending plan are unchanged
+                raise Conflict(
+                    f"session {self.id}: the plan was stopped (POST .../stop); the map and the pending plan are "
+                    "unchanged"
+                ) from None
             self._plan_killed(str(exc))
+        finally:
+            self.progress.end()
         entry = PendingPlan(secrets.token_hex(8), plan, time.time())
         with self._lock:
             self.planner = planner
@@ -287,6 +316,16 @@ class Session:
             if self._state != State.AUTO:
                 self._state = State.PLANNED
         return entry
+
+    def stop_plan(self) -> bool:
+        """Stop a plan running in the worker (state planning): the job is killed at once, the session goes back
+        to its state before the plan, map and pending plan unchanged. True when one was running."""
+        with self._lock:
+            current = self.progress.current
+            if self._state != State.PLANNING or self.worker is None or current is None or not current.stoppable:
+                return False
+            self._stop_plan = True
+        return self.worker.cancel("stopped by the operator")
 
     def _plan_killed(self, reason: str) -> NoReturn:
         message = f"stopped: {reason}"

@@ -38,7 +38,7 @@ class SessionEvent(StrEnum):
     """What a listener (the 3D scene, the page's event stream) is told after a change."""
 
     STATE = "state"
-    """The state, the error or the progress changed."""
+    """The state or the error changed."""
     PLANNED = "planned"
     """A new pending plan."""
     CAPTURED = "captured"
@@ -47,6 +47,8 @@ class SessionEvent(StrEnum):
     """Another candidate is selected."""
     CUSTOM_POSE = "custom_pose"
     """A custom pose was proposed."""
+    PROGRESS = "progress"
+    """A long operation moved on (``status()["progress"]``, None when it ended); nothing to redraw."""
 
 
 class DecisionKind(StrEnum):

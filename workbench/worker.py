@@ -7,7 +7,8 @@ and a fresh worker takes up the next job. Jobs:
 
 - ``("render", RenderSpec)`` once per process, then ``("render", T_table_camera)``: (H, W) float32 depth of the
   simulated camera (open3d ``cast_rays``, which holds the GIL for the whole image);
-- ``("plan", (planner, cell_config, q, angle))``: ``(PlanResult, planner)``, reachability by the cell's geometry
+- ``("plan", (planner, cell_config, q, angle))``: ``("progress", PlanProgress)`` messages on the way, then
+  ``(PlanResult, planner)``, reachability by the cell's geometry
   and, for an arm model, its kinematics with the arm at joints ``q`` and the plate at ``angle`` (the same
   verdicts as the server's cell: reachability is a pure function of the view and the object box);
 - ``("integrate", (planner, frame))``: ``(IntegrationReport, planner)``.
@@ -18,6 +19,7 @@ target of its processes, and the forkserver preloads it so a new worker starts i
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from typing import Any, cast
@@ -28,7 +30,9 @@ from numpy.typing import NDArray
 from devices.cell import Cell
 from devices.config import CameraConfig, CellConfig
 from planner import DepthFrame, Planner, Pose
+from planner.progress import PlanProgress
 from workbench.planning import plan_in
+from workbench.progress import Throttle
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,6 +69,18 @@ class _ArmState:
 
     def rotate_to(self, angle: float) -> None:
         raise RuntimeError("worker: a planning cell does not move")
+
+
+class _Throttled:
+    """A plan's progress, sent on when :class:`workbench.progress.Throttle` says it is worth it."""
+
+    def __init__(self, send: Callable[[Any], None]) -> None:
+        self.send = send
+        self.throttle = Throttle()
+
+    def __call__(self, progress: PlanProgress) -> None:
+        if self.throttle(progress.stage, progress.done, progress.total):
+            self.send(progress)
 
 
 class _Worker:
@@ -105,14 +121,16 @@ class _Worker:
             state.q, state.angle = np.asarray(q, dtype=np.float64), float(angle)
         return cell
 
-    def run(self, kind: str, payload: Any) -> Any:
+    def run(self, kind: str, payload: Any, send: Callable[[Any], None] | None = None) -> Any:
+        """The answer of one job; ``send`` ships ``("progress", value)`` messages to the server on the way."""
         if kind == "setup":
             return self.setup(payload)
         if kind == "render":
             return self.render(payload)
         if kind == "plan":
             planner, config, q, angle = cast(tuple[Planner, CellConfig, Any, float], payload)
-            plan = plan_in(self.reach(config, q, angle), planner)  # as in the server: the arm's box, move costs
+            report = _Throttled(send) if send is not None else None
+            plan = plan_in(self.reach(config, q, angle), planner, report)  # as in the server: the box, move costs
             return plan, planner
         if kind == "integrate":
             planner, frame = cast(tuple[Planner, DepthFrame], payload)
@@ -135,7 +153,7 @@ def serve(conn: Connection) -> None:
         except (EOFError, OSError):
             return
         try:
-            answer: tuple[str, Any] = ("ok", worker.run(kind, payload))
+            answer: tuple[str, Any] = ("ok", worker.run(kind, payload, lambda value: conn.send(("progress", value))))
         except Exception as exc:
             answer = ("error", exc)
         try:

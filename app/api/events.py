@@ -5,7 +5,11 @@ Messages (JSON):
 - ``{"type": "status", "event": "state"|"planned"|"captured"|"selection"|"custom_pose", "status": {...}}``:
   the session's status (the shape of ``GET /api/sessions/{id}``) after each change, first on connect;
 - ``{"type": "sessions", "change": "created"|"deleted", "id": ...}``: the session list changed;
-- ``{"type": "deleted"}``: this tab's session was deleted.
+- ``{"type": "deleted"}``: this tab's session was deleted;
+- ``{"type": "progress", "progress": {...} | null}``: the session's long operation (a plan) moved on or ended
+  (``ProgressOut``; at most ten a second);
+- with ``?create=ID`` (a ``progress_id`` of ``POST /api/sessions``): ``{"type": "create", "id": ID,
+  "progress": {...} | null}`` as that create goes (null: it ended).
 
 Browsers cannot set headers on a websocket, so the token (when the server has one) comes as ``?token=``;
 the Origin must be the page's own or one of ``cors_origins`` (app/security.py checks plain HTTP only).
@@ -27,6 +31,7 @@ from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from app.settings import AppSettings
 from workbench.errors import Conflict, WorkbenchError
 from workbench.jsonable import jsonable
+from workbench.progress import Progress
 from workbench.session import Session
 from workbench.states import SessionEvent
 
@@ -55,7 +60,7 @@ def _dump(message: dict[str, Any]) -> str:
 
 
 @router.websocket("/events")
-async def events(ws: WebSocket, session: str | None = None) -> None:
+async def events(ws: WebSocket, session: str | None = None, create: str | None = None) -> None:
     """Push the session's status after every change and the session list's changes (see the module docstring)."""
     settings: AppSettings = ws.app.state.settings
     registry = ws.app.state.registry
@@ -84,7 +89,14 @@ async def events(ws: WebSocket, session: str | None = None) -> None:
         loop.call_soon_threadsafe(queue.put_nowait, message)
 
     def on_session(s: Session, event: SessionEvent) -> None:
-        push({"type": "status", "event": str(event), "status": s.status()})
+        if event == SessionEvent.PROGRESS:
+            push({"type": "progress", "progress": s.progress_json()})
+        else:
+            push({"type": "status", "event": str(event), "status": s.status()})
+
+    def on_create_progress(progress_id: str, progress: Progress | None) -> None:
+        if progress_id == create:
+            push({"type": "create", "id": progress_id, "progress": None if progress is None else progress.to_json()})
 
     def on_create(s: Session) -> None:
         nonlocal wb
@@ -103,6 +115,11 @@ async def events(ws: WebSocket, session: str | None = None) -> None:
         wb.listeners.append(on_session)
     registry.on_create.append(on_create)
     registry.on_delete.append(on_delete)
+    if create is not None:
+        registry.creations.listeners.append(on_create_progress)
+        current = registry.creations.progress(create)
+        if current is not None:
+            push({"type": "create", "id": create, "progress": current.to_json()})
     reader = asyncio.create_task(_drain(ws))
     try:
         if first is not None:
@@ -122,6 +139,8 @@ async def events(ws: WebSocket, session: str | None = None) -> None:
             registry.on_create.remove(on_create)
         with contextlib.suppress(ValueError):
             registry.on_delete.remove(on_delete)
+        with contextlib.suppress(ValueError):
+            registry.creations.listeners.remove(on_create_progress)
         if wb is not None:
             with contextlib.suppress(ValueError):
                 wb.listeners.remove(on_session)

@@ -73,8 +73,11 @@ def auto(session: SessionDep, body: Annotated[AutoRequest | None, Body()] = None
 
 @router.post("/sessions/{session_id}/stop", response_model=SessionOut)
 def stop(session: SessionDep) -> dict[str, Any]:
-    """Stop auto mode after the current action; on hardware also stop a running move of the arm and the turntable at
-    once (the session then goes to its error state, the arm's last joints in its error)."""
+    """Stop what runs: a plan (killed at once in its worker; the session goes back to its state before it, the
+    plan request answers 409), auto mode (after the current action; a plan of it is killed at once); on
+    hardware also a running move of the arm and the turntable, at once (the session then goes to its error
+    state, the arm's last joints in its error)."""
+    session.stop_plan()
     session.auto.stop()
     stop_devices(session)
     return session.status()

@@ -26,9 +26,23 @@ def create_session(
         raise Invalid("faults: fault injection is disabled on this server (a test flag: [server] fault_api = true)")
     source = None if body.source is None else body.source.model_dump(exclude_none=True)
     session = registry.create(
-        body.model, body.config, body.seed, source=source, faults=body.faults, planner=body.planner
+        body.model,
+        body.config,
+        body.seed,
+        source=source,
+        faults=body.faults,
+        planner=body.planner,
+        progress_id=body.progress_id,
     )
     return {"id": session.id}
+
+
+@router.delete("/creations/{progress_id}", status_code=204)
+def cancel_create(registry: Registry, progress_id: str) -> None:
+    """Cancel the running create named ``progress_id`` (``POST /api/sessions`` answers 409 at its next stage,
+    nothing created); 404 when none runs under that name."""
+    if not registry.creations.cancel(progress_id):
+        raise NotFound(f"create {progress_id!r}: none is running under this progress_id")
 
 
 @router.post("/sessions/{session_id}/discard")

@@ -20,6 +20,7 @@ const S = {
   layers: null,
   autoTotal: 0,
   events: null,
+  progress: null, // the session's long operation (ProgressOut), pushed
   chain: Promise.resolve(), // pushed messages are handled one after the other
 };
 const FORM_KEY = "nbv-form";
@@ -79,7 +80,9 @@ async function action(label, fn) {
     await fn();
   } catch (e) {
     const stale = e.message.startsWith("409") && /stale|already used|not the pending plan/.test(e.message);
-    if (stale) showNotice("The plan changed (another tab planned or approved): " + e.message.slice(5) + ". The new state is shown; check it and approve again.");
+    const stopped = e.message.startsWith("409") && /was stopped|cancelled/.test(e.message);
+    if (stopped) showNotice("Stopped: " + e.message.slice(5));
+    else if (stale) showNotice("The plan changed (another tab planned or approved): " + e.message.slice(5) + ". The new state is shown; check it and approve again.");
     else showError(e.message);
   } finally {
     S.inFlight = false;
@@ -211,8 +214,28 @@ function connectEvents(delay) {
   };
 }
 
+function showProgress(p) {
+  S.progress = p;
+  P.renderProgress($("progress"), p, p && p.operation === "plan" ? "planning" : p ? p.operation : "");
+  updateButtons();
+}
+
+// A create's progress (reading, checking and sampling the mesh, building the cell) on its own event stream.
+function followCreate(progressId) {
+  const proto = location.protocol === "https:" ? "wss" : "ws";
+  const ws = new WebSocket(`${proto}://${location.host}` + withToken(`/api/events?create=${encodeURIComponent(progressId)}`));
+  const box = $("create-progress");
+  $("create-cancel").dataset.progressId = progressId;
+  ws.onmessage = (ev) => {
+    const m = JSON.parse(ev.data);
+    if (m.type === "create" && m.id === progressId) P.renderProgress(box, m.progress, "creating");
+  };
+  return { close: () => { ws.close(); box.hidden = true; } };
+}
+
 async function onMessage(m) {
-  if (m.type === "status") await onStatus(m.status, m.event);
+  if (m.type === "progress") showProgress(m.progress);
+  else if (m.type === "status") await onStatus(m.status, m.event);
   else if (m.type === "sessions") await loadSessions();
   else if (m.type === "deleted") {
     showError(`session ${S.session} was deleted`);
@@ -224,6 +247,7 @@ async function onMessage(m) {
 async function onStatus(st, event) {
   S.status = st;
   renderStatus(st);
+  showProgress(st.progress || null);
   const planId = st.pending_plan ? st.pending_plan.plan_id : null;
   if (planId !== S.planId || event === "captured") {
     S.planId = planId;
@@ -267,8 +291,9 @@ function updateButtons() {
   $("auto-why").textContent = terminated ? `Auto is off: the planner stopped (${terminated}). Plan and approve by hand to go on.` :
     (st && it === 0 ? "Auto needs a first view: capture first." : "");
   $("discard").disabled = busy || !st || it === 0 || state === "interrupted";
-  // Stop: ends auto mode; on hardware it also halts a running move of the arm and the turntable at once
-  $("stop").hidden = !["auto", "moving"].includes(state);
+  // Stop: kills a running plan (in its worker), ends auto mode; on hardware it also halts a running move at once
+  const stoppablePlan = state === "planning" && S.progress && S.progress.stoppable;
+  $("stop").hidden = !(["auto", "moving"].includes(state) || stoppablePlan);
   $("resume").hidden = state !== "interrupted";
   $("resume").disabled = S.inFlight;
   $("retry").hidden = !(state === "error" && st && st.retry);
@@ -383,10 +408,21 @@ function wire() {
   for (const id of FORM_IDS) $(id).addEventListener("change", saveForm);
   $("create").addEventListener("click", () => action("creating the session", async () => {
     saveForm();
-    const body = { model: $("model").value || null, planner: $("planner").value, config: paramConfig(), seed: Number($("p-seed").value) };
-    const r = await api("POST", "/api/sessions", body);
-    location.href = pageUrl({ session: r.id });
+    const progressId = "c" + Math.random().toString(36).slice(2) + Date.now().toString(36);
+    const body = { model: $("model").value || null, planner: $("planner").value, config: paramConfig(),
+      seed: Number($("p-seed").value), progress_id: progressId };
+    const follow = followCreate(progressId);
+    try {
+      const r = await api("POST", "/api/sessions", body);
+      location.href = pageUrl({ session: r.id });
+    } finally {
+      follow.close();
+    }
   }));
+  $("create-cancel").addEventListener("click", () => {
+    const id = $("create-cancel").dataset.progressId;
+    if (id) api("DELETE", `/api/creations/${encodeURIComponent(id)}`).catch((e) => showError(e.message));
+  });
   $("session-select").addEventListener("change", (e) => { location.href = pageUrl(e.target.value ? { session: e.target.value } : {}); });
   $("upload").addEventListener("change", (e) => action("uploading", async () => {
     const f = e.target.files[0];

@@ -82,6 +82,7 @@ def raycast_view_gains(
     kind: GainKind,
     stride_voxels: float = 1.0,
     breakdown: dict[str, float] | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> NDArray[np.float64]:
     """(C,) float64 gain of each view in ``poses``: the sum of its ray gains (``gains`` module).
 
@@ -89,7 +90,8 @@ def raycast_view_gains(
     lower corner; box_lower/box_upper: (3,) the bounding box B (clipped to the grid).
     Rays: ``rays.view_rays``; each is traversed until it leaves B or after its first
     OCCUPIED voxel. ``breakdown``, if given, receives seconds per part ("object_probability",
-    "rays", "traverse" including the gains), the number of rays and of voxel visits.
+    "rays", "traverse" including the gains), the number of rays and of voxel visits. ``progress``, if given,
+    gets ``(views done, views)`` after each batch of views.
     """
     if kind not in _ACCUMULATORS:
         raise ValueError(f"kind: one of {', '.join(GAIN_KINDS)}, got {kind!r}")
@@ -131,6 +133,8 @@ def raycast_view_gains(
         parts["traverse"] += time.perf_counter() - t1
         parts["n_rays"] += len(rays)
         parts["n_visits"] += visits[0]
+        if progress is not None:
+            progress(min(start + VIEWS_PER_BATCH, len(poses)), len(poses))
     if breakdown is not None:
         breakdown.update(parts)
     return total
@@ -141,6 +145,7 @@ class RaycastEvaluator:
 
     name: str = "raycast"
     kind: GainKind = "oa"
+    stages = ("ray casting",)
 
     def __init__(self, config: PlannerConfig, stride_voxels: float = 1.0) -> None:
         self.config = config
@@ -152,6 +157,7 @@ class RaycastEvaluator:
 
     def evaluate(self, ctx: EvaluationContext) -> Evaluation:
         t0 = time.perf_counter()
+        ctx.progress("ray casting", 0, len(ctx.candidates))
         vm: VoxelMap = ctx.voxel_map
         classes = np.asarray(vm.classes)
         origin = np.asarray(vm.origin, dtype=np.float64)
@@ -171,6 +177,7 @@ class RaycastEvaluator:
             self.kind,
             self.stride_voxels,
             breakdown,
+            lambda done, total: ctx.progress("ray casting", done, total),
         )
         scores = gain_scores(values, np.asarray(ctx.eligible, dtype=bool))
         self.last_breakdown = breakdown
@@ -209,6 +216,7 @@ class RandomEvaluator:
     """A floor: a uniformly random eligible candidate (i.i.d. uniform scores from ``ctx.rng``)."""
 
     name = "random"
+    stages = ("score",)
 
     def __init__(self, config: PlannerConfig) -> None:
         self.config = config

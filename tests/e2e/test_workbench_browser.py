@@ -203,3 +203,46 @@ def test_the_loop_helpers(live_server: LiveServer, browser_context: BrowserConte
     page.click("#delete")
     expect(page.locator("#picker")).to_be_visible(timeout=20_000)
     assert api.get(f"/api/sessions/{sid}").status_code == 404
+
+
+HEAVY = {
+    "voxel": {"resolution": 0.01},
+    "cluster": {"search": "exhaustive", "t_min": 1, "t_max": 60, "max_iter": 1000, "tol": 1e-8},
+    "candidates": {"count": 833, "parallels": 30},
+}
+"""A plan of about a minute on 2 cores (60 exhaustive fits per voxel kind)."""
+
+
+def test_long_operations_show_their_progress_and_stop(
+    live_server: LiveServer, browser_context: BrowserContext, tmp_path: Any
+) -> None:
+    import trimesh
+
+    api = httpx.Client(base_url=live_server.url, timeout=120)
+    sid = api.post("/api/sessions", json={"model": "l-block", "config": HEAVY}).json()["id"]
+    api.post(f"/api/sessions/{sid}/capture")
+    tab = Tab(browser_context, f"{live_server.url}/?session={sid}")
+    page = tab.page
+    _state(tab, "ready")
+    # a long plan: its stage, k of n, the values of T done, a percent; Stop kills it and says so
+    page.click("#plan")
+    progress = page.locator("#progress")
+    expect(progress).to_contain_text(re.compile(r"planning · fit occupied \(3 of 6\) · \d+ / 60"), timeout=60_000)
+    expect(page.locator("#stop")).to_be_visible()
+    page.click("#stop")
+    expect(page.locator("#notice")).to_contain_text("the plan was stopped", timeout=10_000)
+    _state(tab, "ready", timeout=10_000)
+    expect(progress).to_be_hidden()
+    assert api.get(f"/api/sessions/{sid}").json()["pending_plan"] is None
+    # a create on a big mesh: its stages under the button, and Cancel (nothing created)
+    trimesh.creation.icosphere(subdivisions=7, radius=0.05).export(tmp_path / "ball.obj")  # 327 680 triangles
+    page.reload()
+    page.locator("#create-box summary").click()
+    page.locator("#model").select_option("ball.obj")
+    sessions = len(api.get("/api/sessions").json())
+    page.click("#create")
+    expect(page.locator("#create-progress")).to_contain_text(re.compile(r"creating · .+ \(\d of 6\)"), timeout=30_000)
+    page.click("#create-cancel")
+    expect(page.locator("#notice")).to_contain_text("cancelled", timeout=30_000)
+    expect(page.locator("#create-progress")).to_be_hidden()
+    assert len(api.get("/api/sessions").json()) == sessions and page.url.endswith(f"session={sid}")
