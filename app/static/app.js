@@ -220,8 +220,9 @@ function showProgress(p) {
   updateButtons();
 }
 
-// A create's progress (reading, checking and sampling the mesh, building the cell) on its own event stream.
-function followCreate(progressId) {
+// A create's progress (reading, checking and sampling the mesh, building the cell) on its own event stream,
+// open before the create starts (at most 2 s of waiting: without it the create just shows no stages).
+async function followCreate(progressId) {
   const proto = location.protocol === "https:" ? "wss" : "ws";
   const ws = new WebSocket(`${proto}://${location.host}` + withToken(`/api/events?create=${encodeURIComponent(progressId)}`));
   const box = $("create-progress");
@@ -230,6 +231,11 @@ function followCreate(progressId) {
     const m = JSON.parse(ev.data);
     if (m.type === "create" && m.id === progressId) P.renderProgress(box, m.progress, "creating");
   };
+  await new Promise((resolve) => {
+    ws.addEventListener("open", resolve);
+    ws.addEventListener("error", resolve);
+    setTimeout(resolve, 2000);
+  });
   return { close: () => { ws.close(); box.hidden = true; } };
 }
 
@@ -411,7 +417,7 @@ function wire() {
     const progressId = "c" + Math.random().toString(36).slice(2) + Date.now().toString(36);
     const body = { model: $("model").value || null, planner: $("planner").value, config: paramConfig(),
       seed: Number($("p-seed").value), progress_id: progressId };
-    const follow = followCreate(progressId);
+    const follow = await followCreate(progressId);
     try {
       const r = await api("POST", "/api/sessions", body);
       location.href = pageUrl({ session: r.id });

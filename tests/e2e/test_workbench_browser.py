@@ -235,14 +235,18 @@ def test_long_operations_show_their_progress_and_stop(
     expect(progress).to_be_hidden()
     assert api.get(f"/api/sessions/{sid}").json()["pending_plan"] is None
     # a create on a big mesh: its stages under the button, and Cancel (nothing created)
-    trimesh.creation.icosphere(subdivisions=7, radius=0.05).export(tmp_path / "ball.obj")  # 327 680 triangles
+    # 1.3 M triangles: seconds to check and read, so Cancel lands before the create ends
+    trimesh.creation.icosphere(subdivisions=8, radius=0.05).export(tmp_path / "ball.obj")
     page.reload()
     page.locator("#create-box summary").click()
     page.locator("#model").select_option("ball.obj")
     sessions = len(api.get("/api/sessions").json())
     page.click("#create")
     expect(page.locator("#create-progress")).to_contain_text(re.compile(r"creating · .+ \(\d of 6\)"), timeout=30_000)
-    page.click("#create-cancel")
+    expect(page.locator("#create-cancel")).to_be_visible()
+    # at once (a click waits for two equal animation frames, which the software-rendered 3D view may delay
+    # past the create's end)
+    page.locator("#create-cancel").dispatch_event("click")
     expect(page.locator("#notice")).to_contain_text("cancelled", timeout=30_000)
     expect(page.locator("#create-progress")).to_be_hidden()
     assert len(api.get("/api/sessions").json()) == sessions and page.url.endswith(f"session={sid}")
