@@ -154,22 +154,19 @@ class Session:
         """The session summary of ``GET /api/sessions/{id}``."""
         with self._lock:
             failed = self._failed
-            return (
-                {"planner": self.evaluator}
-                | session_status(
-                    self.record,
-                    state=self._state,
-                    source=str(self.source.get("kind", "sim")),
-                    pending=self._pending,
-                    selected=self._selected,
-                    custom=self._custom,
-                    error=self._error or self._journal_error,
-                    retry=None if failed is None or self._state != State.ERROR else str(failed.decision.kind),
-                    terminated=self._terminated,
-                    auto_remaining=self.auto.remaining if self._state == State.AUTO else 0,
-                    moves=self.moves,
-                )
-                | {"progress": self.progress_json()}
+            return {"planner": self.evaluator} | session_status(
+                self.record,
+                state=self._state,
+                source=str(self.source.get("kind", "sim")),
+                pending=self._pending,
+                selected=self._selected,
+                custom=self._custom,
+                error=self._error or self._journal_error,
+                retry=None if failed is None or self._state != State.ERROR else str(failed.decision.kind),
+                terminated=self._terminated,
+                auto_remaining=self.auto.remaining if self._state == State.AUTO else 0,
+                moves=self.moves,
+                progress=self.progress_json(),
             )
 
     def progress_json(self) -> dict[str, Any] | None:

@@ -96,10 +96,12 @@ def session_status(
     terminated: str | None = None,
     auto_remaining: int = 0,
     moves: int = 0,
+    progress: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The session summary of ``GET /api/sessions/{id}``, for a live and for an interrupted session alike.
 
     record: the session's :class:`workbench.record.SessionRecord` (id, model, seed and the last capture).
+    progress: the running long operation (``workbench.progress.Progress.to_json``), None when none runs.
     """
     last = record.iterations[-1] if record.iterations else None
     return {
@@ -120,4 +122,5 @@ def session_status(
         "auto_remaining": auto_remaining,
         "moves": moves,
         "seed": record.seed,
+        "progress": progress,
     }
