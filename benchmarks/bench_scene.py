@@ -7,9 +7,11 @@ counts the bytes of every websocket frame it receives and decodes them), and for
 bunny, the built-in L-block) at resolution 0.01 m with the paper's other defaults: capture, then ``--steps``
 times plan + approve of the planner's choice. Printed per model (medians over the steps, max in brackets):
 
-- bytes per plan / per approve: what the viewer received after the request until it went quiet;
-- approve->drawn: from the approve request until the last frame of its update arrived, and the part of it
-  after the approve answered (the capture itself is the rest);
+- bytes per plan / per approve: what the viewer received after the request until it went quiet (with the
+  arm's animation, given apart too);
+- approve->drawn: from the approve request until the last frame of its scene update arrived, and the part of
+  it after the approve answered (the capture itself is the rest); the frames that only move the arm (the
+  executed move played back at its own speed, about a second) are timed apart ("arm animation ends");
 - plan->drawn: from the plan request until its frames arrived, and the part after the plan answered;
 - approve->next plan drawn: approve, then plan, until the plan is drawn, minus the two requests' own time;
 - status pushed: when the page's event stream (``/api/events``) delivered the ``captured`` / ``planned``
@@ -42,13 +44,22 @@ QUIET = 0.4
 """Seconds without a new frame after which an update counts as fully received."""
 
 
-def settle(raw: RawViewer, since: int, timeout: float = 60.0) -> float:
-    """Wait until ``raw`` got at least one frame after ``since`` and then none for QUIET s; the last one's time."""
+def animation(messages: list[dict[str, Any]]) -> bool:
+    """Whether a frame only moves the arm (``/robot/...``: the executed move played back in the 3D view)."""
+    return bool(messages) and all(str(m.get("name", "")).startswith("/robot") for m in messages)
+
+
+def settle(raw: RawViewer, since: int, timeout: float = 60.0) -> tuple[float, float | None]:
+    """Wait until ``raw`` got at least one frame after ``since`` and then none for QUIET s: (the last frame of
+    the session's scene, the last frame of the arm's animation or None). The arm's animation plays the
+    executed move at its own speed (seconds); the scene's update does not wait for it."""
     deadline = time.perf_counter() + timeout
     while time.perf_counter() < deadline:
         frames = raw.frames[since:]
         if frames and time.perf_counter() - frames[-1][0] > QUIET:
-            return frames[-1][0]
+            scene = [t for t, _, ms in frames if not animation(ms)]
+            arm = [t for t, _, ms in frames if animation(ms)]
+            return (scene[-1] if scene else frames[0][0]), (arm[-1] if arm else None)
         time.sleep(0.02)
     raise TimeoutError("the viewer received nothing")
 
@@ -89,7 +100,8 @@ def run(client: TestClient, model: str, steps: int) -> dict[str, list[float]]:
     raw = RawViewer(f"ws://127.0.0.1:{port}/?ticket={v['url'].split('ticket%3D')[1]}", f"http://127.0.0.1:{port}")
     out: dict[str, list[float]] = {k: [] for k in ("plan_bytes", "approve_bytes", "approve_http", "approve_after",
                                                    "approve_drawn", "plan_http", "plan_after", "plan_drawn",
-                                                   "next_plan_overhead", "push_vs_answer")}  # fmt: skip
+                                                   "next_plan_overhead", "push_vs_answer", "animation_bytes",
+                                                   "animation_after")}  # fmt: skip
     try:
         settle(raw, 0)
         mark = raw.mark()
@@ -101,7 +113,7 @@ def run(client: TestClient, model: str, steps: int) -> dict[str, list[float]]:
             t0 = time.perf_counter()
             plan = client.post(f"/api/sessions/{sid}/plan").json()
             t1 = time.perf_counter()
-            drawn = settle(raw, mark)
+            drawn, _ = settle(raw, mark)
             pushed = events.first_after(t0, "planned")
             if pushed is not None:
                 out["push_vs_answer"].append(pushed - t1)
@@ -120,11 +132,14 @@ def run(client: TestClient, model: str, steps: int) -> dict[str, list[float]]:
             )
             t1 = time.perf_counter()
             assert r.status_code == 200, r.text
-            drawn = settle(raw, mark)
+            drawn, animated = settle(raw, mark)
             pushed = events.first_after(t0, "captured")
             if pushed is not None:
                 out["push_vs_answer"].append(pushed - t1)
             out["approve_bytes"].append(raw.bytes_since(mark))
+            out["animation_bytes"].append(sum(n for _, n, ms in raw.frames[mark:] if animation(ms)))
+            if animated is not None:
+                out["animation_after"].append(animated - t1)
             out["approve_http"].append(t1 - t0)
             out["approve_after"].append(max(0.0, drawn - t1))
             out["approve_drawn"].append(drawn - t0)
@@ -159,10 +174,15 @@ def main() -> int:
                 r: dict[str, Any] = run(client, model, args.steps)
                 print(f"\n{model}")
                 print(f"  bytes per plan            {fmt(r['plan_bytes'], 'kB')}")
-                print(f"  bytes per approve         {fmt(r['approve_bytes'], 'kB')}")
+                print(
+                    f"  bytes per approve         {fmt(r['approve_bytes'], 'kB')}   of which the arm's animation {fmt(r['animation_bytes'], 'kB')}"
+                )
                 print(f"  approve request (capture) {fmt(r['approve_http'], 's')}")
                 print(
                     f"  approve -> drawn          {fmt(r['approve_drawn'], 's')}   after the answer {fmt(r['approve_after'], 's')}"
+                )
+                print(
+                    f"  arm animation ends        {fmt(r['animation_after'], 's')} after the approve's answer (the move played back)"
                 )
                 print(f"  plan request              {fmt(r['plan_http'], 's')}")
                 print(
@@ -171,7 +191,8 @@ def main() -> int:
                 print(f"  approve -> next plan drawn, beyond capture + plan time {fmt(r['next_plan_overhead'], 's')}")
                 print(f"  status pushed, relative to the request's answer         {fmt(r['push_vs_answer'], 's')}")
     print(
-        f"\n(frames count as drawn once the viewer got them and then nothing for {QUIET} s; that wait is not in the times)"
+        f"\n(frames count as drawn once the viewer got them and then nothing for {QUIET} s; that wait is not in the times;"
+        "\n the scene's times leave out the frames that only move the arm, its animation is given apart)"
     )
     return 0
 
