@@ -158,7 +158,7 @@ class CustomPoseOut(BaseModel):
 
 
 class ProgressOut(BaseModel):
-    operation: str = Field(description="plan, create")
+    operation: str = Field(description="plan, discard, resume (a session's), create")
     stage: str = Field(description='what runs now, e.g. "reachability", "fit occupied", "reading the mesh"')
     step: int = Field(description="the stage's number, 1-based")
     steps: int = Field(description="the operation's stages")

@@ -1,4 +1,4 @@
-"""Creates in flight: their progress, for the page that started one, and their cancellation.
+"""Creates (and resumes) in flight: their progress, for the page that follows one, and their cancellation.
 
 A create on a big mesh takes seconds (reading, checking and sampling the mesh, building the cell). The page
 names its create with a ``progress_id`` it chose, follows it on ``/api/events?create=ID`` and may cancel it
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import re
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 
 from workbench.errors import Conflict, Invalid
@@ -18,6 +18,12 @@ from workbench.progress import CREATE_STAGES, Progress, Tracker
 
 PROGRESS_ID = re.compile(r"^[A-Za-z0-9_-]{8,64}$")
 """What a page may name its create with."""
+
+
+def resume_id(session_id: str) -> str:
+    """The progress id of the resume of ``session_id`` (a page names its creates otherwise: not ``resume-``)."""
+    return f"resume-{session_id}"
+
 
 Listener = Callable[[str, "Progress | None"], None]
 
@@ -45,8 +51,15 @@ class Creations:
         self.listeners: list[Listener] = []
 
     @contextmanager
-    def run(self, progress_id: str | None) -> Iterator[Creation]:
-        """A create, followed under ``progress_id`` (None: by nobody) from its start to its end."""
+    def run(
+        self,
+        progress_id: str | None,
+        operation: str = "create",
+        stages: Sequence[str] = CREATE_STAGES,
+        stoppable: bool = True,
+    ) -> Iterator[Creation]:
+        """A create (or a resume: ``operation``, ``stages``), followed under ``progress_id`` (None: by nobody)
+        from its start to its end; ``stoppable``: it may be cancelled (when it has an id)."""
         if progress_id is not None and not PROGRESS_ID.match(progress_id):
             raise Invalid(f"progress_id: 8 to 64 letters, digits, '_' or '-', got {progress_id!r}")
 
@@ -61,7 +74,7 @@ class Creations:
                 if progress_id in self._running:
                     raise Conflict(f"progress_id {progress_id!r}: a create with this id is running")
                 self._running[progress_id] = creation
-        creation.tracker.begin("create", CREATE_STAGES, stoppable=progress_id is not None)
+        creation.tracker.begin(operation, stages, stoppable=stoppable and progress_id is not None)
         try:
             yield creation
         finally:

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 from workbench.errors import Conflict, Invalid
 from workbench.journal.discard import last_capture
-from workbench.journal.rebuild import rebuild
+from workbench.journal.rebuild import REPLAY_STAGE, rebuild
 from workbench.journal.store import read_journal
 from workbench.metrics import coverage
 from workbench.states import BUSY, SessionEvent, State
@@ -40,16 +40,20 @@ def discard_last_view(wb: Session) -> dict[str, Any]:
         journal.append("discard", capture_seq=last["seq"], iteration=last["iteration"])
     wb.notify(SessionEvent.STATE)
     samples = wb.surface_samples
+    wb.progress.begin("discard", [REPLAY_STAGE])
     try:
         rebuilt = rebuild(
             read_journal(journal.directory),
             wb.cell,
             None if samples is None else (lambda cloud: coverage(samples, cloud)),
+            wb.progress.stage,
         )
     except (ValueError, KeyError, TypeError) as exc:
         with wb._lock:
             wb._state = before
         raise Invalid(f"session {wb.id}: cannot rebuild without the last view: {exc}") from None
+    finally:
+        wb.progress.end()
     with wb._lock:
         wb._error = None
         wb._failed = None

@@ -19,11 +19,11 @@ from planner import PlannerConfig
 from planner.config import from_dict
 from planner.evaluators import evaluator_names
 from workbench.ceilings import CeilingService
-from workbench.creations import Creation, Creations
+from workbench.creations import Creation, Creations, resume_id
 from workbench.engine import Engine, offload_rendering, render_spec
 from workbench.errors import Conflict, Invalid, NotFound, StorageFault
 from workbench.factory import SURFACE_SAMPLES, SessionParts, build_parts, session_devices
-from workbench.journal.rebuild import Rebuilt, rebuild
+from workbench.journal.rebuild import REPLAY_STAGE, Rebuilt, rebuild
 from workbench.journal.store import JournalBusyError, JournalWriter, in_use, list_journals, read_journal, sessions_dir
 from workbench.limits import check_config
 from workbench.record import SessionRecord
@@ -194,6 +194,8 @@ class SessionRegistry:
             fault_config = self.settings.faults if faults is None else FaultConfig.from_dict(faults)
         except ValueError as exc:
             raise Invalid(str(exc)) from None
+        if progress_id is not None and progress_id.startswith(resume_id("")):
+            raise Invalid(f"progress_id: {progress_id!r} starts with 'resume-', which resumes use")
         with self.creations.run(progress_id) as creation:
             return self._create(planner_config, model, seed, source, fault_config, planner, creation)
 
@@ -344,7 +346,8 @@ class SessionRegistry:
             self._resuming.add(session_id)
             self._rebuilding[session_id] = dormant  # still listed while it is rebuilt
         try:
-            wb, rebuilt = self._rebuild(dormant)
+            with self.creations.run(resume_id(session_id), "resume", [REPLAY_STAGE], stoppable=False) as creation:
+                wb, rebuilt = self._rebuild(dormant, creation.tracker.stage)
         except BaseException:
             with self._lock:
                 self._dormant[session_id] = dormant
@@ -359,7 +362,9 @@ class SessionRegistry:
             hook(wb)
         return wb, rebuilt
 
-    def _rebuild(self, dormant: DormantSession) -> tuple[Session, Rebuilt]:
+    def _rebuild(
+        self, dormant: DormantSession, progress: Callable[[str, int, int], None] | None = None
+    ) -> tuple[Session, Rebuilt]:
         from workbench.metrics import coverage
 
         try:
@@ -379,7 +384,7 @@ class SessionRegistry:
             raise Conflict(str(exc)) from None
         wb = self._session(dormant.id, parts, config, devices, seed, None, str(header.get("planner", "projection")))
         try:
-            rebuilt = rebuild(journal, wb.cell, None if samples is None else lambda c: coverage(samples, c))
+            rebuilt = rebuild(journal, wb.cell, None if samples is None else lambda c: coverage(samples, c), progress)
         except (ValueError, KeyError, TypeError) as exc:
             writer.close()
             _release(parts)

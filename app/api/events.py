@@ -6,8 +6,8 @@ Messages (JSON):
   the session's status (the shape of ``GET /api/sessions/{id}``) after each change, first on connect;
 - ``{"type": "sessions", "change": "created"|"deleted", "id": ...}``: the session list changed;
 - ``{"type": "deleted"}``: this tab's session was deleted;
-- ``{"type": "progress", "progress": {...} | null}``: the session's long operation (a plan) moved on or ended
-  (``ProgressOut``; at most ten a second);
+- ``{"type": "progress", "progress": {...} | null}``: the session's long operation (a plan, a discard, its
+  resume) moved on or ended (``ProgressOut``; at most ten a second within a stage);
 - with ``?create=ID`` (a ``progress_id`` of ``POST /api/sessions``): ``{"type": "create", "id": ID,
   "progress": {...} | null}`` as that create goes (null: it ended).
 
@@ -29,6 +29,7 @@ from urllib.parse import urlsplit
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 
 from app.settings import AppSettings
+from workbench.creations import resume_id
 from workbench.errors import Conflict, WorkbenchError
 from workbench.jsonable import jsonable
 from workbench.progress import Progress
@@ -95,8 +96,11 @@ async def events(ws: WebSocket, session: str | None = None, create: str | None =
             push({"type": "status", "event": str(event), "status": s.status()})
 
     def on_create_progress(progress_id: str, progress: Progress | None) -> None:
+        value = None if progress is None else progress.to_json()
         if progress_id == create:
-            push({"type": "create", "id": progress_id, "progress": None if progress is None else progress.to_json()})
+            push({"type": "create", "id": progress_id, "progress": value})
+        elif session is not None and progress_id == resume_id(session):  # this tab's session being resumed
+            push({"type": "progress", "progress": value})
 
     def on_create(s: Session) -> None:
         nonlocal wb
@@ -115,11 +119,9 @@ async def events(ws: WebSocket, session: str | None = None, create: str | None =
         wb.listeners.append(on_session)
     registry.on_create.append(on_create)
     registry.on_delete.append(on_delete)
-    if create is not None:
-        registry.creations.listeners.append(on_create_progress)
-        current = registry.creations.progress(create)
-        if current is not None:
-            push({"type": "create", "id": create, "progress": current.to_json()})
+    registry.creations.listeners.append(on_create_progress)
+    if create is not None and (current := registry.creations.progress(create)) is not None:
+        push({"type": "create", "id": create, "progress": current.to_json()})
     reader = asyncio.create_task(_drain(ws))
     try:
         if first is not None:

@@ -216,7 +216,8 @@ function connectEvents(delay) {
 
 function showProgress(p) {
   S.progress = p;
-  P.renderProgress($("progress"), p, p && p.operation === "plan" ? "planning" : p ? p.operation : "");
+  const verbs = { plan: "planning", discard: "discarding the last view", resume: "resuming" };
+  P.renderProgress($("progress"), p, p ? verbs[p.operation] || p.operation : "");
   updateButtons();
 }
 

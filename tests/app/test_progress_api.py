@@ -1,6 +1,6 @@
 """Progress and stopping over HTTP: a plan's stages pushed on /api/events, POST .../stop kills a running plan
 (the plan request answers 409, the state goes back), a create's stages on /api/events?create=ID and its
-cancellation by DELETE /api/creations/ID (nothing created)."""
+cancellation by DELETE /api/creations/ID (nothing created), a resume's replay pushed to its session's tab."""
 
 from __future__ import annotations
 
@@ -12,8 +12,10 @@ from typing import Any
 import httpx
 import trimesh
 import websockets.sync.client
-from apphelpers import SMALL, free_port, running_server
+from apphelpers import BASE_URL, SMALL, free_port, running_server
+from fastapi.testclient import TestClient
 
+from app.main import create_app
 from app.settings import AppSettings
 
 HEAVY: dict[str, Any] = {
@@ -107,3 +109,20 @@ def test_a_creates_progress_is_pushed_and_delete_cancels_it(settings: AppSetting
         assert missing.status_code == 404 and "none is running" in missing.json()["detail"]
         bad = api.post("/api/sessions", json={"progress_id": "no spaces allowed"})
         assert bad.status_code == 422 and "progress_id" in bad.text
+
+
+def test_a_resume_pushes_its_replay_to_the_tab_of_its_session(settings: AppSettings) -> None:
+    with TestClient(create_app(settings), base_url=BASE_URL) as a:
+        sid = a.post("/api/sessions", json={"config": SMALL}).json()["id"]
+        a.post(f"/api/sessions/{sid}/capture")
+        assert a.post(f"/api/sessions/{sid}/step", json={"count": 2}).status_code == 200
+    with TestClient(create_app(settings), base_url=BASE_URL) as b:  # the server restarted
+        with b.websocket_connect(f"/api/events?session={sid}") as ws:
+            assert ws.receive_json()["status"]["state"] == "interrupted"
+            assert b.post(f"/api/sessions/{sid}/resume").status_code == 200
+            seen = []
+            while not (seen and seen[-1]["type"] == "status" and seen[-1]["status"]["state"] != "interrupted"):
+                seen.append(ws.receive_json())
+        progress = [m["progress"] for m in seen if m["type"] == "progress"]
+        assert progress[-1] is None and {p["operation"] for p in progress[:-1]} == {"resume"}
+        assert progress[-2]["stage"] == "replaying the journal" and progress[-2]["done"] == progress[-2]["total"] == 5

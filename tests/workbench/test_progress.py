@@ -1,6 +1,6 @@
 """Long operations report where they are and can be stopped: a plan's stages (in its worker, and in the server
 process), Stop of a running plan (the state goes back, map and pending plan unchanged), a create's stages on
-a mesh file, and its cancellation (nothing created, nothing kept)."""
+a mesh file, and its cancellation (nothing created, nothing kept), a discard's and a resume's replay."""
 
 from __future__ import annotations
 
@@ -14,7 +14,9 @@ import pytest
 import trimesh
 
 from tests.helpers import SMALL
+from workbench.creations import resume_id
 from workbench.errors import Conflict, Invalid
+from workbench.journal.rebuild import REPLAY_STAGE
 from workbench.progress import CREATE_STAGES, Progress, Throttle, Tracker
 from workbench.registry import SessionRegistry
 from workbench.session import Session
@@ -174,3 +176,36 @@ def test_the_tracker_sends_stage_changes_and_ends_but_throttles_items() -> None:
     ]
     throttle = Throttle(0.0)
     assert all(throttle("a", i, 10) for i in range(10))  # no interval: every report goes
+
+
+def test_a_discard_and_a_resume_report_the_journal_they_replay(tmp_path: Path) -> None:
+    settings = WorkbenchSettings(data_dir=tmp_path / "data", workers=False)
+    registry = SessionRegistry(settings)
+    try:
+        session = registry.create(model="l-block", config=SMALL)
+        session.capture()
+        session.auto.step(3)  # 4 views, 3 plans
+        seen = progress_log(session)
+        session.discard_last_view()  # replays 3 captures and 3 plans (the 4th capture left out)
+        assert {p["operation"] for p in seen} == {"discard"} and stage_names(seen) == [REPLAY_STAGE]
+        done = [p["done"] for p in seen]  # throttled to 10 a second: the first and the last at least
+        assert (
+            done == sorted(done) and (done[0], done[-1]) == (0, 6) and {p["total"] for p in seen[1:]} == {6}
+        )  # after the start
+        assert session.progress_json() is None
+        assert session.journal is not None
+        session.journal.close()  # the server "stops"
+        other = SessionRegistry(settings)
+        heard: list[tuple[str, Progress | None]] = []
+        other.creations.listeners.append(lambda pid, p: heard.append((pid, p)))
+        other.resume(session.id)
+        assert {pid for pid, _ in heard} == {resume_id(session.id)} and heard[-1][1] is None
+        reports = [p for _, p in heard if p is not None]
+        assert {p.operation for p in reports} == {"resume"} and not any(p.stoppable for p in reports)
+        done = [p.done for p in reports if p.stage == REPLAY_STAGE]
+        assert done == sorted(done) and (done[0], done[-1]) == (0, 6)
+        other.close()
+        with pytest.raises(Invalid, match="resume-"):
+            registry.create(model="l-block", config=SMALL, progress_id=resume_id("12345678"))
+    finally:
+        registry.close()

@@ -76,16 +76,24 @@ def _close(a: float | None, b: float | None, rtol: float = SCORE_RTOL) -> bool:
     return math.isclose(a, b, rel_tol=rtol, abs_tol=1e-12)
 
 
+REPLAY_STAGE = "replaying the journal"
+"""The stage a rebuild reports (its items: the captures and plans replayed)."""
+HEAVY_KINDS = frozenset({"capture", "plan"})
+"""The events whose replay takes time (integrating a frame, planning)."""
+
+
 def rebuild(
     journal: Journal,
     cell: Any,
     coverage: Callable[[NDArray[np.float64]], float] | None = None,
+    progress: Callable[[str, int, int], None] | None = None,
 ) -> Rebuilt:
     """Replay ``journal`` through a fresh Planner, up to the first damaged event or frame (``Rebuilt.dropped``
     says what was left out). ValueError when the header itself is unusable.
 
     cell: the session's cell, asked as the session asked it when planning (:func:`workbench.planning.plan_in`).
     coverage: cloud -> coverage of the ground truth, when it is known (simulation).
+    progress: ``(REPLAY_STAGE, done, total)`` over the captures and plans replayed (the heavy events).
     """
     header = journal.header
     config = PlannerConfig.from_dict(header["config"])
@@ -104,7 +112,12 @@ def rebuild(
         dropped.append(f"{journal.damage}: {journal.dropped_lines} line(s) from there on")
     kept = 0
     events = without_discarded(journal.events)
+    heavy = sum(1 for ev in events if ev.get("kind") in HEAVY_KINDS)
+    done = 0
     for ev in events:
+        if progress is not None and ev.get("kind") in HEAVY_KINDS:
+            progress(REPLAY_STAGE, done, heavy)
+            done += 1
         try:
             in_flight, pending, last, config, device_state = _replay_one(
                 ev,
@@ -124,6 +137,8 @@ def rebuild(
             dropped.insert(0, f"event {ev.get('seq')} ({ev.get('kind')}): {exc}; it and {rest} later event(s) dropped")
             break
         kept += 1
+    if progress is not None:
+        progress(REPLAY_STAGE, done, heavy)
     interrupted = None
     if in_flight is not None:  # killed between the decision and its capture: the step never completed
         interrupted = in_flight.plan_id
