@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import logging
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -41,6 +42,8 @@ SURFACE_SAMPLES = 10_000
 """Points sampled on the ground-truth mesh to measure coverage (simulation only)."""
 RECORDING_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
 
+log = logging.getLogger(__name__)
+
 
 @dataclass(eq=False)
 class SessionParts:
@@ -52,7 +55,8 @@ class SessionParts:
     cell: Cell
     surface_samples: NDArray[np.float64] | None
     source: dict[str, Any]
-    injector: FaultInjector
+    injector: FaultInjector | None
+    """Decides the simulated faults of the devices; None for real hardware (never injected there)."""
 
 
 def recordings_dir(settings: WorkbenchSettings) -> Path:
@@ -118,10 +122,13 @@ def build_parts(
     devices: DeviceConfig,
     faults: FaultConfig,
     stage: Callable[[str], None] = lambda name: None,
+    faults_asked: bool = False,
 ) -> SessionParts:
     """The object and the (fault-injecting) devices of a session. 404/422 with a clear message on bad input.
 
-    stage: told each stage as it starts (``workbench.progress.CREATE_STAGES``); it may raise to cancel."""
+    stage: told each stage as it starts (``workbench.progress.CREATE_STAGES``); it may raise to cancel.
+    Simulated faults are never injected into real hardware: ``faults`` asked by the request
+    (``faults_asked``) are refused for it (422), the server's ``[faults]`` are left out with a warning."""
     from devices.sim import make_sim_cell
 
     source = dict(source or {"kind": "hardware" if settings.cell else "sim"})
@@ -165,9 +172,18 @@ def build_parts(
             except NotFound as exc:
                 raise Invalid(f"source.truth: {exc.detail}") from None
             mesh, samples = ground_truth(settings, truth, seed)
+        if not source["dry_run"] and faults.enabled:
+            if faults_asked:
+                raise Invalid(
+                    "faults: simulated faults go into simulated devices only; this session drives the real devices "
+                    'of the cell file (a dry run, source {"dry_run": true}, rehearses with faults)'
+                )
+            log.warning("the server's [faults] are not injected into the real devices of %s", source["cell"])
         stage("building the cell")
         cell = hardware_cell(source, mesh if source["dry_run"] else None, devices.camera, devices.cell, seed)
         name, model_kind = truth or f"hardware:{Path(source['cell']).stem}", "hardware"
+        if not source["dry_run"]:
+            return SessionParts(name, model_kind, mesh, cell, samples, source, None)
     else:
         raise Invalid(f"source.kind: 'sim', 'replay' or 'hardware', got {kind!r}")
     injector = FaultInjector(faults)

@@ -211,7 +211,10 @@ class SessionRegistry:
     ) -> Session:
         name = model or self.settings.devices.model
         devices = session_devices(self.settings, name, seed)
-        parts = build_parts(self.settings, name, source, seed, devices, fault_config, creation.stage)
+        asked = fault_config is not self.settings.faults
+        parts = build_parts(self.settings, name, source, seed, devices, fault_config, creation.stage, asked)
+        if parts.injector is None:
+            fault_config = FaultConfig()  # real hardware: none injected (the journal says so)
         try:
             creation.stage("starting the session")
         except Conflict:

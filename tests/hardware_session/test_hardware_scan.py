@@ -24,6 +24,7 @@ from devices.cell import rz
 from devices.config import CameraConfig, DeviceConfig
 from devices.drivers.limits import JointLimits
 from devices.drivers.rsrecord import write_depth_recording
+from devices.faults import FaultConfig
 from nbv.cli import main
 from planner.types import Pose
 from tests.devices.drivers.rigfixtures import cell_toml, fake_hardware_cell
@@ -265,3 +266,27 @@ def test_bad_cell_file_is_one_line_naming_the_field(tmp_path: Path, capsys: pyte
         assert c.get("/api/sessions").json() == [] or c.get("/api/sessions").json().get("sessions") == []
         r = c.post("/api/sessions", json={"source": {"kind": "hardware", "cell": "/etc/passwd"}})
         assert r.status_code == 422  # requests never name a path
+
+
+def test_simulated_faults_never_reach_the_real_devices(tmp_path: Path, rig: Any) -> None:
+    """The server's [faults] (every capture fails) apply to simulated sessions only: a hardware session leaves
+    them out (its captures work, its journal says none), refuses a request's own faults (422, the devices not
+    taken), and the test route cannot queue one into it."""
+    fail = FaultConfig(capture_failure=1.0)
+    settings = app_settings(tmp_path, rig.path, "faults", faults=fail, fault_api=True)
+    with TestClient(create_app(settings), base_url=BASE_URL) as c:
+        hardware = {"kind": "hardware", "truth": "l-block"}
+        r = c.post("/api/sessions", json={"seed": 0, "source": hardware, "faults": {"capture_failure": 1.0}})
+        assert r.status_code == 422 and "simulated devices only" in r.json()["detail"], r.text
+        r = c.post("/api/sessions", json={"seed": 0, "source": hardware})  # the devices are free
+        assert r.status_code == 201, r.text
+        sid = r.json()["id"]
+        assert c.post(f"/api/sessions/{sid}/capture").status_code == 200  # no injected failure
+        r = c.post(f"/api/sessions/{sid}/faults", json={"kind": "capture_failure"})
+        assert r.status_code == 409 and "do not inject" in r.json()["detail"]
+        header = read_journal(sessions_dir(settings.data_dir) / sid).header
+        assert header["faults"] == FaultConfig().to_dict()
+        c.delete(f"/api/sessions/{sid}")
+        sim = c.post("/api/sessions", json={"seed": 0, "source": {"kind": "sim"}, "config": SMALL_PLANNER}).json()
+        r = c.post(f"/api/sessions/{sim['id']}/capture")
+        assert r.status_code == 503 and "capture" in r.json()["detail"], r.text  # a simulated one fails as told
