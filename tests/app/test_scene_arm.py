@@ -61,12 +61,18 @@ def test_the_arm_is_drawn_with_the_ghost_of_the_planners_choice(scene_client: Te
         np.testing.assert_allclose(robot.q, wb.cell.arm.joint_positions())
         assert robot.angle == pytest.approx(wb.cell.angle)
         # the raw client received the arm's link meshes under /robot/arm and the ghost's under /robot/ghost
-        assert wait_for(lambda: any(str(m.get("name", "")).startswith("/robot/ghost/") for m in raw.messages()))
-        meshes = {str(m["name"]) for m in raw.messages() if m.get("type") in ("GlbMessage", "MeshMessage")}
         links = ("base", "shoulder", "upperarm", "forearm", "wrist1", "wrist2", "wrist3")
-        for root in ("/robot/arm/", "/robot/ghost/"):
-            for link in links:
-                assert any(n.startswith(root) and f"/{link}.dae" in n for n in meshes), (root, link)
+
+        def missing() -> list[tuple[str, str]]:  # the link meshes not received yet (they stream in)
+            meshes = {str(m["name"]) for m in raw.messages() if m.get("type") in ("GlbMessage", "MeshMessage")}
+            return [
+                (root, link)
+                for root in ("/robot/arm/", "/robot/ghost/")
+                for link in links
+                if not any(n.startswith(root) and f"/{link}.dae" in n for n in meshes)
+            ]
+
+        assert wait_for(lambda: not missing(), timeout=30), missing()
         arm = scene_client.get(f"/api/sessions/{sid}/arm").json()
         assert arm["has_arm"] is True
         np.testing.assert_allclose(arm["joints"], wb.cell.arm.joint_positions())
