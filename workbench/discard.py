@@ -10,11 +10,11 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from workbench.engine import JobKilled
 from workbench.errors import Conflict, Invalid
 from workbench.journal.discard import last_capture
-from workbench.journal.rebuild import REPLAY_STAGE, rebuild
+from workbench.journal.rebuild import REPLAY_STAGE
 from workbench.journal.store import read_journal
-from workbench.metrics import coverage
 from workbench.states import BUSY, SessionEvent, State
 
 if TYPE_CHECKING:
@@ -39,18 +39,13 @@ def discard_last_view(wb: Session) -> dict[str, Any]:
         before = wb.claim(frozenset(State) - BUSY - {State.INTERRUPTED}, State.CAPTURING, "discard")
         journal.append("discard", capture_seq=last["seq"], iteration=last["iteration"])
     wb.notify(SessionEvent.STATE)
-    samples = wb.surface_samples
     wb.progress.begin("discard", [REPLAY_STAGE])
     try:
-        rebuilt = rebuild(
-            read_journal(journal.directory),
-            wb.cell,
-            None if samples is None else (lambda cloud: coverage(samples, cloud)),
-            wb.progress.stage,
-        )
-    except (ValueError, KeyError, TypeError) as exc:
+        rebuilt = wb.replay(read_journal(journal.directory), wb.progress.stage)
+    except (ValueError, KeyError, TypeError, JobKilled) as exc:
         with wb._lock:
             wb._state = before
+        wb.notify(SessionEvent.STATE)
         raise Invalid(f"session {wb.id}: cannot rebuild without the last view: {exc}") from None
     finally:
         wb.progress.end()

@@ -36,6 +36,8 @@ from devices.config import CellConfig
 from planner import DepthFrame, Planner, Pose
 from planner.planner import IntegrationReport, PlanResult
 from planner.progress import ProgressFn
+from workbench.journal.rebuild import Rebuilt
+from workbench.journal.store import Journal
 from workbench.worker import RenderSpec, serve
 
 log = logging.getLogger(__name__)
@@ -162,6 +164,22 @@ class SessionWorker:
         model: its kinematics, the arm at joints ``q`` (n,), the plate at ``angle``): (plan, the planner after
         it). ``on_progress`` hears the plan's stages (sent by the worker at most every 0.1 s within a stage)."""
         return self.call("plan", (planner, cell, q, angle), budget, "plan", on_progress)
+
+    def rebuild(
+        self,
+        journal: Journal,
+        cell: CellConfig,
+        q: Any,
+        angle: float,
+        samples: Any,
+        on_progress: Callable[[str, int, int], None] | None = None,
+    ) -> Rebuilt:
+        """:func:`workbench.journal.rebuild.rebuild` of ``journal`` in the worker's planning cell of ``cell``
+        (the arm at joints ``q``, the plate at ``angle``; each capture's device state then), coverage against
+        ``samples`` (S, 3) when given. No budget (it is as long as the session); DELETE and shutdown kill it.
+        ``on_progress`` hears ``(stage, done, total)``."""
+        report = None if on_progress is None else (lambda value: on_progress(*value))
+        return self.call("rebuild", (journal, cell, q, angle, samples), 0.0, "rebuild", report)
 
     def integrate(self, planner: Planner, frame: DepthFrame, budget: float) -> tuple[IntegrationReport, Planner]:
         """``planner.integrate(frame)`` in the worker: (report, the planner after it)."""

@@ -20,10 +20,10 @@ from planner.config import from_dict
 from planner.evaluators import evaluator_names
 from workbench.ceilings import CeilingService
 from workbench.creations import Creation, Creations, resume_id
-from workbench.engine import Engine, offload_rendering, render_spec
+from workbench.engine import Engine, JobKilled, offload_rendering, render_spec
 from workbench.errors import Conflict, Invalid, NotFound, StorageFault
 from workbench.factory import SURFACE_SAMPLES, SessionParts, build_parts, session_devices
-from workbench.journal.rebuild import REPLAY_STAGE, Rebuilt, rebuild
+from workbench.journal.rebuild import REPLAY_STAGE, Rebuilt
 from workbench.journal.store import JournalBusyError, JournalWriter, in_use, list_journals, read_journal, sessions_dir
 from workbench.limits import check_config
 from workbench.record import SessionRecord
@@ -368,8 +368,6 @@ class SessionRegistry:
     def _rebuild(
         self, dormant: DormantSession, progress: Callable[[str, int, int], None] | None = None
     ) -> tuple[Session, Rebuilt]:
-        from workbench.metrics import coverage
-
         try:
             journal = read_journal(dormant.directory)
             header = journal.header
@@ -379,7 +377,6 @@ class SessionRegistry:
         except (ValueError, KeyError, TypeError) as exc:
             raise Invalid(f"session {dormant.id}: cannot resume: {exc}") from None
         parts = build_parts(self.settings, header["model"]["name"], header.get("source"), seed, devices, FaultConfig())
-        samples = parts.surface_samples
         try:
             writer = JournalWriter.reopen(journal)  # first: it locks the journal against a second resumer
         except JournalBusyError as exc:
@@ -387,9 +384,11 @@ class SessionRegistry:
             raise Conflict(str(exc)) from None
         wb = self._session(dormant.id, parts, config, devices, seed, None, str(header.get("planner", "projection")))
         try:
-            rebuilt = rebuild(journal, wb.cell, None if samples is None else lambda c: coverage(samples, c), progress)
-        except (ValueError, KeyError, TypeError) as exc:
+            rebuilt = wb.replay(journal, progress)
+        except (ValueError, KeyError, TypeError, JobKilled) as exc:
             writer.close()
+            if wb.worker is not None:
+                wb.worker.close()
             _release(parts)
             raise Invalid(f"session {dormant.id}: cannot resume: {exc}") from None
         if rebuilt.kept < len(journal.events):  # a damaged event or frame: the journal goes on from before it

@@ -44,9 +44,10 @@ from workbench.auto import AutoRunner
 from workbench.engine import JobKilled, SessionWorker
 from workbench.errors import Conflict, DeviceFault, Invalid, NotFound, Unreachable
 from workbench.factory import SessionParts
-from workbench.journal.rebuild import Rebuilt
-from workbench.journal.store import JournalWriter, make_event
+from workbench.journal.rebuild import Rebuilt, rebuild
+from workbench.journal.store import Journal, JournalWriter, make_event
 from workbench.limits import check_config
+from workbench.metrics import coverage
 from workbench.planning import plan_in
 from workbench.progress import Progress, Tracker
 from workbench.record import SessionRecord
@@ -471,6 +472,20 @@ class Session:
                 with contextlib.suppress(ValueError):  # a device that cannot restore just draws fresh noise
                     self.cell.restore_device_state(rebuilt.device_state)
             self._state = State.NEW if self.planner.iteration == 0 else self.settle()
+
+    def replay(self, journal: Journal, progress: Callable[[str, int, int], None] | None = None) -> Rebuilt:
+        """This session's state rebuilt from ``journal`` (a resume, a discard), to :meth:`restore`: in its worker
+        when it has one (killed with it on DELETE and at shutdown), else here. ValueError / KeyError / TypeError
+        for a journal that cannot be replayed; JobKilled when the worker was killed."""
+        samples = self.surface_samples
+        if self.worker is None or type(self.cell).is_reachable is not Cell.is_reachable:
+            truth = None if samples is None else (lambda cloud: coverage(samples, cloud))
+            return rebuild(journal, self.cell, truth, progress)
+        q, angle = self.cell.joint_positions(), self.cell.angle
+        rebuilt = self.worker.rebuild(journal, self.cell.config, q, angle, samples, progress)
+        if rebuilt.planner.voxel_map.bbox is not None:
+            self.cell.set_object_box(rebuilt.planner.voxel_map.bbox)  # the box the replayed plans used
+        return rebuilt
 
     def discard_last_view(self) -> dict[str, Any]:
         """Rebuild this session from its journal without its last view (workbench/discard.py)."""

@@ -11,7 +11,9 @@ and a fresh worker takes up the next job. Jobs:
   ``(PlanResult, planner)``, reachability by the cell's geometry
   and, for an arm model, its kinematics with the arm at joints ``q`` and the plate at ``angle`` (the same
   verdicts as the server's cell: reachability is a pure function of the view and the object box);
-- ``("integrate", (planner, frame))``: ``(IntegrationReport, planner)``.
+- ``("integrate", (planner, frame))``: ``(IntegrationReport, planner)``;
+- ``("rebuild", (journal, cell_config, q, angle, surface_samples))``: ``("progress", (stage, done, total))``
+  messages on the way, then the ``Rebuilt`` session (a resume or a discard replays its journal here).
 
 This module imports the planner and (on the first render) open3d; the server imports it only to name the
 target of its processes, and the forkserver preloads it so a new worker starts in milliseconds.
@@ -31,6 +33,8 @@ from devices.cell import Cell
 from devices.config import CameraConfig, CellConfig
 from planner import DepthFrame, Planner, Pose
 from planner.progress import PlanProgress
+from workbench.journal.rebuild import Rebuilt
+from workbench.journal.store import Journal
 from workbench.planning import plan_in
 from workbench.progress import Throttle
 
@@ -50,22 +54,34 @@ class RenderSpec:
 
 
 class _ArmState:
-    """The arm and the plate as a planning cell reads them (``joint_positions()``, ``angle``): the session's
-    joints and plate angle, sent with each plan (move costs start there). It moves nothing."""
+    """The arm as a planning cell reads it (``joint_positions()``): the session's joints, sent with each job
+    (move costs start there; a rebuild resets them to each capture's). It moves nothing."""
 
     def __init__(self, joint_names: tuple[str, ...], q: NDArray[np.float64]) -> None:
         self.joint_names = joint_names
         self.q = q
-        self.angle = 0.0
 
     def joint_positions(self) -> NDArray[np.float64]:
         return self.q
+
+    def reset(self, q: NDArray[np.float64]) -> None:
+        self.q = np.asarray(q, dtype=np.float64)
 
     def execute(self, trajectory: object) -> None:
         raise RuntimeError("worker: a planning cell does not move")
 
     def stop(self) -> None:
         pass
+
+
+class _PlateState:
+    """The turntable as a planning cell reads it (``angle``). It turns nothing."""
+
+    def __init__(self) -> None:
+        self.angle = 0.0
+
+    def reset(self, angle: float) -> None:
+        self.angle = float(angle)
 
     def rotate_to(self, angle: float) -> None:
         raise RuntimeError("worker: a planning cell does not move")
@@ -86,7 +102,7 @@ class _Throttled:
 class _Worker:
     def __init__(self) -> None:
         self.camera: Any = None
-        self.geometry: dict[CellConfig, tuple[Cell, _ArmState | None]] = {}
+        self.geometry: dict[CellConfig, tuple[Cell, tuple[_ArmState, _PlateState] | None]] = {}
 
     def setup(self, spec: RenderSpec) -> None:
         import trimesh
@@ -113,13 +129,33 @@ class _Worker:
                 from devices.arm.kinematics import ArmKinematics
 
                 kinematics = ArmKinematics(config.arm, config.plate_radius, config.plate_thickness)
-                state = _ArmState(kinematics.joint_names, np.asarray(q, dtype=np.float64))
-                cell = Cell(cast(Any, None), state, cast(Any, state), config, kinematics=kinematics)
-                self.geometry[config] = (cell, state)
+                arm, plate = _ArmState(kinematics.joint_names, np.asarray(q, dtype=np.float64)), _PlateState()
+                cell = Cell(cast(Any, None), arm, cast(Any, plate), config, kinematics=kinematics)
+                self.geometry[config] = (cell, (arm, plate))
         cell, state = self.geometry[config]
         if state is not None and q is not None:
-            state.q, state.angle = np.asarray(q, dtype=np.float64), float(angle)
+            state[0].reset(q)
+            state[1].reset(angle)
         return cell
+
+    def rebuild(self, payload: Any, send: Callable[[Any], None] | None) -> Rebuilt:
+        """:func:`workbench.journal.rebuild.rebuild` of a journal in this worker's planning cell; the replayed
+        captures' plans stay here (the pending and last plans travel in the result)."""
+        from workbench.journal.rebuild import rebuild
+        from workbench.metrics import coverage
+
+        journal, config, q, angle, samples = cast(tuple[Journal, CellConfig, Any, float, Any], payload)
+        throttle = Throttle()
+
+        def report(stage: str, done: int, total: int) -> None:
+            if send is not None and throttle(stage, done, total):
+                send((stage, done, total))
+
+        truth = None if samples is None else (lambda cloud: coverage(samples, cloud))
+        rebuilt = rebuild(journal, self.reach(config, q, angle), truth, report)
+        for capture in rebuilt.captures:
+            capture.plans.clear()
+        return rebuilt
 
     def run(self, kind: str, payload: Any, send: Callable[[Any], None] | None = None) -> Any:
         """The answer of one job; ``send`` ships ``("progress", value)`` messages to the server on the way."""
@@ -132,6 +168,8 @@ class _Worker:
             report = _Throttled(send) if send is not None else None
             plan = plan_in(self.reach(config, q, angle), planner, report)  # as in the server: the box, move costs
             return plan, planner
+        if kind == "rebuild":
+            return self.rebuild(payload, send)
         if kind == "integrate":
             planner, frame = cast(tuple[Planner, DepthFrame], payload)
             report = planner.integrate(frame)

@@ -209,3 +209,33 @@ def test_a_discard_and_a_resume_report_the_journal_they_replay(tmp_path: Path) -
             registry.create(model="l-block", config=SMALL, progress_id=resume_id("12345678"))
     finally:
         registry.close()
+
+
+def test_a_resume_replays_its_journal_in_the_worker(tmp_path: Path) -> None:
+    """With workers (the server's default) the journal is replayed in the session's worker, bounded and killable
+    like its plans: the rebuilt map and pending plan equal the live session's, with no mismatch."""
+    settings = WorkbenchSettings(data_dir=tmp_path / "data")
+    registry = SessionRegistry(settings)
+    try:
+        session = registry.create(model="l-block", config=SMALL)
+        session.capture()
+        session.auto.step(2)
+        live = session.plan()
+        assert session.journal is not None
+        session.journal.close()
+        other = SessionRegistry(settings)
+        try:
+            wb, rebuilt = other.resume(session.id)
+            assert wb.worker is not None and wb.worker.jobs == 1  # the rebuild was its worker's first job
+            assert rebuilt.mismatches == [] and rebuilt.dropped == []
+            assert np.array_equal(wb.planner.voxel_map.classes, session.planner.voxel_map.classes)
+            assert wb.pending is not None and wb.pending.plan_id == live.plan_id
+            assert wb.pending.plan.best_index == live.plan.best_index
+            assert [s.score for s in wb.pending.plan.scores] == [s.score for s in live.plan.scores]
+            assert wb.cell.joint_positions() is not None and np.allclose(
+                wb.cell.joint_positions(), session.cell.joint_positions()
+            )  # the arm where the session left it
+        finally:
+            other.close()
+    finally:
+        registry.close()
