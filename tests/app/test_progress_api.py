@@ -94,13 +94,21 @@ def test_a_creates_progress_is_pushed_and_delete_cancels_it(settings: AppSetting
             "building the cell",
             "starting the session",
         ]
-        # cancelled while it reads the mesh: 409, no session, the id free again
+        # cancelled while it reads the mesh (held there until the DELETE answered): 409, no session, the id free
+        hold = threading.Event()
+
+        def hold_reading(progress_id: str, progress: Any) -> None:
+            if progress_id == "tab-create-2" and progress is not None and progress.stage == "reading the mesh":
+                hold.wait(30)
+
+        live.registry.creations.listeners.append(hold_reading)
         with websockets.sync.client.connect(ws_url.replace("tab-create-1", "tab-create-2")) as ws:
             thread, box = post_in_thread(
                 f"{live.url}/api/sessions", {"model": "ball.obj", "config": SMALL, "progress_id": "tab-create-2"}
             )
             receive_until(ws, lambda m: m["type"] == "create" and m["progress"] is not None)
             assert api.delete("/api/creations/tab-create-2").status_code == 204
+            hold.set()
             thread.join(60)
         r = box["response"]
         assert r.status_code == 409 and "cancelled" in r.json()["detail"], r.text
