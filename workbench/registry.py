@@ -197,7 +197,9 @@ class SessionRegistry:
         if progress_id is not None and progress_id.startswith(resume_id("")):
             raise Invalid(f"progress_id: {progress_id!r} starts with 'resume-', which resumes use")
         with self.creations.run(progress_id) as creation:
-            return self._create(planner_config, model, seed, source, fault_config, planner, creation)
+            return self._create(
+                planner_config, model, seed, source, fault_config, faults is not None, planner, creation
+            )
 
     def _create(
         self,
@@ -206,13 +208,13 @@ class SessionRegistry:
         seed: int,
         source: dict[str, Any] | None,
         fault_config: FaultConfig,
+        faults_asked: bool,
         planner: str,
         creation: Creation,
     ) -> Session:
         name = model or self.settings.devices.model
         devices = session_devices(self.settings, name, seed)
-        asked = fault_config is not self.settings.faults
-        parts = build_parts(self.settings, name, source, seed, devices, fault_config, creation.stage, asked)
+        parts = build_parts(self.settings, name, source, seed, devices, fault_config, creation.stage, faults_asked)
         if parts.injector is None:
             fault_config = FaultConfig()  # real hardware: none injected (the journal says so)
         try:

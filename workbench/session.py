@@ -274,15 +274,15 @@ class Session:
         to state error with the reason (DeviceFault), its map and pending plan unchanged; plan again to go on.
         """
         planner = self.planner
-        in_worker = self.worker is not None and type(self.cell).is_reachable is Cell.is_reachable
+        worker = self._planning_worker()
         self._stop_plan = False
-        self.progress.begin("plan", stoppable=in_worker)
+        self.progress.begin("plan", stoppable=worker is not None)
         try:
-            if self.worker is None or not in_worker:
+            if worker is None:
                 plan = plan_in(self.cell, planner, self.progress.plan)
             else:  # the worker's cell has this cell's geometry, arm model, joints and plate angle
                 q, angle = self.cell.joint_positions(), self.cell.angle
-                plan, planner = self.worker.plan(
+                plan, planner = worker.plan(
                     planner, self.cell.config, self.plan_budget, q, angle, on_progress=self.progress.plan
                 )
                 if planner.voxel_map.bbox is not None:
@@ -473,16 +473,23 @@ class Session:
                     self.cell.restore_device_state(rebuilt.device_state)
             self._state = State.NEW if self.planner.iteration == 0 else self.settle()
 
+    def _planning_worker(self) -> SessionWorker | None:
+        """The worker that plans (and replays) for this session: its own, unless there is none or the cell judges
+        reachability its own way (a replay cell), which a worker's planning cell (the config's geometry and arm
+        model) could not reproduce."""
+        return self.worker if type(self.cell).is_reachable is Cell.is_reachable else None
+
     def replay(self, journal: Journal, progress: Callable[[str, int, int], None] | None = None) -> Rebuilt:
         """This session's state rebuilt from ``journal`` (a resume, a discard), to :meth:`restore`: in its worker
         when it has one (killed with it on DELETE and at shutdown), else here. ValueError / KeyError / TypeError
         for a journal that cannot be replayed; JobKilled when the worker was killed."""
         samples = self.surface_samples
-        if self.worker is None or type(self.cell).is_reachable is not Cell.is_reachable:
+        worker = self._planning_worker()
+        if worker is None:
             truth = None if samples is None else (lambda cloud: coverage(samples, cloud))
             return rebuild(journal, self.cell, truth, progress)
         q, angle = self.cell.joint_positions(), self.cell.angle
-        rebuilt = self.worker.rebuild(journal, self.cell.config, q, angle, samples, progress)
+        rebuilt = worker.rebuild(journal, self.cell.config, q, angle, samples, progress)
         if rebuilt.planner.voxel_map.bbox is not None:
             self.cell.set_object_box(rebuilt.planner.voxel_map.bbox)  # the box the replayed plans used
         return rebuilt
