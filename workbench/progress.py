@@ -14,7 +14,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
-from planner.progress import PlanProgress
+from planner.progress import PlanProgress, Stages
 
 CREATE_STAGES = (
     "checking the file",
@@ -93,7 +93,7 @@ class Tracker:
         self.interval = interval
         self._lock = threading.Lock()
         self._current: Progress | None = None
-        self._names: list[str] = []
+        self._stages = Stages([], self.plan)  # numbers the stages named by :meth:`stage`
         self._throttle = Throttle(interval)
 
     @property
@@ -103,9 +103,9 @@ class Tracker:
     def begin(self, operation: str, stages: Sequence[str] = (), stoppable: bool = False) -> None:
         """A new operation (any running one is replaced); ``stages`` names its stages in order, if known."""
         with self._lock:
-            self._names = list(stages)
-            first = self._names[0] if self._names else "starting"
-            self._current = Progress(operation, first, 1, max(1, len(self._names)), 0, 0, time.monotonic(), stoppable)
+            self._stages = Stages(stages, self.plan)
+            first = stages[0] if stages else "starting"
+            self._current = Progress(operation, first, 1, max(1, len(stages)), 0, 0, time.monotonic(), stoppable)
             self._throttle = Throttle(self.interval)
             self._throttle(first, 0, 0)
             current = self._current
@@ -113,20 +113,10 @@ class Tracker:
 
     def stage(self, name: str, done: int = 0, total: int = 0) -> None:
         """The operation is at stage ``name`` (added after the named ones if unnamed), ``done`` of ``total``."""
-        with self._lock:
-            if self._current is None:
-                return
-            if name not in self._names:
-                self._names.append(name)
-            step = self._names.index(name) + 1
-            send = self._report(
-                replace(self._current, stage=name, step=step, steps=len(self._names), done=done, total=total)
-            )
-        if send is not None:
-            self.sink(send)
+        self._stages(name, done, total)
 
     def plan(self, p: PlanProgress) -> None:
-        """A plan's own report (its stages numbered by the planner)."""
+        """A report with its stage numbered (by the planner, or by :meth:`stage`)."""
         with self._lock:
             if self._current is None:
                 return
