@@ -33,6 +33,12 @@ function withToken(url) {
   return url + (url.includes("?") ? "&" : "?") + "token=" + encodeURIComponent(TOKEN);
 }
 
+// The page's pushed events (/api/events?session=ID or ?create=PROGRESS_ID), same host, the token if any.
+function eventSocket(key, value) {
+  const proto = location.protocol === "https:" ? "wss" : "ws";
+  return new WebSocket(`${proto}://${location.host}` + withToken(`/api/events?${key}=${encodeURIComponent(value)}`));
+}
+
 function pageUrl(params) {
   const q = new URLSearchParams(params);
   if (TOKEN) q.set("token", TOKEN);
@@ -189,8 +195,7 @@ async function openViewer() {
 }
 
 function connectEvents(delay) {
-  const proto = location.protocol === "https:" ? "wss" : "ws";
-  const ws = new WebSocket(`${proto}://${location.host}` + withToken(`/api/events?session=${encodeURIComponent(S.session)}`));
+  const ws = eventSocket("session", S.session);
   S.events = ws;
   let opened = false;
   ws.onopen = () => {
@@ -224,8 +229,7 @@ function showProgress(p) {
 // A create's progress (reading, checking and sampling the mesh, building the cell) on its own event stream,
 // open before the create starts (at most 2 s of waiting: without it the create just shows no stages).
 async function followCreate(progressId) {
-  const proto = location.protocol === "https:" ? "wss" : "ws";
-  const ws = new WebSocket(`${proto}://${location.host}` + withToken(`/api/events?create=${encodeURIComponent(progressId)}`));
+  const ws = eventSocket("create", progressId);
   const box = $("create-progress");
   $("create-cancel").dataset.progressId = progressId;
   ws.onmessage = (ev) => {
@@ -523,9 +527,8 @@ async function showCompare(ids) {
     P.renderCompare(sessions, (id) => pageUrl({ session: id }));
   };
   await draw();
-  const proto = location.protocol === "https:" ? "wss" : "ws";
   for (const id of ids) { // live: redraw when a compared session takes a view
-    const ws = new WebSocket(`${proto}://${location.host}` + withToken(`/api/events?session=${encodeURIComponent(id)}`));
+    const ws = eventSocket("session", id);
     ws.onmessage = (ev) => { if (JSON.parse(ev.data).event === "captured") draw(); };
   }
 }
