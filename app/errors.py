@@ -2,16 +2,7 @@
 
 from __future__ import annotations
 
-from workbench.errors import (
-    Conflict,
-    DeviceFault,
-    Invalid,
-    NotFound,
-    StorageFault,
-    TooLarge,
-    Unreachable,
-    WorkbenchError,
-)
+from workbench import Conflict, DeviceFault, Invalid, NotFound, StorageFault, TooLarge, Unreachable, WorkbenchError
 
 STATUS: dict[type[WorkbenchError], int] = {
     NotFound: 404,

@@ -35,8 +35,7 @@ from app.scene.controller import SceneController
 from app.security import SecurityMiddleware, install_log_redaction, openapi_security
 from app.serialize import SafeJSONResponse
 from app.settings import AppSettings, check_exposure, viewer_host
-from workbench.errors import WorkbenchError
-from workbench.registry import SessionRegistry
+from workbench import SessionRegistry, WorkbenchError
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 log = logging.getLogger(__name__)

@@ -9,7 +9,7 @@ from typing import Any
 from fastapi.responses import JSONResponse
 
 from planner import PlanResult
-from workbench.jsonable import jsonable
+from workbench import jsonable
 
 
 class SafeJSONResponse(JSONResponse):

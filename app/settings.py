@@ -35,7 +35,7 @@ from typing import Any
 from devices.faults import FaultConfig
 from planner.config import merge
 from planner.validate import integer
-from workbench.settings import WorkbenchSettings
+from workbench import WorkbenchSettings
 
 MIN_TOKEN_LENGTH = 12
 

@@ -28,8 +28,8 @@ from typing import Any
 from devices.builtins import resolve_model
 from devices.config import CameraConfig, CellConfig
 from devices.sim import make_sim_cell
-from nbv.scan import IterationRecord, run_scan
 from planner import Planner, PlannerConfig, PlanResult
+from workbench.evaluation import IterationRecord, run_scan
 
 
 def timed_scan(model: str, views: int, kinematics: str, seed: int) -> dict[str, Any]:

@@ -11,7 +11,7 @@ Run from the project root::
 Ceilings are computed once, before the timings (the cache), so only the runs are compared.
 
 ``ceiling`` computes, per model (the four Stanford models; with ``--extra`` also the thirteen of
-``models/extra``), the visibility ceiling (:func:`workbench.object_ceiling.ceiling_mask`) and the
+``models/extra``), the visibility ceiling (:func:`workbench.evaluation.object_ceiling.ceiling_mask`) and the
 render-based reference on the same samples and views, and prints: reachable views, both ceilings,
 the share of samples classified the same, the two wall times, and (unless ``--no-scan``) the
 wall time of a 10-view projection scan of the model and the ceiling's share of it.
@@ -25,6 +25,8 @@ import argparse
 import json
 import os
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -33,28 +35,30 @@ from devices.builtins import resolve_model
 from devices.config import CameraConfig, CellConfig
 from devices.sim import make_sim_cell
 from planner.config import PlannerConfig
-from workbench.ceiling import DEFAULT_CEILING
-from workbench.object_ceiling import ceiling_mask, reference_mask
+from workbench.evaluation import DEFAULT_CEILING, ceiling_mask, reference_mask, simulate
 
 GRID_MODELS = ["l-block", "mug", "two-boxes"]
 
 
-def sweep(views: int, seeds: int) -> dict[str, float]:
-    from nbv.cli import main
+def main_cli(args: list[str]) -> int:
+    """Run the ``nbv`` command (the installed entry point beside this interpreter) as a user would."""
+    return subprocess.run([str(Path(sys.executable).with_name("nbv")), *args], check=False).returncode
 
+
+def sweep(views: int, seeds: int) -> dict[str, float]:
     common = ["--models", *GRID_MODELS, "--planners", "projection,random", "--seeds", str(seeds)]
     common += ["--views", str(views)]
     results: dict[str, float] = {}
     with tempfile.TemporaryDirectory() as tmp:
         cache = ["--ceiling-cache", str(Path(tmp) / "ceilings")]
-        main(["bench", *common, "--jobs", "1", "--views", "1", "--seeds", "1", "--out", f"{tmp}/warm", *cache])
+        main_cli(["bench", *common, "--jobs", "1", "--views", "1", "--seeds", "1", "--out", f"{tmp}/warm", *cache])
         runs = len(GRID_MODELS) * 2 * seeds
         for name, extra in (
             ("local, 2 jobs", ["--executor", "local", "--jobs", "2"]),
             ("dask, 2 workers", ["--executor", "dask", "--workers", "2"]),
         ):
             t0 = time.perf_counter()
-            code = main(["bench", *common, *extra, "--out", f"{tmp}/{name.split(',')[0]}", *cache])
+            code = main_cli(["bench", *common, *extra, "--out", f"{tmp}/{name.split(',')[0]}", *cache])
             wall = time.perf_counter() - t0
             results[name] = 60.0 * runs / wall
             print(f"{name:<16} {runs} scans in {wall:6.1f} s: {results[name]:.1f} scans per minute (exit {code})")
@@ -62,8 +66,6 @@ def sweep(views: int, seeds: int) -> dict[str, float]:
 
 
 def ceiling_table(models: list[Path], scan: bool) -> list[dict[str, float | str]]:
-    from nbv.run import simulate
-
     planner = PlannerConfig()
     camera = CameraConfig()
     rows: list[dict[str, float | str]] = []

@@ -20,8 +20,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from workbench.registry import SessionRegistry
-from workbench.settings import WorkbenchSettings
+from workbench import SessionRegistry, WorkbenchSettings
 
 
 def run(workers: bool, model: str, views: int, config: dict[str, Any]) -> dict[str, Any]:

@@ -15,13 +15,13 @@ from collections.abc import Callable
 
 import numpy as np
 
-from nbv.run import simulate
 from planner.baselines.evaluators import AporaEvaluator
 from planner.candidates import propose_candidates
 from planner.config import PlannerConfig, ZBufferConfig
 from planner.evaluators import EvaluationContext
 from planner.scoring import score_views
 from planner.visibility import score_visible_frontier
+from workbench.evaluation import simulate
 
 
 def best_of(fn: Callable[[], object], repeats: int) -> tuple[float, float]:

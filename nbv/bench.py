@@ -2,7 +2,7 @@
 
 ``nbv bench --models l-block mug --planners projection,raycast-apora,random --seeds 2 --yaws 0,90``
 runs every (model, placement, seed, planner) combination as one simulated scan
-(:func:`nbv.run.simulate`) on an executor (:mod:`nbv.executors`: ``--executor local`` with
+(:func:`nbv.scan_cmd.simulate`) on an executor (:mod:`nbv.executors`: ``--executor local`` with
 ``--jobs`` worker processes, or ``--executor dask`` on a Dask cluster) and writes
 
 - ``DIR/results.csv``: one row per (model, planner, seed, yaw, iteration), rewritten as runs complete;
@@ -11,7 +11,7 @@ runs every (model, placement, seed, planner) combination as one simulated scan
   see :mod:`nbv.bench_report`.
 
 The reachable-coverage ceiling belongs to the object and its placement, not to a run: it is
-computed once per (model, yaw) before the runs (:func:`workbench.object_ceiling.cached_ceiling`,
+computed once per (model, yaw) before the runs (:func:`workbench.evaluation.object_ceiling.cached_ceiling`,
 about a second; cached on disk under ``--ceiling-cache``) and shared by every planner and seed.
 
 Fairness: every planner of a (model, placement, seed) gets the same cell, the same first view
@@ -199,7 +199,7 @@ def compute_ceilings(
     from devices.config import CameraConfig, CellConfig
     from devices.mesh import turned_about_plate_axis
     from devices.sim import make_sim_cell
-    from workbench.object_ceiling import cached_ceiling
+    from workbench.evaluation import cached_ceiling
 
     config = planner_config_from_args(args)
     camera = CameraConfig()

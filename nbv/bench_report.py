@@ -212,7 +212,7 @@ def _ratio_panel(
     ax: Any, outcomes: Sequence[RunOutcome], model: str, planner: str, ceilings: Ceilings, views: int, color: str
 ) -> None:
     """One planner's mean coverage / ceiling curve over its runs of ``model``, with a ± std band."""
-    from workbench.scan_metrics import ratio_curve
+    from workbench.evaluation import ratio_curve
 
     curves = []
     for o in outcomes:

@@ -16,14 +16,14 @@ from planner.config import PlannerConfig
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
-    from nbv.run import run_and_report
+    from nbv.scan_cmd import run_and_report
 
     run_and_report(args, profile=False)
     return 0
 
 
 def cmd_profile(args: argparse.Namespace) -> int:
-    from nbv.run import run_and_report
+    from nbv.scan_cmd import run_and_report
 
     run_and_report(args, profile=True)
     return 0

@@ -26,7 +26,7 @@ from concurrent.futures.process import BrokenProcessPool
 
 from nbv.runs import MeshPayload, RunOutcome, RunTask
 
-PRELOAD = ("nbv.executors", "nbv.run", "planner.baselines", "devices.sim", "open3d", "sklearn.mixture")
+PRELOAD = ("nbv.executors", "workbench.evaluation", "planner.baselines", "devices.sim", "open3d", "sklearn.mixture")
 """Modules the fork server imports once, so a run's process starts in milliseconds, not seconds."""
 
 Done = Callable[[RunOutcome], None]
@@ -59,7 +59,7 @@ def execute(task: RunTask, mesh: MeshPayload | None = None) -> RunOutcome:
 
 
 def _execute(task: RunTask, mesh: MeshPayload | None, t0: float) -> RunOutcome:
-    from nbv.run import simulate
+    from workbench.evaluation import simulate
 
     scan = simulate(
         task.model if mesh is None else task.label,

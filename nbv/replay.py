@@ -1,7 +1,7 @@
 """re-run a journaled session headless and check that it reproduces its metrics
 
 ``nbv replay DATA_DIR/sessions/ID`` feeds the journaled frames, in their order,
-through a fresh Planner with the journaled config and seed (workbench/journal/replay.py),
+through a fresh Planner with the journaled config and seed (workbench/journal/check.py),
 re-makes every journaled plan, and compares points, voxel counts, coverage and
 each plan's best view and score with the journal. It prints a table, writes
 ``metrics.json`` (the layout of ``nbv scan``'s, plus the comparison) and
@@ -33,8 +33,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _iteration(capture: Any) -> dict[str, Any]:
     """One row of metrics.json: nbv scan's record of the capture and the (last) plan made from it, replayed,
     and what the journal recorded."""
-    from nbv.scan import make_record
-    from workbench.summaries import best_of
+    from workbench import best_of
+    from workbench.evaluation import make_record
 
     ev = capture.event
     plan_event, plan = capture.plans[-1] if capture.plans else (None, None)
@@ -90,9 +90,9 @@ def _pair(replayed: Any, recorded: Any) -> str:
 def run(args: argparse.Namespace) -> int:
     """Replay, report, write the outputs; 0 when the journal was reproduced, 1 when not."""
     from devices.ply import write_ply
-    from workbench.journal.replay import replay_journal
+    from workbench.journal import check_journal
 
-    replay = replay_journal(args.journal, args.models_dir)
+    replay = check_journal(args.journal, args.models_dir)
     journal, rebuilt = replay.journal, replay.rebuilt
     rows = [_iteration(c) for c in rebuilt.captures]
     _table(rows, rebuilt.mismatches)

@@ -1,5 +1,56 @@
 """Supervised scanning, independent of HTTP and of the 3D scene.
 
-A session (:class:`workbench.session.Session`) owns a planner, a cell and a lock; every state change
-of a scan goes through it. Importing this package loads no fastapi, uvicorn or viser.
+A session (:class:`Session`) owns a planner, a cell and a lock; every state change of a scan goes through
+it (workbench/session/). The registry (:class:`SessionRegistry`, workbench/registry/) holds the live ones
+and the journaled ones of an earlier server. Importing this package loads no fastapi, uvicorn or viser.
+
+These names are the public API the web layer (app/), the command line (nbv/) and the benchmarks use;
+``workbench.evaluation`` and ``workbench.journal`` list their own. docs/architecture.md shows the tree.
 """
+
+from workbench.errors import (
+    Conflict,
+    DeviceFault,
+    Invalid,
+    NotFound,
+    StorageFault,
+    TooLarge,
+    Unreachable,
+    WorkbenchError,
+)
+from workbench.jsonable import jsonable
+from workbench.progress import Progress
+from workbench.registry.creations import resume_id
+from workbench.registry.registry import SessionRegistry
+from workbench.session.session import Session
+from workbench.session.summaries import best_of, plan_summary
+from workbench.session.values import BUSY, SceneData, SessionEvent, State
+from workbench.settings import WorkbenchSettings
+from workbench.sources.catalog import list_models, save_upload
+from workbench.sources.parts import list_recordings
+
+__all__ = [
+    "BUSY",
+    "Conflict",
+    "DeviceFault",
+    "Invalid",
+    "NotFound",
+    "Progress",
+    "SceneData",
+    "Session",
+    "SessionEvent",
+    "SessionRegistry",
+    "State",
+    "StorageFault",
+    "TooLarge",
+    "Unreachable",
+    "WorkbenchError",
+    "WorkbenchSettings",
+    "best_of",
+    "jsonable",
+    "list_models",
+    "list_recordings",
+    "plan_summary",
+    "resume_id",
+    "save_upload",
+]

@@ -15,7 +15,7 @@ from devices.config import DeviceConfig
 from devices.faults import FaultConfig
 from planner.config import PlannerConfig
 from planner.validate import finite, integer
-from workbench.limits import MeshLimits
+from workbench.sources.limits import MeshLimits
 
 
 def default_models_dir() -> Path:
@@ -47,14 +47,14 @@ class WorkbenchSettings:
     is killed in its worker process like a plan, seconds (0: no limit). The move before it has move_timeout."""
     workers: bool = True
     """Run each live session's heavy work (rendering, integration, fitting, scoring) in a worker process that
-    can be killed (workbench/engine.py); False: in the server process (tests of the state machine alone)."""
+    can be killed (workbench/workers/pool.py); False: in the server process (tests of the state machine alone)."""
     max_running_jobs: int = 0
     """Heavy jobs running at once over all sessions (others wait their turn); 0: os.cpu_count()."""
     max_idle_workers: int = 4
     """Worker processes kept for idle sessions; beyond this the least recently used is stopped (rebuilt from
     the journal when its session works again)."""
     mesh_limits: MeshLimits = field(default_factory=MeshLimits)
-    """What a model mesh may cost (triangles, vertices, polygon degree, triangles per vertex): workbench/limits.py."""
+    """What a model mesh may cost (triangles, vertices, polygon degree, triangles per vertex): workbench/sources/limits.py."""
     trash_max_bytes: int = 500 * 1024 * 1024
     """Deleted sessions wait in ``data_dir/sessions/.trash``; beyond this total size the oldest are removed."""
     trash_max_age: float = 7 * 24 * 3600.0
@@ -70,7 +70,7 @@ class WorkbenchSettings:
     in models_dir), ``devices.size`` / ``devices.up`` apply to every model file."""
     cell: str = ""
     """A cell file (docs/hardware.md): new sessions drive its camera, arm and turntable (source ``hardware``,
-    workbench/hardware.py). "" = simulated sessions. Read when a session is created or resumed."""
+    workbench/sources/hardware.py). "" = simulated sessions. Read when a session is created or resumed."""
     dry_run: bool = False
     """With ``cell``: hardware sessions plan, preview and take approvals as usual, but their captures come
     from the simulator on the cell file's arm model and no device is opened or moved (rehearse a scan)."""

@@ -1,6 +1,6 @@
 """The REST API (the paths are a contract of issue 4; OpenAPI at /docs): one router per resource.
 
-Thin routes: each calls the session (workbench/session.py) or the registry and returns a schema object.
+Thin routes: each calls the session (workbench/session/session.py) or the registry and returns a schema object.
 Heavy routes are plain ``def`` (FastAPI runs them in its thread pool). Errors are ``{"detail": ...}`` with
 400 (bad Host), 401 (token), 403 (cross-origin), 404 (unknown session / candidate / model / recording),
 409 (wrong state, stale or used plan_id, an interrupted session not resumed yet), 413 (body too large),

@@ -8,9 +8,7 @@ from fastapi import Depends, Request
 
 from app.scene.controller import SceneController
 from app.settings import AppSettings
-from workbench.errors import Conflict
-from workbench.registry import SessionRegistry
-from workbench.session import Session
+from workbench import Conflict, Session, SessionRegistry
 
 
 def registry_of(request: Request) -> SessionRegistry:

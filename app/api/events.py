@@ -29,12 +29,7 @@ from urllib.parse import urlsplit
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 
 from app.settings import AppSettings
-from workbench.creations import resume_id
-from workbench.errors import Conflict, WorkbenchError
-from workbench.jsonable import jsonable
-from workbench.progress import Progress
-from workbench.session import Session
-from workbench.states import SessionEvent
+from workbench import Conflict, Progress, Session, SessionEvent, WorkbenchError, jsonable, resume_id
 
 router = APIRouter()
 log = logging.getLogger(__name__)

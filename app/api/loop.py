@@ -17,8 +17,7 @@ from app.schemas import (
     SessionOut,
     StepRequest,
 )
-from workbench.hardware import stop_devices
-from workbench.summaries import plan_summary
+from workbench import plan_summary
 
 router = APIRouter()
 
@@ -77,7 +76,5 @@ def stop(session: SessionDep) -> dict[str, Any]:
     plan request answers 409), auto mode (after the current action; a plan of it is killed at once); on
     hardware also a running move of the arm and the turntable, at once (the session then goes to its error
     state, the arm's last joints in its error)."""
-    session.stop_plan()
-    session.auto.stop()
-    stop_devices(session)
+    session.stop()
     return session.status()

@@ -8,9 +8,7 @@ from fastapi import APIRouter, UploadFile
 
 from app.api.deps import Settings
 from app.schemas import ModelOut
-from workbench.catalog import list_models, save_upload
-from workbench.errors import TooLarge
-from workbench.factory import list_recordings
+from workbench import TooLarge, list_models, list_recordings, save_upload
 
 router = APIRouter()
 

@@ -10,7 +10,7 @@ from fastapi.responses import JSONResponse
 from app.api.deps import Registry, SessionDep, Settings
 from app.schemas import FaultRequest, ResumeOut, SessionCreate, SessionCreated, SessionOut
 from app.serialize import SafeJSONResponse
-from workbench.errors import Conflict, Invalid, NotFound
+from workbench import Conflict, Invalid, NotFound
 
 router = APIRouter()
 

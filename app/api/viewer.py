@@ -10,7 +10,7 @@ from app.api.deps import Registry, Scene, Settings
 from app.scene.guard import viewer_url
 from app.schemas import ViewerOut, ViewerRequest, ViewerTicketOut
 from app.settings import AppSettings, is_loopback, viewer_host
-from workbench.errors import Conflict
+from workbench import Conflict
 
 router = APIRouter()
 

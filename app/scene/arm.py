@@ -21,7 +21,7 @@ from devices.arm.model import ArmModel
 from devices.cell import Motion
 from devices.protocols import UnreachableError
 from planner import PlanResult, Pose
-from workbench.states import BUSY, SceneData
+from workbench import BUSY, SceneData
 
 _URDFS: dict[int, Any] = {}
 _URDF_LOCK = threading.Lock()

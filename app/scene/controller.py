@@ -32,10 +32,17 @@ from app.scene.guard import install_guard
 from app.scene.robot import RobotScene
 from app.scene.tickets import Ticket, TicketBook
 from planner import Pose
-from workbench.errors import Conflict, Invalid, NotFound, Unreachable, WorkbenchError
-from workbench.registry import SessionRegistry
-from workbench.session import Session
-from workbench.states import SessionEvent, State
+from workbench import (
+    Conflict,
+    Invalid,
+    NotFound,
+    Session,
+    SessionEvent,
+    SessionRegistry,
+    State,
+    Unreachable,
+    WorkbenchError,
+)
 
 log = logging.getLogger(__name__)
 

@@ -42,7 +42,7 @@ from app.scene.geometry import (
     sector_segments,
 )
 from planner import PlanResult, Pose
-from workbench.states import SceneData
+from workbench import SceneData
 
 log = logging.getLogger(__name__)
 

@@ -17,7 +17,7 @@ from fastapi.testclient import TestClient
 
 from app.main import create_app
 from app.settings import AppSettings
-from workbench.limits import BOUNDS, MeshLimits
+from workbench.sources.limits import BOUNDS, MeshLimits
 
 
 def fan_bomb(lines: int = 327, corners: int = 4000) -> bytes:

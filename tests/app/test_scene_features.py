@@ -12,7 +12,7 @@ from app.main import create_app
 from app.settings import AppSettings
 from workbench.journal.discard import last_capture, without_discarded
 from workbench.journal.store import read_journal, sessions_dir
-from workbench.trash import trash_dir
+from workbench.journal.trash import trash_dir
 
 
 def test_the_planner_is_chosen_per_session_and_journaled(client: TestClient, settings: AppSettings) -> None:

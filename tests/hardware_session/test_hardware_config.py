@@ -9,7 +9,7 @@ import pytest
 
 from devices.cellfile import CellFile, parse_cell
 from devices.config import CellConfig
-from workbench.hardware import arm_cell_config, arm_kinematics, auto_refusal
+from workbench.sources.hardware import arm_cell_config, arm_kinematics, auto_refusal
 
 
 def cell(arm_base: dict | None = None, **arm: object) -> CellFile:

@@ -16,7 +16,7 @@ from tests.helpers import SMALL
 @pytest.fixture(scope="module")
 def journaled(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict, bytes]:
     """A session journaled by the workbench: first view, an override, two steps, a plan left pending."""
-    from workbench.registry import SessionRegistry
+    from workbench.registry.registry import SessionRegistry
 
     data = tmp_path_factory.mktemp("replay") / "data"
     registry = SessionRegistry(AppSettings(scene=False, data_dir=data))

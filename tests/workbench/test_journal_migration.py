@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from workbench.registry import SessionRegistry
+from workbench.registry.registry import SessionRegistry
 from workbench.settings import WorkbenchSettings
 
 FIXTURE = Path(__file__).parent / "fixtures" / "journal_v1"

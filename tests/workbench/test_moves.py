@@ -15,8 +15,8 @@ from devices.sim import SimulatedArm
 from planner import Pose
 from tests.helpers import SMALL
 from workbench.errors import DeviceFault
-from workbench.registry import SessionRegistry
-from workbench.session import Session
+from workbench.registry.registry import SessionRegistry
+from workbench.session.session import Session
 from workbench.settings import WorkbenchSettings
 
 

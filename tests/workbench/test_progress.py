@@ -14,14 +14,14 @@ import pytest
 import trimesh
 
 from tests.helpers import SMALL
-from workbench.creations import resume_id
 from workbench.errors import Conflict, Invalid
 from workbench.journal.rebuild import REPLAY_STAGE
 from workbench.progress import CREATE_STAGES, Progress, Throttle, Tracker
-from workbench.registry import SessionRegistry
-from workbench.session import Session
+from workbench.registry.creations import resume_id
+from workbench.registry.registry import SessionRegistry
+from workbench.session.session import Session
+from workbench.session.values import SessionEvent
 from workbench.settings import WorkbenchSettings
-from workbench.states import SessionEvent
 
 HEAVY: dict[str, Any] = {
     "voxel": {"resolution": 0.01},

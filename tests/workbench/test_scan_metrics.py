@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from workbench.scan_metrics import (
+from workbench.evaluation.curves import (
     THRESHOLDS,
     area_under_curve,
     mean_std,

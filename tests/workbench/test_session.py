@@ -11,8 +11,8 @@ from planner import Pose
 from tests.helpers import SMALL, wait_for_state, wait_until
 from workbench.errors import Conflict, DeviceFault, Invalid, NotFound, Unreachable
 from workbench.journal.store import read_journal
-from workbench.registry import SessionRegistry
-from workbench.states import DecisionKind, SessionEvent, State
+from workbench.registry.registry import SessionRegistry
+from workbench.session.values import DecisionKind, SessionEvent, State
 
 
 def test_the_loop_capture_plan_approve_moves_once_per_plan(registry: SessionRegistry) -> None:

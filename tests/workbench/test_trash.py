@@ -7,9 +7,9 @@ from pathlib import Path
 
 from tests.helpers import SMALL
 from workbench.journal.store import JOURNAL_FILE, list_journals
-from workbench.registry import SessionRegistry
+from workbench.journal.trash import entries, move_to_trash, prune, trash_dir
+from workbench.registry.registry import SessionRegistry
 from workbench.settings import WorkbenchSettings
-from workbench.trash import entries, move_to_trash, prune, trash_dir
 
 
 def fake_session(data_dir: Path, sid: str, size: int) -> Path:

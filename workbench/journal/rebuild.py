@@ -25,9 +25,9 @@ from planner.planner import IntegrationReport
 from workbench.journal.discard import without_discarded
 from workbench.journal.store import Journal
 from workbench.planning import plan_in
-from workbench.record import SessionRecord
-from workbench.states import PendingPlan
-from workbench.summaries import best_of, capture_fields, plan_fields, voxel_counts
+from workbench.session.record import SessionRecord
+from workbench.session.summaries import best_of, capture_fields, plan_fields, voxel_counts
+from workbench.session.values import PendingPlan
 
 SCORE_RTOL = 1e-9
 """Relative tolerance of a replayed score (the same computation on the same build is exact)."""

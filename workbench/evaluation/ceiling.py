@@ -52,7 +52,7 @@ from planner.validate import finite, integer, require
 
 @dataclass(frozen=True)
 class CeilingConfig:
-    """How the ceiling is measured (the defaults match ``workbench.metrics.coverage`` and ``nbv bench``)."""
+    """How the ceiling is measured (the defaults match ``workbench.evaluation.coverage.coverage`` and ``nbv bench``)."""
 
     coverage_radius: float = 0.005
     """A sample is covered when a scanned point lies within this distance, metres (as in coverage)."""

@@ -4,102 +4,16 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import statistics
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from rich.console import Console
 from rich.table import Table
 
 from nbv.options import planner_config_from_args
-from nbv.scan import STAGES, IterationRecord, ScanResult, run_scan
-from planner import Planner, PlannerConfig, PlanResult
-
-
-@dataclass
-class SimScan:
-    """A finished simulated scan with what is needed to report on it."""
-
-    model: str
-    config: PlannerConfig
-    result: ScanResult
-    planner: Planner
-    reachable_coverage: float | None
-    surface_samples: np.ndarray
-    cell: Any
-
-
-def simulate(
-    model: str,
-    config: PlannerConfig,
-    *,
-    planner_name: str = "projection",
-    size: float = 0.2,
-    up: str = "y",
-    yaw_deg: float = 0.0,
-    seed: int = 0,
-    depth_noise: float = 0.0,
-    pose_noise: float = 0.0,
-    reachable: bool = True,
-    keep_plans: bool = False,
-    console: Console | None = None,
-    mesh: Any = None,
-    arm: str = "urdf",
-) -> SimScan:
-    """Load ``model``, build the simulated cell, run Algorithm 1, measure coverage.
-
-    ``yaw_deg`` turns the placed object about the turntable axis (z through the plate
-    centre) before the scan: the same object, set down another way round. ``mesh``: the
-    placed mesh already loaded (then ``model`` is only its name; ``up`` and ``size`` are not
-    applied again). ``reachable``: also compute the reachable-coverage ceiling of the object
-    and placement (:func:`workbench.object_ceiling.object_ceiling`, independent of the run).
-    ``arm``: 'urdf' (the UR5 with IK, collision checks and joint trajectories) or 'reach_sphere'
-    (``CellConfig.kinematics``).
-    """
-    from devices.builtins import resolve_model
-    from devices.config import CameraConfig, CellConfig
-    from devices.mesh import sample_surface, turned_about_plate_axis
-    from devices.sim import make_sim_cell
-    from workbench.object_ceiling import object_ceiling
-
-    if not (math.isfinite(size) and size > 0):
-        raise ValueError(f"--size: must be > 0, got {size}")
-    if depth_noise < 0 or pose_noise < 0:
-        raise ValueError("--depth-noise and --pose-noise must be >= 0")
-    if not math.isfinite(yaw_deg):
-        raise ValueError(f"--yaw: must be finite, got {yaw_deg}")
-    if mesh is None:
-        name, mesh = resolve_model(model, up=up, size=size)  # type: ignore[arg-type]
-    else:
-        name = model
-    if yaw_deg % 360.0 != 0.0:
-        mesh = turned_about_plate_axis(mesh, yaw_deg)
-    camera = CameraConfig(depth_noise_std=depth_noise, pose_noise_translation=pose_noise)
-    if arm not in ("urdf", "reach_sphere"):
-        raise ValueError(f"--arm: 'urdf' or 'reach_sphere', got {arm!r}")
-    cell = make_sim_cell(mesh, camera, CellConfig(kinematics=arm), seed=seed)  # type: ignore[arg-type]
-    samples = sample_surface(mesh, 10_000, seed=seed)
-    planner = Planner(config, evaluator=planner_name)
-
-    def show(record: IterationRecord, plan: PlanResult) -> None:
-        if console is not None:
-            console.print(_row(record), highlight=False)
-
-    if console is not None:
-        console.print(f"[bold]{name}[/bold]: {config.termination.max_views} views, planner {planner_name}")
-        console.print(_header(), highlight=False)
-    result = run_scan(planner, cell, samples, on_iteration=show, keep_plans=keep_plans)
-    ceiling = None
-    if reachable:
-        t0 = time.perf_counter()
-        ceiling = object_ceiling(mesh, cell, CameraConfig(), config).coverage
-        if console is not None:
-            console.print(f"reachable coverage {ceiling:.4f} ({time.perf_counter() - t0:.1f} s)")
-    return SimScan(name, config, result, planner, ceiling, samples, cell)
+from workbench.evaluation import STAGES, IterationRecord, SimScan, simulate
 
 
 def _header() -> str:
@@ -201,6 +115,10 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
     console = Console(highlight=False)
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
+    def start(name: str) -> None:
+        console.print(f"[bold]{name}[/bold]: {config.termination.max_views} views, planner {args.planner}")
+        console.print(_header(), highlight=False)
+
     scan = simulate(
         args.model,
         config,
@@ -213,9 +131,12 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
         pose_noise=args.pose_noise,
         reachable=not args.no_reachable,
         keep_plans=profile and args.fidelity,
-        console=console,
+        on_start=start,
+        on_iteration=lambda record, plan: console.print(_row(record), highlight=False),
         arm=args.arm,
     )
+    if scan.reachable_coverage is not None:
+        console.print(f"reachable coverage {scan.reachable_coverage:.4f} ({scan.ceiling_seconds:.1f} s)")
     doc = metrics_json(scan, args.planner)
     (out / "metrics.json").write_text(json.dumps(doc, indent=2))
     write_ply(out / "cloud.ply", scan.planner.cloud)

@@ -1,6 +1,6 @@
 """One reachable-coverage ceiling per (mesh, placement, cell), computed in seconds and cached on disk.
 
-:func:`object_ceiling` builds what :mod:`workbench.ceiling` needs from a placed mesh and a cell:
+:func:`object_ceiling` builds what :mod:`workbench.evaluation.ceiling` needs from a placed mesh and a cell:
 the candidate hemisphere about the mesh's true bounding box, the views the cell can reach
 (``cell.is_reachable``, so an arm model replaces the reach sphere without a change here), the
 surface samples and probes, and the occlusion scene (object + plate). :func:`cached_ceiling`
@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from devices.config import CameraConfig
 from planner.config import PlannerConfig
-from workbench.ceiling import (
+from workbench.evaluation.ceiling import (
     DEFAULT_CEILING,
     CeilingConfig,
     OcclusionScene,
@@ -110,7 +110,7 @@ def _inputs(
 def ceiling_mask(
     mesh: trimesh.Trimesh, cell: Any, camera: CameraConfig, planner: PlannerConfig, config: CeilingConfig
 ) -> tuple[NDArray[np.bool_], int]:
-    """((M,) bool covered samples, reachable views) by :func:`workbench.ceiling.visibility_ceiling`.
+    """((M,) bool covered samples, reachable views) by :func:`workbench.evaluation.ceiling.visibility_ceiling`.
 
     mesh: the placed object (table frame). cell: anything with ``is_reachable(T_world_camera)``
     and ``config.plate_radius`` / ``config.plate_thickness``.

@@ -13,13 +13,13 @@ import threading
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from workbench.engine import JobKilled
 from workbench.errors import Conflict
-from workbench.hardware import auto_refusal
-from workbench.states import Decision, DecisionKind, SessionEvent, State
+from workbench.session.values import Decision, DecisionKind, SessionEvent, State
+from workbench.sources.hardware import auto_refusal
+from workbench.workers.pool import JobKilled
 
 if TYPE_CHECKING:
-    from workbench.session import Session
+    from workbench.session.session import Session
 
 RUNNABLE = frozenset({State.READY, State.PLANNED, State.DONE})
 

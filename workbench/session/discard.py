@@ -10,15 +10,15 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from workbench.engine import JobKilled
 from workbench.errors import Conflict, Invalid
 from workbench.journal.discard import last_capture
 from workbench.journal.rebuild import REPLAY_STAGE
 from workbench.journal.store import read_journal
-from workbench.states import BUSY, SessionEvent, State
+from workbench.session.values import BUSY, SessionEvent, State
+from workbench.workers.pool import JobKilled
 
 if TYPE_CHECKING:
-    from workbench.session import Session
+    from workbench.session.session import Session
 
 
 def discard_last_view(wb: Session) -> dict[str, Any]:

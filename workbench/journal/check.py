@@ -15,11 +15,11 @@ from devices.config import DeviceConfig
 from devices.replay import ReplayCell
 from planner.config import from_dict
 from workbench.errors import WorkbenchError
-from workbench.factory import ground_truth
+from workbench.evaluation.coverage import coverage
 from workbench.journal.rebuild import Rebuilt, rebuild
 from workbench.journal.store import Journal, read_journal
-from workbench.metrics import coverage
 from workbench.settings import WorkbenchSettings, default_models_dir
+from workbench.sources.parts import ground_truth
 
 Coverage = Callable[[NDArray[np.float64]], float]
 
@@ -44,7 +44,7 @@ def ground_truth_coverage(journal: Journal, models_dir: Path | None) -> Coverage
 
 
 @dataclass(frozen=True, eq=False)
-class Replay:
+class JournalCheck:
     """A journal re-run: what was read, what the replay rebuilt, and how long it took (seconds)."""
 
     journal: Journal
@@ -52,8 +52,8 @@ class Replay:
     seconds: float
 
 
-def replay_journal(directory: Path, models_dir: Path | None = None) -> Replay:
-    """Replay the session journaled in ``directory``. ValueError for a damaged journal or no frame."""
+def check_journal(directory: Path, models_dir: Path | None = None) -> JournalCheck:
+    """Re-run the session journaled in ``directory``. ValueError for a damaged journal or no frame."""
     journal = read_journal(directory)
     captures = [e for e in journal.of_kind("capture") if e.get("frame")]
     if not captures:
@@ -62,4 +62,4 @@ def replay_journal(directory: Path, models_dir: Path | None = None) -> Replay:
     cell = ReplayCell([journal.frame(e) for e in captures], devices.cell)  # reachability as in the session
     t0 = time.perf_counter()
     rebuilt = rebuild(journal, cell, ground_truth_coverage(journal, models_dir))
-    return Replay(journal, rebuilt, time.perf_counter() - t0)
+    return JournalCheck(journal, rebuilt, time.perf_counter() - t0)

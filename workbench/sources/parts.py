@@ -7,7 +7,7 @@ Sources (the ``source`` of ``POST /api/sessions``):
   ``data_dir/recordings/NAME`` (PLY + pose JSON per view, docs/journal.md).
 - ``{"kind": "replay", "session": ID, "mode": ...}``: the frames of a journaled session.
 - ``{"kind": "hardware", "dry_run": false, "truth": null}``: the devices of the server's cell file
-  (workbench/hardware.py); the default source when the server has one (``nbv serve --cell``).
+  (workbench/sources/hardware.py); the default source when the server has one (``nbv serve --cell``).
 
 Requests name recordings and sessions; they never give a path. A name is looked
 up among the folders that exist (:func:`list_recordings`), so ``../``, absolute
@@ -33,10 +33,10 @@ from devices.cell import Cell
 from devices.config import DeviceConfig
 from devices.faults import FaultConfig, FaultInjector, with_faults
 from planner import DepthFrame
-from workbench.catalog import find_model, load_model
 from workbench.errors import Invalid, NotFound
 from workbench.journal.store import SESSION_ID, list_journals, read_journal
 from workbench.settings import WorkbenchSettings
+from workbench.sources.catalog import find_model, load_model
 
 SURFACE_SAMPLES = 10_000
 """Points sampled on the ground-truth mesh to measure coverage (simulation only)."""
@@ -161,7 +161,7 @@ def build_parts(
             raise Invalid(f"{name}: {exc}") from None
         model_kind = "replay"
     elif kind == "hardware":
-        from workbench.hardware import hardware_cell, hardware_source
+        from workbench.sources.hardware import hardware_cell, hardware_source
 
         source = hardware_source(settings, source)
         truth = source["truth"] or (model or settings.devices.model if source["dry_run"] else None)

@@ -15,10 +15,10 @@ plan all leave it.
 
 Locking: ``_lock`` (an RLock) guards every field and is held only briefly. A long action (capture, plan,
 move) first claims the session under the lock by switching to a *busy* state, then runs outside the lock
-(:class:`workbench.view_step.ViewStep`, ``Planner.plan``), then publishes its result under the lock. A
+(:class:`workbench.session.view_step.ViewStep`, ``Planner.plan``), then publishes its result under the lock. A
 second action meanwhile sees the busy state and gets :class:`Conflict`, so two approvals of one plan_id move
 the robot exactly once, and status reads never wait for the robot. Every change is journaled as it happens
-(:meth:`_emit`), and the same event feeds the session's record (workbench/record.py). Listeners are called
+(:meth:`_emit`), and the same event feeds the session's record (workbench/session/record.py). Listeners are called
 outside the lock with a :class:`SessionEvent`.
 """
 
@@ -40,20 +40,18 @@ from devices.cell import Cell
 from devices.config import DeviceConfig
 from devices.protocols import UnreachableError
 from planner import Planner, PlannerConfig, Pose
-from workbench.auto import AutoRunner
-from workbench.engine import JobKilled, SessionWorker
 from workbench.errors import Conflict, DeviceFault, Invalid, NotFound, Unreachable
-from workbench.factory import SessionParts
+from workbench.evaluation.coverage import coverage
+from workbench.evaluation.curves import ceiling_metrics
 from workbench.journal.rebuild import Rebuilt, rebuild
 from workbench.journal.store import Journal, JournalWriter, make_event
-from workbench.limits import check_config
-from workbench.metrics import coverage
 from workbench.planning import plan_in
 from workbench.progress import Progress, Tracker
-from workbench.record import SessionRecord
-from workbench.region import ObjectRegion
-from workbench.scan_metrics import ceiling_metrics
-from workbench.states import (
+from workbench.session.auto import AutoRunner
+from workbench.session.record import SessionRecord
+from workbench.session.region import ObjectRegion
+from workbench.session.summaries import capture_fields, plan_fields, session_status
+from workbench.session.values import (
     BUSY,
     CAN_PLAN,
     CustomPose,
@@ -65,8 +63,10 @@ from workbench.states import (
     SessionEvent,
     State,
 )
-from workbench.summaries import capture_fields, plan_fields, session_status
-from workbench.view_step import ViewOutcome, ViewStep, failure_of
+from workbench.session.view_step import ViewOutcome, ViewStep, failure_of
+from workbench.sources.limits import check_config
+from workbench.sources.parts import SessionParts
+from workbench.workers.pool import JobKilled, SessionWorker
 
 log = logging.getLogger(__name__)
 Listener = Callable[["Session", SessionEvent], None]
@@ -109,7 +109,7 @@ class Session:
         self.planner = Planner(config, evaluator=evaluator)
         self.journal = journal
         self.worker = worker
-        """The worker process of the heavy steps (workbench/engine.py); None: they run in this process."""
+        """The worker process of the heavy steps (workbench/workers/pool.py); None: they run in this process."""
         self.plan_budget = plan_budget
         self.step_runner = ViewStep(
             self.cell, journal, parts.surface_samples, capture_timeout, move_timeout, worker, capture_budget
@@ -134,7 +134,7 @@ class Session:
         self._occupied: NDArray[np.float64] = np.zeros((0, 3))
         self.moves = 0
         self.ceiling: float | None = None
-        """The reachable-coverage ceiling of a simulated session, once computed (workbench/ceilings.py)."""
+        """The reachable-coverage ceiling of a simulated session, once computed (workbench/evaluation/ceiling_service.py)."""
         self.request_ceiling: Callable[[], None] | None = None
         """Starts computing ``ceiling`` (set by the registry for sessions with a ground truth)."""
         self.progress = Tracker(self._on_progress)
@@ -495,10 +495,20 @@ class Session:
         return rebuilt
 
     def discard_last_view(self) -> dict[str, Any]:
-        """Rebuild this session from its journal without its last view (workbench/discard.py)."""
-        from workbench.discard import discard_last_view
+        """Rebuild this session from its journal without its last view (workbench/session/discard.py)."""
+        from workbench.session.discard import discard_last_view
 
         return discard_last_view(self)
+
+    def stop(self) -> None:
+        """Stop what runs: a plan (killed at once in its worker; the session goes back to its state before it),
+        auto mode (after the current action; a plan of it is killed at once), and on hardware a running move of
+        the arm and the turntable, at once (the session then goes to its error state)."""
+        from workbench.sources.hardware import stop_devices
+
+        self.stop_plan()
+        self.auto.stop()
+        stop_devices(self)
 
     def close(self, timeout: float = 30.0) -> None:
         """Kill a running job and the worker, stop auto mode and wait for it (on delete and at shutdown); release

@@ -16,9 +16,9 @@ from numpy.typing import NDArray
 
 from planner import Planner, PlanResult, Pose
 from planner.planner import IntegrationReport
-from workbench.metrics import coverage
+from workbench.evaluation.coverage import coverage
 from workbench.planning import plan_in
-from workbench.summaries import voxel_counts
+from workbench.session.summaries import voxel_counts
 
 STAGES = ("preprocess", "register", "integrate", "cluster", "ellipsoids", "candidates", "score", "select")
 PLAN_STAGES = ("integrate", "cluster", "ellipsoids", "candidates", "score", "select")
@@ -88,7 +88,7 @@ def make_record(
 ) -> IterationRecord:
     """Summarise one integrate + plan (None: no plan was made after it) into the metrics of metrics.json.
 
-    voxels: the map's class counts after the integrate (:func:`workbench.summaries.voxel_counts`).
+    voxels: the map's class counts after the integrate (:func:`workbench.session.summaries.voxel_counts`).
     """
     timings = {stage: 0.0 for stage in STAGES}
     for source in (report.timings, {} if plan is None else plan.timings):

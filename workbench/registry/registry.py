@@ -18,20 +18,20 @@ from devices.faults import FaultConfig
 from planner import PlannerConfig
 from planner.config import from_dict
 from planner.evaluators import evaluator_names
-from workbench.ceilings import CeilingService
-from workbench.creations import Creation, Creations, resume_id
-from workbench.engine import Engine, JobKilled, offload_rendering, render_spec
 from workbench.errors import Conflict, Invalid, NotFound, StorageFault
-from workbench.factory import SURFACE_SAMPLES, SessionParts, build_parts, session_devices
+from workbench.evaluation.ceiling_service import CeilingService
 from workbench.journal.rebuild import REPLAY_STAGE, Rebuilt
 from workbench.journal.store import JournalBusyError, JournalWriter, in_use, list_journals, read_journal, sessions_dir
-from workbench.limits import check_config
-from workbench.record import SessionRecord
-from workbench.session import Session
+from workbench.journal.trash import move_to_trash, prune
+from workbench.registry.creations import Creation, Creations, resume_id
+from workbench.session.record import SessionRecord
+from workbench.session.session import Session
+from workbench.session.summaries import session_status
+from workbench.session.values import SessionEvent, State
 from workbench.settings import WorkbenchSettings
-from workbench.states import SessionEvent, State
-from workbench.summaries import session_status
-from workbench.trash import move_to_trash, prune
+from workbench.sources.limits import check_config
+from workbench.sources.parts import SURFACE_SAMPLES, SessionParts, build_parts, session_devices
+from workbench.workers.pool import Engine, JobKilled, offload_rendering, render_spec
 
 __all__ = ["SURFACE_SAMPLES", "DormantSession", "SessionRegistry"]
 log = logging.getLogger(__name__)
@@ -129,7 +129,7 @@ class SessionRegistry:
             if getattr(settings, "workers", False)
             else None
         )
-        """The sessions' worker processes (workbench/engine.py); None: heavy work runs in this process."""
+        """The sessions' worker processes (workbench/workers/pool.py); None: heavy work runs in this process."""
         if settings.journal:
             for directory in list_journals(settings.data_dir):
                 if in_use(directory):  # live in another server on the same data directory
@@ -415,7 +415,7 @@ class SessionRegistry:
 
     def delete(self, session_id: str) -> None:
         """Forget a session (live, interrupted or damaged): its running job is killed, its journal marked deleted
-        and its folder moved to the trash (workbench/trash.py), which keeps it until its age or size limit."""
+        and its folder moved to the trash (workbench/journal/trash.py), which keeps it until its age or size limit."""
         with self._lock:
             wb = self._sessions.pop(session_id, None)
             dormant = self._dormant.pop(session_id, None) if wb is None else None

@@ -1,6 +1,6 @@
 """What runs inside a session's worker process: the heavy, GIL-holding work of a session, on request.
 
-The server (workbench/engine.py) sends ``(kind, payload)`` over a Pipe and receives ``("ok", result)`` or
+The server (workbench/workers/pool.py) sends ``(kind, payload)`` over a Pipe and receives ``("ok", result)`` or
 ``("error", exception)``. Every job carries the state it needs (the planner is pickled in and the planner
 after the job pickled back), so a killed worker loses nothing: the server process keeps the session's planner
 and a fresh worker takes up the next job. Jobs:
@@ -141,8 +141,8 @@ class _Worker:
     def rebuild(self, payload: Any, send: Callable[[Any], None] | None) -> Rebuilt:
         """:func:`workbench.journal.rebuild.rebuild` of a journal in this worker's planning cell; the replayed
         captures' plans stay here (the pending and last plans travel in the result)."""
+        from workbench.evaluation.coverage import coverage
         from workbench.journal.rebuild import rebuild
-        from workbench.metrics import coverage
 
         journal, config, q, angle, samples = cast(tuple[Journal, CellConfig, Any, float, Any], payload)
         throttle = Throttle()

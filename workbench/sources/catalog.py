@@ -126,7 +126,7 @@ def save_upload(settings: WorkbenchSettings, filename: str, data: bytes) -> Mode
     The stored name is the sanitised stem plus a content hash, so two uploads
     never overwrite each other and the name carries no path. TooLarge over
     ``max_upload_bytes`` or beyond ``settings.mesh_limits`` (triangles, vertices,
-    polygon degree, triangles per vertex: workbench/limits.py); Invalid for an
+    polygon degree, triangles per vertex: workbench/sources/limits.py); Invalid for an
     unsupported or unusable file (nothing is kept then).
     """
     from devices.mesh import load_mesh

@@ -46,7 +46,7 @@ from workbench.errors import Conflict, Invalid
 if TYPE_CHECKING:
     from devices.arm.kinematics import ArmKinematics
     from devices.rig import Rig
-    from workbench.session import Session
+    from workbench.session.session import Session
 
 SOURCE_KEYS = ("kind", "dry_run", "truth", "cell", "mode")
 """Keys of a hardware source (``mode``, a replay setting the API always sends, is ignored)."""
@@ -183,7 +183,7 @@ def auto_refusal(cell: Cell) -> str | None:
 def stop_devices(session: Session, wait: float = STOP_WAIT) -> list[str]:
     """Stop the arm and the turntable of ``session`` at once if a move is running, then wait up to ``wait`` s
     for the session to leave its busy state (it goes to error). Returns the drivers' errors."""
-    from workbench.states import BUSY
+    from workbench.session.values import BUSY
 
     cell = session.cell
     if not isinstance(cell, HardwareCell):

@@ -1,7 +1,7 @@
 """Worker processes for the sessions' heavy work, so the server always answers and a job can be killed.
 
 open3d's ``cast_rays`` and the planner's fits hold the GIL; a thread cannot be stopped. So each live session
-gets a worker *process* (:class:`SessionWorker`, running workbench/worker.py) for rendering, integration,
+gets a worker *process* (:class:`SessionWorker`, running workbench/workers/child.py) for rendering, integration,
 fitting and scoring, driven over a Pipe. The session's state machine, its devices and the authoritative
 planner stay in the server process: every job carries the planner in and the planner after the job back, so
 a worker killed by a budget, by ``DELETE`` or by Stop loses nothing and a fresh one takes the next job.
@@ -13,7 +13,7 @@ a worker killed by a budget, by ``DELETE`` or by Stop loses nothing and a fresh 
 - **Idle workers.** Beyond ``max_idle_workers`` the least recently used idle worker is stopped; it is
   started again (and the render scene shipped again) on its session's next job.
 
-Processes come from a forkserver that preloaded workbench/worker.py: a new worker is a fork of a small,
+Processes come from a forkserver that preloaded workbench/workers/child.py: a new worker is a fork of a small,
 single-threaded process (not of the server with its threads), ready in milliseconds.
 """
 
@@ -38,7 +38,7 @@ from planner.planner import IntegrationReport, PlanResult
 from planner.progress import ProgressFn
 from workbench.journal.rebuild import Rebuilt
 from workbench.journal.store import Journal
-from workbench.worker import RenderSpec, serve
+from workbench.workers.child import RenderSpec, serve
 
 log = logging.getLogger(__name__)
 SETUP_TIMEOUT = 60.0
@@ -54,7 +54,7 @@ def _mp_context() -> Any:
         if _context is None:
             ctx = multiprocessing.get_context("forkserver")
             # open3d is imported (no thread started by it) but no scene built: a worker builds its own after the fork
-            ctx.set_forkserver_preload(["workbench.worker", "devices.sim", "devices.arm.kinematics"])
+            ctx.set_forkserver_preload(["workbench.workers.child", "devices.sim", "devices.arm.kinematics"])
             _context = ctx
         return _context
 

@@ -8,7 +8,7 @@ from typing import Any
 
 from planner import Planner, PlanResult, VoxelClass
 from planner.planner import IntegrationReport
-from workbench.states import CustomPose, PendingPlan, State
+from workbench.session.values import CustomPose, PendingPlan, State
 
 VOXEL_CLASSES = ("occupied", "frontier", "unknown", "empty")
 
@@ -100,7 +100,7 @@ def session_status(
 ) -> dict[str, Any]:
     """The session summary of ``GET /api/sessions/{id}``, for a live and for an interrupted session alike.
 
-    record: the session's :class:`workbench.record.SessionRecord` (id, model, seed and the last capture).
+    record: the session's :class:`workbench.session.record.SessionRecord` (id, model, seed and the last capture).
     progress: the running long operation (``workbench.progress.Progress.to_json``), None when none runs.
     """
     last = record.iterations[-1] if record.iterations else None

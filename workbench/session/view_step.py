@@ -21,11 +21,11 @@ from devices.protocols import DeviceError, UnreachableError
 from devices.timeout import DeviceTimeoutError, call_with_timeout
 from planner import DepthFrame, Planner, Pose, VoxelClass
 from planner.planner import IntegrationReport
-from workbench.engine import JobKilled, SessionWorker
 from workbench.errors import DeviceFault, Unreachable, WorkbenchError
+from workbench.evaluation.coverage import coverage
 from workbench.journal.store import JournalWriter
-from workbench.metrics import coverage
-from workbench.summaries import voxel_counts
+from workbench.session.summaries import voxel_counts
+from workbench.workers.pool import JobKilled, SessionWorker
 
 
 @dataclass(frozen=True, eq=False)

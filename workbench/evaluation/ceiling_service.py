@@ -1,6 +1,6 @@
 """The reachable-coverage ceiling of a simulated session, for the coverage chart's dashed line.
 
-The ceiling (:mod:`workbench.object_ceiling`: what the union of every reachable candidate view could
+The ceiling (:mod:`workbench.evaluation.object_ceiling`: what the union of every reachable candidate view could
 cover) depends only on the object, its placement and the cell, so it is computed once per
 (mesh, placement, cell) and cached on disk under ``data_dir/ceilings``. It takes a second or two of open3d
 ray casting (which holds the GIL), so :class:`CeilingService` computes it in a worker process, one at a
@@ -28,7 +28,7 @@ log = logging.getLogger(__name__)
 def compute_ceiling(mesh: trimesh.Trimesh, devices: DeviceConfig, planner: PlannerConfig, cache_dir: Path) -> float:
     """The ceiling of ``mesh`` (table frame, placed) in the simulated cell of ``devices`` (runs in a worker)."""
     from devices.sim import make_sim_cell
-    from workbench.object_ceiling import cached_ceiling
+    from workbench.evaluation.object_ceiling import cached_ceiling
 
     cell = make_sim_cell(mesh, devices.camera, devices.cell)
     return cached_ceiling(mesh, cell, devices.camera, planner, cache_dir).coverage

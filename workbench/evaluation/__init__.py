@@ -1,0 +1,56 @@
+"""How good a scan is, measured against a ground truth, and the headless scan the bench and ``nbv scan`` run.
+
+- coverage.py: ground-truth coverage (the fraction of surface samples a cloud point is near);
+- curves.py: coverage against the ceiling per view, its area, views-to-X, means and paired comparisons;
+- ceiling.py: the reachable-coverage ceiling by visibility (one occlusion ray per sample and view) and by
+  rendering (the reference);
+- object_ceiling.py: the ceiling of one (mesh, placement, cell), keyed and cached on disk;
+- ceiling_service.py: a session's ceiling computed in a worker process, one at a time;
+- scan.py: Algorithm 1 headless (``run_scan``), with metrics per iteration;
+- simulate.py: one simulated scan of a model (load, place, build the cell, run, measure).
+"""
+
+from workbench.evaluation.ceiling import DEFAULT_CEILING, CeilingConfig
+from workbench.evaluation.coverage import coverage
+from workbench.evaluation.curves import (
+    THRESHOLDS,
+    Paired,
+    RunMetrics,
+    area_under_curve,
+    mean_std,
+    paired_comparison,
+    ratio_curve,
+    run_metrics,
+    views_to_reach,
+)
+from workbench.evaluation.object_ceiling import Ceiling, cached_ceiling, ceiling_mask, object_ceiling, reference_mask
+from workbench.evaluation.scan import PLAN_STAGES, STAGES, IterationRecord, ScanResult, make_record, run_scan
+from workbench.evaluation.simulate import SimScan, simulate
+
+__all__ = [
+    "DEFAULT_CEILING",
+    "PLAN_STAGES",
+    "STAGES",
+    "THRESHOLDS",
+    "Ceiling",
+    "CeilingConfig",
+    "IterationRecord",
+    "Paired",
+    "RunMetrics",
+    "ScanResult",
+    "SimScan",
+    "area_under_curve",
+    "cached_ceiling",
+    "ceiling_mask",
+    "coverage",
+    "make_record",
+    "mean_std",
+    "object_ceiling",
+    "paired_comparison",
+    "ratio_curve",
+    "reference_mask",
+    "run_metrics",
+    "run_scan",
+    "simulate",
+    "views_to_reach",
+]
