@@ -177,7 +177,7 @@ class SessionOut(BaseModel):
         "or journal (an interrupted session not yet resumed)"
     )
     state: str = Field(
-        description="new, capturing, ready, planning, planned, moving, auto, done, error, interrupted, damaged"
+        description="new, capturing, ready, planning, planned, moving, auto, discarding, done, error, interrupted, damaged"
     )
     iteration: int
     coverage: float | None

@@ -287,6 +287,25 @@ class Cell:
         )
         return Pose.look_at(eye, target)
 
+    # ------------------------------------------------------------------ safety and life cycle
+
+    def auto_refusal(self) -> str | None:
+        """Why moves without an approval per view (step, auto mode) may not run on this cell; None: they may."""
+        return None
+
+    def halt(self) -> list[str] | None:
+        """Stop a running move at once; None when this cell cannot (a simulated cell ends its move quickly),
+        else the drivers' errors (a cell on real devices, :class:`devices.hwcell.HardwareCell`)."""
+        return None
+
+    @property
+    def halting(self) -> bool:
+        """A halt was asked and the move it stopped has not ended yet."""
+        return False
+
+    def close(self) -> None:
+        """Release the devices (a cell on real devices closes them; here nothing to do)."""
+
     # ------------------------------------------------------------------ actions
 
     def move_to(self, T_table_camera: Pose) -> Motion:

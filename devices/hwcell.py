@@ -1,22 +1,82 @@
 """The kinematic :class:`devices.cell.Cell` on real devices: what a session drives on hardware.
 
-:func:`hardware_cell` puts the opened devices of a :class:`devices.rig.Rig` into the same ``Cell`` the
-simulator uses, with the arm model (``devices/arm``, the UR5 by default) configured from the cell file:
-the hand-eye transform, the arm's mount and the driver's joint bounds. Planning, IK, collision checks and
-trajectories then run on our side exactly as in simulation; ``Cell.move_to`` turns the real plate and
-sends the trajectory to the real arm, ``Cell.capture`` takes a real image and places it by forward
-kinematics of the joints the controller reports.
+:func:`hardware_cell` is the one builder: it puts the opened devices of a :class:`devices.rig.Rig` into a
+:class:`HardwareCell`, the same ``Cell`` the simulator uses, with the arm model (``devices/arm``, the UR5 by
+default) configured from the cell file (:func:`arm_cell_config`: the hand-eye transform, the arm's mount and
+the driver's joint bounds; :func:`arm_kinematics`: planned joint speeds within the driver's limit). It checks
+both that the model's joint names are the driver's and that the speeds fit, so a mismatch is refused before the
+first move. :func:`dry_run_cell` builds the same cell on simulated devices (a rehearsal of the same scan).
+Planning, IK, collision checks and trajectories then run on our side exactly as in simulation;
+``Cell.move_to`` turns the real plate and sends the trajectory to the real arm, ``Cell.capture`` takes a real
+image and places it by forward kinematics of the joints the controller reports.
+
+One holder at a time: :func:`device_claim` claims a cell file's devices for the block that opens them and hands
+the claim to the cell, which releases it when it is closed (:class:`DevicesInUse` for a second claimant).
 """
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+import math
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
-from devices.cell import Cell
+import numpy as np
+
+from devices.cell import Cell, Motion
 from devices.cellfile import CellFile
-from devices.config import CellConfig
+from devices.config import CameraConfig, CellConfig
+from devices.protocols import DeviceError
 from devices.rig import Rig
+from planner.types import Pose
+
+if TYPE_CHECKING:
+    import trimesh
+
+    from devices.arm.kinematics import ArmKinematics
+
+
+class DevicesInUse(RuntimeError):  # noqa: N818 - it says what the devices are
+    """Another holder has the devices of this cell file open."""
+
+
+_in_use: dict[str, str] = {}
+"""Cell files whose devices a claim holds: resolved path -> label of the holder."""
+_in_use_lock = threading.Lock()
+
+
+class DeviceClaim:
+    """The claim of one holder on the devices of a cell file; :meth:`release` (idempotent) lets them go."""
+
+    def __init__(self, path: str, label: str) -> None:
+        self.key = str(Path(path).resolve())
+        with _in_use_lock:
+            if self.key in _in_use:
+                raise DevicesInUse(f"the devices of {path} are in use by {_in_use[self.key]}; delete or stop it first")
+            _in_use[self.key] = label
+        self._held = True
+
+    def release(self) -> None:
+        with _in_use_lock:
+            if self._held:
+                _in_use.pop(self.key, None)
+                self._held = False
+
+
+@contextmanager
+def device_claim(path: str, label: str) -> Iterator[DeviceClaim]:
+    """Claim the devices of cell file ``path`` for ``label`` while the block opens them: released when the block
+    fails; after it, the claim belongs to whoever the block handed it to (a :class:`HardwareCell` releases it when
+    closed). DevicesInUse when another holder has them."""
+    claim = DeviceClaim(path, label)
+    try:
+        yield claim
+    except BaseException:
+        claim.release()
+        raise
 
 
 def arm_cell_config(cell: CellFile, base: CellConfig) -> CellConfig:
@@ -41,27 +101,200 @@ def arm_cell_config(cell: CellFile, base: CellConfig) -> CellConfig:
     return dataclasses.replace(base, kinematics="urdf", arm=dataclasses.replace(base.arm, **changes))
 
 
-def hardware_cell(rig: Rig, cell_config: CellConfig | None = None) -> Cell:
-    """A Cell of ``rig``'s camera, arm and turntable.
+def arm_kinematics(cell: CellFile, config: CellConfig) -> tuple[CellConfig, ArmKinematics]:
+    """(config, its arm model) with planned joint speeds within the cell file's ``max_joint_speed_deg``: the
+    arm's ``velocity_scale`` is lowered when the URDF's limits times the scale would exceed it."""
+    from devices.arm.kinematics import ArmKinematics
+
+    kinematics = ArmKinematics(config.arm, config.plate_radius, config.plate_thickness)
+    limit = getattr(cell.arm.config, "max_joint_speed_deg", None) if cell.arm is not None else None
+    fastest = float(np.max(kinematics.model.velocity))
+    if limit is not None and fastest > math.radians(limit):
+        scale = config.arm.velocity_scale * math.radians(limit) / fastest * 0.999
+        config = dataclasses.replace(config, arm=dataclasses.replace(config.arm, velocity_scale=scale))
+        kinematics = ArmKinematics(config.arm, config.plate_radius, config.plate_thickness)
+    return config, kinematics
+
+
+def configured_arm(cell: CellFile, base: CellConfig) -> tuple[CellConfig, ArmKinematics]:
+    """The cell config and arm model of a cell file: :func:`arm_cell_config` then :func:`arm_kinematics`."""
+    return arm_kinematics(cell, arm_cell_config(cell, base))
+
+
+class HardwareCell(Cell):
+    """A :class:`Cell` on a cell file's devices (``rig``), or, in a dry run, on simulated devices.
+
+    cellfile: the parsed cell file (``allow_auto``, hand-eye, mount). rig: the opened devices (None in a dry
+    run). claim: this cell's claim on the devices (released by :meth:`close`).
+    """
+
+    def __init__(
+        self,
+        camera: Any,
+        arm: Any,
+        turntable: Any,
+        config: CellConfig,
+        *,
+        kinematics: ArmKinematics,
+        cellfile: CellFile,
+        rig: Rig | None,
+        claim: DeviceClaim | None = None,
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(camera, arm, turntable, config, kinematics=kinematics, **kwargs)
+        self.cellfile = cellfile
+        self.rig = rig
+        self.claim = claim
+        self.moving = threading.Event()
+        self.stop_requested = threading.Event()
+        self._closed = False
+
+    @property
+    def dry_run(self) -> bool:
+        return self.rig is None
+
+    @property
+    def allow_auto(self) -> bool:
+        return self.cellfile.allow_auto
+
+    def auto_refusal(self) -> str | None:
+        """A real arm moves only on an approval per view unless the cell file says ``allow_auto = true``."""
+        if self.allow_auto:
+            return None
+        where = self.cellfile.source or "the cell file"
+        return (
+            "step and auto mode would move the arm without an approval per view; "
+            f"{where} does not allow it (set devices.allow_auto = true)"
+        )
+
+    def arm_state(self) -> str:
+        """The arm's joints in degrees, or why they cannot be read (for error messages)."""
+        try:
+            q = self.arm.joint_positions()
+        except DeviceError as exc:
+            last = getattr(self.arm, "last_joint_positions", None)
+            if last is None:
+                return f"arm joints unknown ({exc})"
+            q = last
+        return "arm at joints [" + ", ".join(f"{math.degrees(float(v)):.2f}" for v in q) + "] deg"
+
+    def move_to(self, T_table_camera: Pose) -> Motion:
+        """:meth:`Cell.move_to`; a DeviceError (a fault, a refused trajectory, a stop) names the arm's last joints."""
+        self.stop_requested.clear()
+        self.moving.set()
+        try:
+            motion = super().move_to(T_table_camera)
+            if self.stop_requested.is_set():
+                raise DeviceError("stopped on request")
+            return motion
+        except DeviceError as exc:
+            message = str(exc)
+            if "last joints" not in message:
+                message = f"{message}; {self.arm_state()}"
+            exc.args = (message,)  # the same type and fields (ArmFaultError.joint_positions), a fuller message
+            raise
+        finally:
+            self.moving.clear()
+
+    def halt(self) -> list[str] | None:
+        """Stop the arm and the turntable at once if a move is running (None when none is); the drivers' errors."""
+        if not self.moving.is_set():
+            return None
+        self.stop_requested.set()
+        if self.rig is not None:
+            return self.rig.stop()
+        for device in (self.arm, self.turntable):
+            stop = getattr(device, "stop", None)
+            if callable(stop):
+                stop()
+        return []
+
+    @property
+    def halting(self) -> bool:
+        return self.stop_requested.is_set()
+
+    def restore_device_state(self, state: dict[str, Any]) -> None:
+        """A resumed session on real devices moves nothing: the next plan starts from where they really are."""
+        if self.dry_run:
+            super().restore_device_state(state)
+
+    def close(self) -> None:
+        """Close the devices (once) and release the claim on them."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            if self.rig is not None:
+                self.rig.close()
+        finally:
+            if self.claim is not None:
+                self.claim.release()
+
+
+def hardware_cell(rig: Rig, cell_config: CellConfig | None = None, claim: DeviceClaim | None = None) -> HardwareCell:
+    """A :class:`HardwareCell` of ``rig``'s camera, arm and turntable.
 
     cell_config: the plate, the initial view and the arm model (``cell_config.arm``: URDF, planning
     settings); its ``T_flange_camera``, ``base``, ``base_yaw_deg`` are replaced by the cell file's
-    ``hand_eye`` and ``arm_base`` and, for a UR arm, its joint bounds by ``[devices.arm]``'s, so plans and
-    the driver agree. ValueError when a device is missing, the arm base is tilted, or the model's joints
-    are not the driver's.
+    ``hand_eye`` and ``arm_base`` and, for a UR arm, its joint bounds by ``[devices.arm]``'s and its speeds
+    kept within ``max_joint_speed_deg``, so plans and the driver agree. claim: handed to the cell (released
+    when it closes). ValueError when a device is missing, the arm base is tilted, or the model's joints are
+    not the driver's.
     """
-    from devices.arm.kinematics import ArmKinematics
-
-    cell_config = cell_config if cell_config is not None else CellConfig()
     missing = [kind for kind in ("camera", "arm", "turntable") if getattr(rig, kind) is None]
     if missing:
         raise ValueError(f"devices.{missing[0]}: a cell needs a camera, an arm and a turntable")
-    cell_config = arm_cell_config(rig.cell, cell_config)
-    arm_config = cell_config.arm
-    kinematics = ArmKinematics(arm_config, cell_config.plate_radius, cell_config.plate_thickness)
+    config, kinematics = configured_arm(rig.cell, cell_config if cell_config is not None else CellConfig())
     if tuple(kinematics.joint_names) != tuple(rig.arm.joint_names):
         raise ValueError(
             f"devices.arm: the arm model's joints {list(kinematics.joint_names)} are not the driver's "
             f"{list(rig.arm.joint_names)}"
         )
-    return Cell(rig.camera, rig.arm, rig.turntable, cell_config, kinematics=kinematics)
+    return HardwareCell(
+        rig.camera, rig.arm, rig.turntable, config, kinematics=kinematics, cellfile=rig.cell, rig=rig, claim=claim
+    )
+
+
+def open_hardware_cell(cellfile: CellFile, cell_config: CellConfig, label: str) -> HardwareCell:
+    """Claim the devices of ``cellfile`` for ``label``, open them and build their :func:`hardware_cell`.
+
+    DevicesInUse when another holder has them; DeviceError / OSError when a device cannot be opened;
+    ValueError for a bad cell file (a missing device, a tilted mount, joints that are not the driver's). On
+    any failure the devices opened so far are closed and the claim released."""
+    from devices.rig import open_rig
+
+    missing = [kind for kind in ("camera", "arm", "turntable") if getattr(cellfile, kind) is None]
+    if missing:
+        raise ValueError(f"devices.{missing[0]}: a hardware session needs a camera, an arm and a turntable")
+    configured_arm(cellfile, cell_config)  # a bad mount is refused before any device opens
+    with device_claim(str(cellfile.source), label) as claim:
+        rig = open_rig(cellfile)
+        try:
+            return hardware_cell(rig, cell_config, claim)
+        except BaseException:
+            rig.close()
+            raise
+
+
+def dry_run_cell(
+    cellfile: CellFile, cell_config: CellConfig, mesh: trimesh.Trimesh | None, camera: CameraConfig, seed: int
+) -> HardwareCell:
+    """The cell of a dry run: the simulator scanning ``mesh`` with ``camera``, with the cell file's arm model (no
+    device opened). ValueError for a bad cell file."""
+    from devices.sim import make_sim_cell
+
+    config, _ = configured_arm(cellfile, cell_config)
+    sim = make_sim_cell(mesh, camera, config, seed=seed)
+    assert sim.kinematics is not None
+    return HardwareCell(
+        sim.camera,
+        sim.arm,
+        sim.turntable,
+        config,
+        kinematics=sim.kinematics,
+        cellfile=cellfile,
+        rig=None,
+        pose_noise_translation=camera.pose_noise_translation,
+        pose_noise_rotation_deg=camera.pose_noise_rotation_deg,
+        seed=seed,
+    )

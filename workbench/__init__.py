@@ -23,8 +23,9 @@ from workbench.progress import Progress
 from workbench.registry.creations import resume_id
 from workbench.registry.registry import SessionRegistry
 from workbench.session.session import Session
+from workbench.session.states import BUSY, Listed, State
 from workbench.session.summaries import best_of, plan_summary
-from workbench.session.values import BUSY, SceneData, SessionEvent, State
+from workbench.session.values import SceneData, SessionEvent
 from workbench.settings import WorkbenchSettings
 from workbench.sources.catalog import list_models, save_upload
 from workbench.sources.parts import list_recordings
@@ -34,6 +35,7 @@ __all__ = [
     "Conflict",
     "DeviceFault",
     "Invalid",
+    "Listed",
     "NotFound",
     "Progress",
     "SceneData",

@@ -273,12 +273,12 @@ async function onStatus(st, event) {
   }
   const custom = st.custom_pose ? st.custom_pose.pose.position.join(",") + st.custom_pose.pose.wxyz : "";
   const armKey = `${st.iteration}/${planId}/${st.selected}/${custom}`;
-  if (armKey !== S.armKey && S.viewer && !["capturing", "planning", "moving", "auto"].includes(st.state)) {
+  if (armKey !== S.armKey && S.viewer && !["capturing", "planning", "moving", "auto", "discarding"].includes(st.state)) {
     S.armKey = armKey;
     await loadArm();
   }
   const key = `${st.iteration}/${planId}`;
-  if (key !== S.metricsKey && !["capturing", "planning", "moving", "interrupted"].includes(st.state)) {
+  if (key !== S.metricsKey && !["capturing", "planning", "moving", "discarding", "interrupted"].includes(st.state)) {
     S.metricsKey = key;
     P.renderCharts(await api("GET", `/api/sessions/${S.session}/metrics`));
   }
@@ -290,7 +290,7 @@ function updateButtons() {
   const st = S.status;
   const state = st ? st.state : null;
   const it = st ? st.iteration : 0;
-  const busy = S.inFlight || ["capturing", "planning", "moving", "auto"].includes(state);
+  const busy = S.inFlight || ["capturing", "planning", "moving", "auto", "discarding"].includes(state);
   $("capture").disabled = busy || !st || !(state === "new" || (state === "error" && it === 0));
   $("plan").disabled = busy || !st || it === 0 || !["ready", "planned", "done", "error"].includes(state);
   $("approve").disabled = busy || !st || state !== "planned" || st.selected === null;

@@ -9,7 +9,7 @@ import pytest
 
 from devices.cellfile import CellFile, parse_cell
 from devices.config import CellConfig
-from workbench.sources.hardware import arm_cell_config, arm_kinematics, auto_refusal
+from devices.hwcell import arm_cell_config, arm_kinematics
 
 
 def cell(arm_base: dict | None = None, **arm: object) -> CellFile:
@@ -48,4 +48,4 @@ def test_a_tilted_arm_mount_is_refused_naming_the_field() -> None:
 def test_only_a_hardware_cell_is_gated() -> None:
     from devices.sim import make_sim_cell
 
-    assert auto_refusal(make_sim_cell(None)) is None
+    assert make_sim_cell(None).auto_refusal() is None

@@ -25,13 +25,13 @@ from devices.config import CameraConfig, DeviceConfig
 from devices.drivers.limits import JointLimits
 from devices.drivers.rsrecord import write_depth_recording
 from devices.faults import FaultConfig
+from devices.hwcell import HardwareCell
 from nbv.cli import main
 from planner.types import Pose
 from tests.devices.drivers.rigfixtures import cell_toml, fake_hardware_cell
 from tests.devices.drivers.rsfixtures import DEPTH_UNIT, rendered_views
 from tests.helpers import SMALL as SMALL_PLANNER
 from workbench.journal.store import read_journal, sessions_dir
-from workbench.sources.hardware import HardwareCell
 
 BASE_URL = "http://127.0.0.1"
 VIEWS = 3

@@ -12,7 +12,8 @@ from tests.helpers import SMALL, wait_for_state, wait_until
 from workbench.errors import Conflict, DeviceFault, Invalid, NotFound, Unreachable
 from workbench.journal.store import read_journal
 from workbench.registry.registry import SessionRegistry
-from workbench.session.values import DecisionKind, SessionEvent, State
+from workbench.session.states import State
+from workbench.session.values import DecisionKind, SessionEvent
 
 
 def test_the_loop_capture_plan_approve_moves_once_per_plan(registry: SessionRegistry) -> None:
@@ -180,3 +181,19 @@ def test_a_simulated_session_reports_its_reachable_ceiling(registry: SessionRegi
     assert metrics["auc"] == coverage / ceiling and metrics["views_to_90"] == (1 if coverage / ceiling >= 0.9 else 2)
     cached = list((registry.settings.data_dir / "ceilings").glob("*.json"))
     assert len(cached) == 1 and json.loads(cached[0].read_text())["coverage"] == ceiling
+
+
+def test_a_discard_is_claimed_as_discarding_then_settles_with_its_plan_pending(registry: SessionRegistry) -> None:
+    session = registry.create("l-block", SMALL, seed=1)
+    session.capture()
+    entry = session.plan()
+    assert entry.plan.best_index is not None
+    session.approve(entry.plan_id, index=entry.plan.best_index)
+    seen: list[tuple[SessionEvent, State]] = []
+    session.listeners.append(lambda s, event: seen.append((event, s.state)) if event != SessionEvent.PROGRESS else None)
+    assert session.discard_last_view()["discarded"] == 2
+    assert seen == [(SessionEvent.STATE, State.DISCARDING), (SessionEvent.CAPTURED, State.PLANNED)]
+    assert session.status()["iteration"] == 1 and session.pending is not None
+    assert session.pending.plan_id == entry.plan_id  # the plan whose approval took the discarded view
+    session.discard_last_view()  # the first view too: the session is new again, as before its capture
+    assert session.state == State.NEW and session.status()["iteration"] == 0

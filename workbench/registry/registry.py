@@ -26,8 +26,9 @@ from workbench.journal.trash import move_to_trash, prune
 from workbench.registry.creations import Creation, Creations, resume_id
 from workbench.session.record import SessionRecord
 from workbench.session.session import Session
+from workbench.session.states import Listed
 from workbench.session.summaries import session_status
-from workbench.session.values import SessionEvent, State
+from workbench.session.values import SessionEvent
 from workbench.settings import WorkbenchSettings
 from workbench.sources.limits import check_config
 from workbench.sources.parts import SURFACE_SAMPLES, SessionParts, build_parts, session_devices
@@ -57,14 +58,14 @@ class DormantSession:
         if self.damage is not None:
             return {"planner": self.planner} | session_status(
                 self.record,
-                state=State.DAMAGED,
+                state=Listed.DAMAGED,
                 source="journal",
                 error=f"damaged journal: {self.damage}; POST /api/sessions/{self.id}/resume recovers what comes "
                 "before the damage",
             )
         return {"planner": self.planner} | session_status(
             self.record,
-            state=State.INTERRUPTED,
+            state=Listed.INTERRUPTED,
             source="journal",
             error=f"the server stopped during this session; POST /api/sessions/{self.id}/resume to continue it",
         )

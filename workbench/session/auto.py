@@ -2,8 +2,9 @@
 
 :class:`AutoRunner` belongs to one session. ``step(count)`` runs in the caller's thread; ``start(count)``
 runs in a background thread that :meth:`stop` ends after the current action. The first fault ends either
-(the session is then in state error). It only drives the session's public steps (claim, make_plan,
-take_view), so every decision is journaled and published exactly as a person's approval would be.
+(the session is then in state error). It drives the same steps as a person's approval
+(:func:`workbench.session.loop.make_plan`, :func:`~workbench.session.loop.take_view`) inside one claim of the
+session (state ``auto``), so every decision is journaled and published exactly as a person's would be.
 """
 
 from __future__ import annotations
@@ -11,59 +12,67 @@ from __future__ import annotations
 import contextlib
 import threading
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from workbench.errors import Conflict
-from workbench.session.values import Decision, DecisionKind, SessionEvent, State
-from workbench.sources.hardware import auto_refusal
+from workbench.session.core import SessionCore
+from workbench.session.loop import make_plan, no_frame_yet, take_view
+from workbench.session.states import TRANSITIONS, Action, State
+from workbench.session.values import Decision, DecisionKind, SessionEvent
 from workbench.workers.pool import JobKilled
-
-if TYPE_CHECKING:
-    from workbench.session.session import Session
-
-RUNNABLE = frozenset({State.READY, State.PLANNED, State.DONE})
 
 
 class AutoRunner:
-    """Runs a session's planner-chosen steps; ``remaining`` counts the steps still to go."""
+    """Runs a session's planner-chosen steps; the session's ``auto_remaining`` counts the steps still to go."""
 
-    def __init__(self, session: Session) -> None:
+    def __init__(self, session: SessionCore) -> None:
         self.session = session
-        self.remaining = 0
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
-    def _claim(self, count: int, action: str) -> None:
-        s = self.session
-        if s.planner.iteration == 0:
-            raise Conflict(f"session {s.id}: no frame yet; capture first")
-        refusal = auto_refusal(s.cell)
-        if refusal is not None:
-            raise Conflict(f"session {s.id}: {action} refused: {refusal}")
-        s.claim(RUNNABLE, State.AUTO, action)
+    @property
+    def remaining(self) -> int:
+        return self.session.auto_remaining
+
+    def _check(self, action: Action) -> Callable[[], None]:
+        def check() -> None:
+            s = self.session
+            no_frame_yet(s)
+            refusal = s.cell.auto_refusal()
+            if refusal is not None:
+                raise Conflict(f"session {s.id}: {TRANSITIONS[action].label} refused: {refusal}")
+
+        return check
+
+    def _begin(self, count: int) -> None:
         self._stop.clear()
-        self.remaining = count
+        self.session.set_auto_remaining(count)
 
     def step(self, count: int = 1) -> list[dict[str, Any]]:
         """Plan and take the planner's choice ``count`` times (scripting); stops early when the scan ends."""
-        with self.session._lock:
-            self._claim(count, "step")
-        self.session.notify(SessionEvent.STATE)
-        return self._run(count, DecisionKind.STEP)
+        with self.session.enter(Action.STEP, lambda: self._begin(count), self._check(Action.STEP)):
+            return self._run(count, DecisionKind.STEP)
 
     def start(self, count: int) -> None:
-        """Run ``count`` steps in a background thread."""
+        """Run ``count`` steps in a background thread (the claim is made here; the thread settles it)."""
         s = self.session
-        with s._lock:
-            self._claim(count, "start auto mode")
-            s._emit("auto_start", count=count)
-            thread = threading.Thread(target=self._main, args=(count,), name=f"auto-{s.id}", daemon=True)
-            self._thread = thread
-        s.notify(SessionEvent.STATE)
-        thread.start()
 
-    def _main(self, count: int) -> None:
-        with contextlib.suppress(Exception):  # already recorded as the error state; the thread just ends
+        def begin() -> None:
+            self._begin(count)
+            s.emit("auto_start", count=count)
+
+        claim = contextlib.ExitStack()
+        claim.enter_context(s.enter(Action.AUTO, begin, self._check(Action.AUTO)))
+        thread = threading.Thread(target=self._main, args=(count, claim), name=f"auto-{s.id}", daemon=True)
+        self._thread = thread
+        try:
+            thread.start()
+        except BaseException:
+            claim.close()
+            raise
+
+    def _main(self, count: int, claim: contextlib.ExitStack) -> None:
+        with contextlib.suppress(Exception), claim:  # a fault is the error state already; the thread just ends
             self._run(count, DecisionKind.AUTO)
 
     @property
@@ -76,11 +85,11 @@ class AutoRunner:
         just ends auto mode; a killed integration leaves its view step in state error to retry, map unchanged); a
         move or capture in flight ends first. True when auto mode was running."""
         s = self.session
-        with s._lock:
+        with s.lock:
             running = s.state == State.AUTO
             if running:
                 self._stop.set()
-                s._emit("auto_stop")
+                s.emit("auto_stop")
         if running and s.worker is not None:
             s.worker.cancel("stopped by the operator")
         return running
@@ -108,7 +117,7 @@ class AutoRunner:
                 if self._stop.is_set() or s.planner.terminated is not None:
                     break
                 try:
-                    entry = s.make_plan()
+                    entry = make_plan(s, stopping=self._stop.is_set)
                 except JobKilled:
                     if self._stop.is_set():
                         break  # Stop killed the plan at once
@@ -117,19 +126,12 @@ class AutoRunner:
                 best = entry.plan.best_index
                 if best is None or self._stop.is_set():
                     break
-                with s._lock:
-                    s.consume(entry)
-                    target = entry.plan.candidates[best].T_world_camera
-                    decision = Decision(kind, target, entry.plan_id, best, best)
-                    s.record_decision(decision)
-                records.append(s.take_view(decision, entry))
-                with s._lock:
-                    self.remaining -= 1
+                decision = Decision(kind, entry.plan.candidates[best].T_world_camera, entry.plan_id, best, best)
+                with s.lock:
+                    s.take_decision(decision, entry)
+                records.append(take_view(s, decision, entry))
+                s.set_auto_remaining(s.auto_remaining - 1)
         finally:
-            with s._lock:
-                if s.state == State.AUTO:
-                    s._state = s.settle()
-                self.remaining = 0
-                self._thread = None
-            s.notify(SessionEvent.STATE)
+            s.set_auto_remaining(0)
+            self._thread = None
         return records

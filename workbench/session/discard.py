@@ -3,56 +3,51 @@
 The ``discard`` event is journaled first, then the session is rebuilt by replaying its journal (which now
 leaves that capture out, workbench/journal/discard.py) and takes the rebuilt state over: map, cloud, views,
 record. The plan whose approval took the discarded view is pending again (approve another candidate of it,
-or plan again). The frame file stays on disk. The session is claimed busy (``capturing``) meanwhile.
+or plan again). The frame file stays on disk. The session is in state ``discarding`` meanwhile.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from workbench.errors import Conflict, Invalid
 from workbench.journal.discard import last_capture
 from workbench.journal.rebuild import REPLAY_STAGE
-from workbench.journal.store import read_journal
-from workbench.session.values import BUSY, SessionEvent, State
+from workbench.journal.store import JournalWriter, read_journal
+from workbench.session.core import SessionCore
+from workbench.session.loop import replay
+from workbench.session.states import Action
+from workbench.session.values import SessionEvent
 from workbench.workers.pool import JobKilled
 
-if TYPE_CHECKING:
-    from workbench.session.session import Session
 
-
-def discard_last_view(wb: Session) -> dict[str, Any]:
-    """Undo the last capture of ``wb``; returns ``{"discarded": iteration, "mismatches": [...]}``.
+def discard_last_view(s: SessionCore) -> dict[str, Any]:
+    """Undo the last capture of ``s``; returns ``{"discarded": iteration, "mismatches": [...]}``.
 
     Conflict without a journal, without a view, or while busy; Invalid when the journal cannot be replayed
-    (the session is then left in state error with its map as it was before the call).
+    (the session is then back in the state it was in, its map as it was before the call).
     """
-    journal = wb.journal
+    journal = s.journal
     if journal is None:
-        raise Conflict(f"session {wb.id}: no journal to rebuild from; cannot discard a view")
-    with wb._lock:
-        if wb.state in BUSY:
-            raise Conflict(f"session {wb.id} is busy ({wb.state}); discard refused")
+        raise Conflict(f"session {s.id}: no journal to rebuild from; cannot discard a view")
+
+    def prepare(journal: JournalWriter = journal) -> dict[str, Any]:
         last = last_capture(read_journal(journal.directory).events)
         if last is None:
-            raise Conflict(f"session {wb.id}: no view to discard")
-        before = wb.claim(frozenset(State) - BUSY - {State.INTERRUPTED}, State.CAPTURING, "discard")
+            raise Conflict(f"session {s.id}: no view to discard")
         journal.append("discard", capture_seq=last["seq"], iteration=last["iteration"])
-    wb.notify(SessionEvent.STATE)
-    wb.progress.begin("discard", [REPLAY_STAGE])
-    try:
-        rebuilt = wb.replay(read_journal(journal.directory), wb.progress.stage)
-    except (ValueError, KeyError, TypeError, JobKilled) as exc:
-        with wb._lock:
-            wb._state = before
-        wb.notify(SessionEvent.STATE)
-        raise Invalid(f"session {wb.id}: cannot rebuild without the last view: {exc}") from None
-    finally:
-        wb.progress.end()
-    with wb._lock:
-        wb._error = None
-        wb._failed = None
-        wb._custom = None
-    wb.restore(rebuilt)
-    wb.notify(SessionEvent.CAPTURED)
+        return last
+
+    with s.enter(Action.DISCARD, prepare) as claim:
+        last = claim.value
+        assert last is not None
+        s.progress.begin("discard", [REPLAY_STAGE])
+        try:
+            rebuilt = replay(s, read_journal(journal.directory), s.progress.stage)
+        except (ValueError, KeyError, TypeError, JobKilled) as exc:
+            raise Invalid(f"session {s.id}: cannot rebuild without the last view: {exc}") from None
+        finally:
+            s.progress.end()
+        s.take_over(rebuilt)
+        claim.news.append(SessionEvent.CAPTURED)
     return {"discarded": int(last["iteration"]), "mismatches": rebuilt.mismatches}

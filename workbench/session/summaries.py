@@ -8,7 +8,8 @@ from typing import Any
 
 from planner import Planner, PlanResult, VoxelClass
 from planner.planner import IntegrationReport
-from workbench.session.values import CustomPose, PendingPlan, State
+from workbench.session.states import Listed, State
+from workbench.session.values import CustomPose, PendingPlan
 
 VOXEL_CLASSES = ("occupied", "frontier", "unknown", "empty")
 
@@ -86,7 +87,7 @@ def capture_fields(report: IntegrationReport, voxels: dict[str, int], coverage: 
 def session_status(
     record: Any,
     *,
-    state: State,
+    state: State | Listed,
     source: str,
     pending: PendingPlan | None = None,
     selected: int | None = None,
@@ -98,7 +99,7 @@ def session_status(
     moves: int = 0,
     progress: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """The session summary of ``GET /api/sessions/{id}``, for a live and for an interrupted session alike.
+    """The session summary (its status), for a live and for an interrupted session alike.
 
     record: the session's :class:`workbench.session.record.SessionRecord` (id, model, seed and the last capture).
     progress: the running long operation (``workbench.progress.Progress.to_json``), None when none runs.

@@ -1,5 +1,5 @@
-"""The value types of a session's state machine: states, decisions, plans waiting for a decision, the events
-listeners receive, and what the 3D scene draws."""
+"""The value types of a session: decisions, plans waiting for a decision, the step a fault interrupted, the events
+listeners receive, and what the 3D scene draws (the states and their table: workbench/session/states.py)."""
 
 from __future__ import annotations
 
@@ -12,26 +12,6 @@ import trimesh
 from numpy.typing import NDArray
 
 from planner import PlanResult, Pose
-
-
-class State(StrEnum):
-    NEW = "new"
-    CAPTURING = "capturing"
-    READY = "ready"
-    PLANNING = "planning"
-    PLANNED = "planned"
-    MOVING = "moving"
-    AUTO = "auto"
-    DONE = "done"
-    ERROR = "error"
-    INTERRUPTED = "interrupted"
-    """Journaled by an earlier server process that stopped; resume rebuilds it (never a live state)."""
-    DAMAGED = "damaged"
-    """Like interrupted, but its journal is damaged; resume recovers what comes before the damage."""
-
-
-BUSY = frozenset({State.CAPTURING, State.PLANNING, State.MOVING, State.AUTO})
-CAN_PLAN = frozenset({State.READY, State.PLANNED, State.DONE, State.ERROR})
 
 
 class SessionEvent(StrEnum):
