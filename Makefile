@@ -7,6 +7,7 @@ TSTAMP  := $(VENV)/.installed-test
 HOST    ?= 127.0.0.1
 PORT    ?= 8000
 PYTEST_ARGS ?=
+PYTEST_WORKERS ?= 2
 
 .PHONY: run test lint bench bench-agreement install system-deps clean
 
@@ -40,7 +41,7 @@ run: system-deps $(STAMP)
 
 test: system-deps $(TSTAMP)
 	$(BIN)/ruff check planner devices workbench app nbv tests
-	$(BIN)/python -m pytest -q $(PYTEST_ARGS)
+	$(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --dist loadgroup $(PYTEST_ARGS)
 
 lint: $(TSTAMP)
 	$(BIN)/ruff check planner devices workbench app nbv tests

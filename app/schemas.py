@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import typing
 from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StrictFloat, StrictInt, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StrictFloat, StrictInt, create_model, model_validator
 
 from planner import Pose
+from workbench import SessionStatus
 
 
 def _finite(values: list[float | int]) -> list[float]:
@@ -169,31 +172,23 @@ class ProgressOut(BaseModel):
     stoppable: bool = Field(description="POST .../stop (a plan) or DELETE /api/creations/{id} (a create) ends it")
 
 
-class SessionOut(BaseModel):
-    id: str
-    model: str
-    source: str = Field(
-        description="sim, replay, hardware (a cell file's devices, or its dry run), "
-        "or journal (an interrupted session not yet resumed)"
-    )
-    state: str = Field(
-        description="new, capturing, ready, planning, planned, moving, auto, discarding, done, error, interrupted, damaged"
-    )
-    iteration: int
-    coverage: float | None
-    points: int
-    voxels: dict[str, int] = Field(description="voxel counts by class: occupied, frontier, unknown, empty")
-    pending_plan: PlanOut | None
-    selected: int | None
-    custom_pose: CustomPoseOut | None
-    error: str | None
-    retry: str | None = Field(description="in state error: the failed step POST .../retry re-does")
-    terminated: str | None
-    auto_remaining: int
-    moves: int
-    seed: int
-    planner: str = Field(default="projection", description="the view evaluator this session plans with")
-    progress: ProgressOut | None = Field(default=None, description="the long operation running now, if any")
+def model_of(shape: type, name: str, nested: dict[str, Any]) -> type[BaseModel]:
+    """A response schema with the fields, types, defaults and docs of the domain dataclass ``shape``; ``nested``
+    gives the schema of a field whose domain type is plain JSON (a dict)."""
+    hints = typing.get_type_hints(shape)
+    fields: dict[str, Any] = {}
+    for f in dataclasses.fields(shape):
+        default = ... if f.default is dataclasses.MISSING else f.default
+        fields[f.name] = (nested.get(f.name, hints[f.name]), Field(default, description=f.metadata.get("doc")))
+    return create_model(name, __doc__=shape.__doc__, **fields)
+
+
+SessionOut = model_of(
+    SessionStatus,
+    "SessionOut",
+    {"pending_plan": PlanOut | None, "custom_pose": CustomPoseOut | None, "progress": ProgressOut | None},
+)
+"""A session's status: :class:`workbench.SessionStatus`, the shape defined once in the workbench."""
 
 
 class CandidateOut(BaseModel):
@@ -324,7 +319,7 @@ class ViewerTicketOut(BaseModel):
 
 
 class ResumeOut(BaseModel):
-    session: SessionOut
+    session: SessionOut  # pyright: ignore[reportInvalidTypeForm] # a schema built from the domain's dataclass
     verified: bool = Field(description="every replayed step matched the journal (points, voxels, plans)")
     mismatches: list[str]
     interrupted: str | None = Field(description="plan_id of a decision whose capture never happened; pending again")
@@ -338,3 +333,106 @@ class ResumeOut(BaseModel):
 class FaultRequest(BaseModel):
     model_config = ConfigDict(extra="forbid")
     kind: Literal["camera_timeout", "capture_failure", "nan_frame", "empty_frame", "arm_halfway", "turntable_error"]
+
+
+class DiscardOut(BaseModel):
+    discarded: int = Field(description="the iteration the discarded view was")
+    mismatches: list[str] = Field(description="where the rebuilt session differs from the journal (none: the same)")
+    session: SessionOut  # pyright: ignore[reportInvalidTypeForm] # a schema built from the domain's dataclass
+
+
+class FaultQueuedOut(BaseModel):
+    queued: str = Field(description="the fault kind the device's next action raises")
+
+
+class MetricPoint(BaseModel):
+    iteration: int
+    coverage: float | None
+    points: int
+    plan_seconds: float | None
+    decision: str | None
+
+
+class MetricsOut(BaseModel):
+    """The charts of a session: per-iteration series, the BIC curves of the last plan, the coverage ceiling."""
+
+    iterations: list[MetricPoint]
+    fits: list[dict[str, Any]] = Field(description="the last plan's fits: kind, BIC per T, the T chosen")
+    fit_iteration: int | None
+    ceiling: float | None = Field(description="the reachable-coverage ceiling; null until computed or without truth")
+    coverage_ratio: list[float] | None
+    auc: float | None
+    views_to_90: int | None
+    views_to_95: int | None
+    views_to_98: int | None
+
+
+class ExportOut(BaseModel):
+    """The whole session as one JSON document (``version``: the export format)."""
+
+    version: int
+    session: SessionOut  # pyright: ignore[reportInvalidTypeForm] # a schema built from the domain's dataclass
+    model: str
+    seed: int
+    created: float
+    config: dict[str, Any]
+    iterations: list[dict[str, Any]]
+    plans: list[dict[str, Any]]
+    decisions: list[dict[str, Any]]
+    events: list[dict[str, Any]]
+
+
+class ArmTargetOut(BaseModel):
+    kind: str = Field(description="best, selected or custom: which view the move goes to")
+    index: int | None
+    reachable: bool
+    reason: str | None = Field(description="why it is unreachable; null when reachable")
+    joints: list[float] | None
+    plate_angle: float | None
+    duration: float | None
+    path_method: str | None
+
+
+class ArmOut(BaseModel):
+    has_arm: bool
+    joints: list[float] | None
+    plate_angle: float
+    target: ArmTargetOut | None
+    unreachable: dict[str, str] = Field(description="the cell's reason per unreachable candidate, by index")
+
+
+class ArmPreviewOut(BaseModel):
+    target: ArmTargetOut
+    tabs: int = Field(description="tabs animating the ghost arm")
+    seconds: float
+
+
+class ViewerCameraOut(BaseModel):
+    client_id: int
+    position: list[float]
+    wxyz: list[float]
+    look_at: list[float]
+    fov: float
+    image_width: int
+    image_height: int
+    timestamp: float
+
+
+class SceneInfoOut(BaseModel):
+    viewer: str
+    session: str
+    connected: bool
+    layers: dict[str, bool]
+    nodes: list[str]
+    colormap: list[list[float]]
+    score_range: list[float]
+    colors: dict[str, list[float]]
+    scale: str
+
+
+class ClientsOut(BaseModel):
+    clients: int = Field(description="the viewer's clients whose camera moved")
+
+
+class HealthOut(BaseModel):
+    status: str

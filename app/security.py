@@ -23,6 +23,7 @@ from __future__ import annotations
 import hmac
 import logging
 import re
+from collections.abc import Collection
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
@@ -31,6 +32,18 @@ from starlette.responses import JSONResponse
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.settings import AppSettings, is_loopback
+
+
+def same_origin(origin: str, host: str | None, allowed: Collection[str]) -> bool:
+    """The one same-origin rule (plain HTTP, the events websocket, the 3D viewer's websocket): ``origin`` is the
+    page's own (its host and port are the ``Host`` the request reached) or one of ``allowed`` (``cors_origins``,
+    a trailing slash aside). The opaque origin ``null`` is never the page's own."""
+    if origin == "null":
+        return origin in allowed
+    if host is not None and urlsplit(origin).netloc.lower() == host.lower():
+        return True
+    return origin.rstrip("/") in {o.rstrip("/") for o in allowed}
+
 
 SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
 PROTECTED_PAGES = frozenset({"/openapi.json", "/docs", "/docs/oauth2-redirect", "/redoc"})
@@ -97,10 +110,8 @@ class SecurityMiddleware:
             return 400, f"host {host!r} refused: this server answers only to 127.0.0.1 / localhost"
         method = scope.get("method", "GET")
         origin = headers.get("origin")
-        if method not in SAFE_METHODS and origin is not None:
-            same = urlsplit(origin).netloc.lower() == host.lower() and origin != "null"
-            if not same and origin.rstrip("/") not in self.cors:
-                return 403, f"cross-origin request from {origin!r} refused (allowed: this page, cors_origins)"
+        if method not in SAFE_METHODS and origin is not None and not same_origin(origin, host, self.cors):
+            return 403, f"cross-origin request from {origin!r} refused (allowed: this page, cors_origins)"
         path = scope["path"]
         api = path == "/api" or path.startswith("/api/") or path in PROTECTED_PAGES
         if self.token is not None and api and method != "OPTIONS" and not self._has_token(scope, headers):

@@ -198,3 +198,28 @@ def test_importing_a_lower_package_loads_no_stack_above_it(imports: str, banned:
     code = f"import sys, {imports}\nprint(','.join(m for m in {banned!r} if m in sys.modules))\n"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == ""
+
+
+def test_docs_architecture_lists_every_workbench_module() -> None:
+    """docs/architecture.md's tree names every module of workbench/ (its folder and file name), and nothing more."""
+    import re
+
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    tree = text[text.index("```\nworkbench/\n") :]
+    tree = tree[: tree.index("```", 4)]
+    listed, folder = set(), ""
+    for line in tree.splitlines()[1:]:
+        match = re.match(r"^  (  )?([a-z_]+(?:\.py|/))", line)
+        if match is None:
+            continue
+        name = match.group(2)
+        if name.endswith("/"):
+            folder = name
+        else:
+            listed.add((folder if match.group(1) else "") + name)
+    actual = {
+        str(p.relative_to(ROOT / "workbench"))
+        for p in (ROOT / "workbench").rglob("*.py")
+        if not (p.name == "__init__.py" and p.parent != ROOT / "workbench")
+    }
+    assert sorted(actual - listed) == [] and sorted(listed - actual) == []

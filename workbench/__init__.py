@@ -24,7 +24,7 @@ from workbench.registry.creations import resume_id
 from workbench.registry.registry import SessionRegistry
 from workbench.session.session import Session
 from workbench.session.states import BUSY, Listed, State
-from workbench.session.summaries import best_of, plan_summary
+from workbench.session.summaries import SessionStatus, best_of, plan_summary
 from workbench.session.values import SceneData, SessionEvent
 from workbench.settings import WorkbenchSettings
 from workbench.sources.catalog import list_models, save_upload
@@ -42,6 +42,7 @@ __all__ = [
     "Session",
     "SessionEvent",
     "SessionRegistry",
+    "SessionStatus",
     "State",
     "StorageFault",
     "TooLarge",

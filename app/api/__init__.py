@@ -18,4 +18,5 @@ from app.schemas import ERROR_RESPONSES
 
 router = APIRouter(prefix="/api", responses=ERROR_RESPONSES)
 for module in (viewer, models, sessions, loop, candidates, scene, events, arm):
-    router.include_router(module.router)
+    for resource in module.routers:  # each with its prefix and tags
+        router.include_router(resource)

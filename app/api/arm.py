@@ -9,8 +9,9 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Query
 
 from app.api.deps import Scene, SessionDep
+from app.schemas import ArmOut, ArmPreviewOut
 
-router = APIRouter()
+router = APIRouter(prefix="/sessions/{session_id}/arm", tags=["arm"])
 
 
 def _arm_json(scene: Any, session: Any) -> dict[str, Any]:
@@ -30,7 +31,7 @@ def _arm_json(scene: Any, session: Any) -> dict[str, Any]:
     }
 
 
-@router.get("/sessions/{session_id}/arm")
+@router.get("", response_model=ArmOut)
 def arm_state(session: SessionDep, scene: Scene) -> dict[str, Any]:
     """The arm's joints and plate angle; the move to the selected target (the planner's choice, a clicked
     candidate or the custom pose: joints, plate angle, duration, or why it is unreachable); and the cell's
@@ -39,9 +40,12 @@ def arm_state(session: SessionDep, scene: Scene) -> dict[str, Any]:
     return _arm_json(scene, session)
 
 
-@router.post("/sessions/{session_id}/arm/preview")
+@router.post("/preview", response_model=ArmPreviewOut)
 def preview(session: SessionDep, scene: Scene, speed: Annotated[float, Query(gt=0.0, le=10.0)] = 1.0) -> dict[str, Any]:
     """Play the move to the selected target on the ghost arm in every tab showing this session (nothing moves).
     409 without an arm or a pending plan, 422 when the target is unreachable."""
     target, tabs = scene.preview(session, speed if math.isfinite(speed) else 1.0)
     return {"target": target.to_json(), "tabs": tabs, "seconds": target.to_json()["duration"] / speed}
+
+
+routers = [router]

@@ -10,10 +10,10 @@ from app.api.deps import SessionDep
 from app.schemas import CandidateDetail, CandidateOut
 from app.serialize import candidate_detail, candidate_json
 
-router = APIRouter()
+router = APIRouter(prefix="/sessions/{session_id}/candidates", tags=["candidates"])
 
 
-@router.get("/sessions/{session_id}/candidates", response_model=list[CandidateOut])
+@router.get("", response_model=list[CandidateOut])
 def candidates(
     session: SessionDep,
     sort: Literal["index", "score"] = "index",
@@ -30,7 +30,7 @@ def candidates(
     return items[:limit] if limit else items
 
 
-@router.get("/sessions/{session_id}/candidates/{index}", response_model=CandidateDetail)
+@router.get("/{index}", response_model=CandidateDetail)
 def candidate(session: SessionDep, index: int) -> dict[str, Any]:
     """One candidate with its score broken down per ellipsoid."""
     entry = session.plan_for()
@@ -38,7 +38,7 @@ def candidate(session: SessionDep, index: int) -> dict[str, Any]:
 
 
 @router.get(
-    "/sessions/{session_id}/candidates/{index}/projection.png",
+    "/{index}/projection.png",
     response_class=Response,
     responses={200: {"content": {"image/png": {}}}},
 )
@@ -55,3 +55,6 @@ def projection_png(session: SessionDep, index: int) -> Response:
     else:
         png = render_projection(entry.plan, i, session.cell.intrinsics)
     return Response(png, media_type="image/png", headers={"Cache-Control": "no-store"})
+
+
+routers = [router]

@@ -24,14 +24,14 @@ import hmac
 import json
 import logging
 from typing import Any
-from urllib.parse import urlsplit
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 
+from app.security import same_origin
 from app.settings import AppSettings
 from workbench import Conflict, Progress, Session, SessionEvent, WorkbenchError, jsonable, resume_id
 
-router = APIRouter()
+router = APIRouter(prefix="/events", tags=["events"])
 log = logging.getLogger(__name__)
 
 
@@ -39,10 +39,8 @@ def refusal(ws: WebSocket, settings: AppSettings) -> tuple[int, str] | None:
     """(close code, reason) when this websocket may not subscribe, else None."""
     origin = ws.headers.get("origin")
     host = ws.headers.get("host", "")
-    if origin is not None:
-        same = urlsplit(origin).netloc.lower() == host.lower() and origin != "null"
-        if not same and origin.rstrip("/") not in {o.rstrip("/") for o in settings.cors_origins}:
-            return 4403, f"cross-origin event stream from {origin!r} refused"
+    if origin is not None and not same_origin(origin, host, settings.cors_origins):
+        return 4403, f"cross-origin event stream from {origin!r} refused"
     if settings.token:
         given = ws.query_params.get("token", "")
         if not hmac.compare_digest(given.encode("utf-8"), settings.token.encode("utf-8")):
@@ -55,7 +53,7 @@ def _dump(message: dict[str, Any]) -> str:
     return json.dumps(jsonable(message), separators=(",", ":"))
 
 
-@router.websocket("/events")
+@router.websocket("")
 async def events(ws: WebSocket, session: str | None = None, create: str | None = None) -> None:
     """Push the session's status after every change and the session list's changes (see the module docstring)."""
     settings: AppSettings = ws.app.state.settings
@@ -150,3 +148,6 @@ async def _drain(ws: WebSocket) -> None:
             message = await ws.receive()
             if message["type"] == "websocket.disconnect":
                 return
+
+
+routers = [router]

@@ -10,16 +10,17 @@ from app.api.deps import Settings
 from app.schemas import ModelOut
 from workbench import TooLarge, list_models, list_recordings, save_upload
 
-router = APIRouter()
+router = APIRouter(prefix="/models", tags=["catalog"])
+recordings_router = APIRouter(prefix="/recordings", tags=["catalog"])
 
 
-@router.get("/models", response_model=list[ModelOut])
+@router.get("", response_model=list[ModelOut])
 def models(settings: Settings) -> list[dict[str, Any]]:
     """Built-in objects, mesh files in the models directory, and uploads."""
     return [m.to_json() for m in list_models(settings)]
 
 
-@router.post("/models", status_code=201, response_model=ModelOut)
+@router.post("", status_code=201, response_model=ModelOut)
 def upload_model(settings: Settings, file: UploadFile) -> dict[str, Any]:
     """Upload a mesh (PLY/OBJ/STL/OFF/GLB); it is checked, stored under the data directory and listed."""
     data = file.file.read(settings.max_upload_bytes + 1)
@@ -28,7 +29,10 @@ def upload_model(settings: Settings, file: UploadFile) -> dict[str, Any]:
     return save_upload(settings, file.filename or "upload", data).to_json()
 
 
-@router.get("/recordings", response_model=list[str])
+@recordings_router.get("", response_model=list[str])
 def recordings(settings: Settings) -> list[str]:
     """Recording folders (PLY + pose JSON per view) in ``data_dir/recordings``, usable as a replay source."""
     return list_recordings(settings)
+
+
+routers = [router, recordings_router]

@@ -7,32 +7,35 @@ from typing import Any
 from fastapi import APIRouter
 
 from app.api.deps import Scene
-from app.schemas import CameraRequest
+from app.schemas import CameraRequest, ClientsOut, SceneInfoOut, ViewerCameraOut
 
-router = APIRouter()
+router = APIRouter(prefix="/scene", tags=["scene"])
 
 
-@router.get("/scene/cameras")
+@router.get("/cameras", response_model=list[ViewerCameraOut])
 def scene_cameras(scene: Scene) -> list[dict[str, Any]]:
     """Each connected viewer's camera (OpenCV pose, vertical fov, canvas size), as last reported."""
     return scene.cameras()
 
 
-@router.get("/scene/{viewer}")
+@router.get("/{viewer}", response_model=SceneInfoOut)
 def scene_info(scene: Scene, viewer: str) -> dict[str, Any]:
     """The viewer's session, whether it is connected, layer visibility, drawn node names, colour bar."""
     return scene.info(viewer)
 
 
-@router.put("/scene/{viewer}/layers")
+@router.put("/{viewer}/layers", response_model=dict[str, bool])
 def scene_layers(scene: Scene, viewer: str, body: dict[str, bool]) -> dict[str, bool]:
     """Show or hide layers of this viewer, e.g. ``{"empty": true, "gmm": true}``."""
     return scene.set_layers(viewer, body)
 
 
-@router.post("/scene/{viewer}/camera")
+@router.post("/{viewer}/camera", response_model=ClientsOut)
 def scene_camera(scene: Scene, viewer: str, body: CameraRequest) -> dict[str, int]:
     """Point this viewer's camera at a candidate (from outside the hemisphere) or at a given point."""
     if body.candidate is not None:
         return {"clients": scene.look_at_candidate(viewer, body.candidate, body.distance)}
     return {"clients": scene.set_camera(viewer, body.position, body.look_at)}
+
+
+routers = [router]

@@ -8,14 +8,26 @@ from fastapi import APIRouter, Body, Response
 from fastapi.responses import JSONResponse
 
 from app.api.deps import Registry, SessionDep, Settings
-from app.schemas import FaultRequest, ResumeOut, SessionCreate, SessionCreated, SessionOut
+from app.schemas import (
+    DiscardOut,
+    ExportOut,
+    FaultQueuedOut,
+    FaultRequest,
+    MetricsOut,
+    ResumeOut,
+    SessionCreate,
+    SessionCreated,
+    SessionOut,
+)
 from app.serialize import SafeJSONResponse
 from workbench import Conflict, Invalid, NotFound
 
-router = APIRouter()
+router = APIRouter(prefix="/sessions", tags=["sessions"])
+creations_router = APIRouter(prefix="/creations", tags=["sessions"])
+planners_router = APIRouter(prefix="/planners", tags=["sessions"])
 
 
-@router.post("/sessions", status_code=201, response_model=SessionCreated)
+@router.post("", status_code=201, response_model=SessionCreated)
 def create_session(
     registry: Registry, settings: Settings, body: Annotated[SessionCreate | None, Body()] = None
 ) -> dict[str, str]:
@@ -37,7 +49,7 @@ def create_session(
     return {"id": session.id}
 
 
-@router.delete("/creations/{progress_id}", status_code=204)
+@creations_router.delete("/{progress_id}", status_code=204)
 def cancel_create(registry: Registry, progress_id: str) -> None:
     """Cancel the running create named ``progress_id`` (``POST /api/sessions`` answers 409 at its next stage,
     nothing created); 404 when none runs under that name."""
@@ -45,13 +57,13 @@ def cancel_create(registry: Registry, progress_id: str) -> None:
         raise NotFound(f"create {progress_id!r}: none is running under this progress_id")
 
 
-@router.post("/sessions/{session_id}/discard")
+@router.post("/{session_id}/discard", response_model=DiscardOut)
 def discard_last_view(session: SessionDep) -> dict[str, Any]:
     """Undo the last view: the session is rebuilt from its journal without that frame (journaled as a discard)."""
     return session.discard_last_view() | {"session": session.status()}
 
 
-@router.get("/planners")
+@planners_router.get("", response_model=list[str])
 def planners() -> list[str]:
     """The view evaluators a session may plan with (``planner`` of ``POST /api/sessions``)."""
     from planner.evaluators import evaluator_names
@@ -59,18 +71,18 @@ def planners() -> list[str]:
     return evaluator_names()
 
 
-@router.get("/sessions", response_model=list[SessionOut])
+@router.get("", response_model=list[SessionOut])
 def list_sessions(registry: Registry) -> list[dict[str, Any]]:
     """Live sessions, and journaled ones of an earlier server process (state ``interrupted``)."""
     return registry.list_status()
 
 
-@router.get("/sessions/{session_id}", response_model=SessionOut)
+@router.get("/{session_id}", response_model=SessionOut)
 def get_session(session_id: str, registry: Registry) -> dict[str, Any]:
     return registry.status(session_id)
 
 
-@router.post("/sessions/{session_id}/resume", response_model=ResumeOut)
+@router.post("/{session_id}/resume", response_model=ResumeOut)
 def resume(session_id: str, registry: Registry) -> dict[str, Any]:
     """Rebuild an interrupted session from its journal: the same map and the same pending plan."""
     session, rebuilt = registry.resume(session_id)
@@ -83,20 +95,20 @@ def resume(session_id: str, registry: Registry) -> dict[str, Any]:
     }
 
 
-@router.post("/sessions/{session_id}/retry", response_model=SessionOut)
+@router.post("/{session_id}/retry", response_model=SessionOut)
 def retry(session: SessionDep) -> dict[str, Any]:
     """In state error: re-do the failed step (the same move and capture)."""
     session.retry()
     return session.status()
 
 
-@router.patch("/sessions/{session_id}/config")
+@router.patch("/{session_id}/config", response_model=dict[str, dict[str, Any]])
 def change_config(session: SessionDep, body: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """Change ``termination``, ``candidates`` or ``partitions`` of a running session (journaled)."""
     return session.change_config(body)
 
 
-@router.post("/sessions/{session_id}/faults", status_code=202)
+@router.post("/{session_id}/faults", status_code=202, response_model=FaultQueuedOut)
 def inject_fault(settings: Settings, session: SessionDep, body: FaultRequest) -> dict[str, Any]:
     """Test-only (``fault_api``): the next action of the fault's device fails with ``kind``."""
     if not settings.fault_api:
@@ -107,20 +119,20 @@ def inject_fault(settings: Settings, session: SessionDep, body: FaultRequest) ->
     return {"queued": body.kind}
 
 
-@router.delete("/sessions/{session_id}", status_code=204)
+@router.delete("/{session_id}", status_code=204)
 def delete_session(session_id: str, registry: Registry) -> Response:
     registry.delete(session_id)
     return Response(status_code=204)
 
 
-@router.get("/sessions/{session_id}/metrics")
+@router.get("/{session_id}/metrics", response_model=MetricsOut)
 def metrics(session: SessionDep) -> dict[str, Any]:
     """Per-iteration coverage, point count and plan time; the BIC curves of the last fit."""
     return session.metrics()
 
 
 @router.get(
-    "/sessions/{session_id}/cloud.ply",
+    "/{session_id}/cloud.ply",
     response_class=Response,
     responses={200: {"content": {"application/octet-stream": {}}}},
 )
@@ -135,9 +147,12 @@ def cloud_ply(session: SessionDep) -> Response:
     )
 
 
-@router.get("/sessions/{session_id}/export")
+@router.get("/{session_id}/export", response_model=ExportOut)
 def export(session: SessionDep) -> JSONResponse:
     """The whole session (every pose, plan, decision, override and metric) as JSON."""
     return SafeJSONResponse(
         session.export(), headers={"Content-Disposition": f'attachment; filename="nbv-{session.id}-session.json"'}
     )
+
+
+routers = [router, creations_router, planners_router]

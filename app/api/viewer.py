@@ -8,14 +8,15 @@ from fastapi import APIRouter, Request
 
 from app.api.deps import Registry, Scene, Settings
 from app.scene.guard import viewer_url
-from app.schemas import ViewerOut, ViewerRequest, ViewerTicketOut
+from app.schemas import HealthOut, ViewerOut, ViewerRequest, ViewerTicketOut
 from app.settings import AppSettings, is_loopback, viewer_host
 from workbench import Conflict
 
-router = APIRouter()
+health_router = APIRouter(prefix="/health", tags=["server"])
+router = APIRouter(prefix="/viewer", tags=["viewer"])
 
 
-@router.get("/health")
+@health_router.get("", response_model=HealthOut)
 def health() -> dict[str, str]:
     return {"status": "ok"}
 
@@ -36,14 +37,14 @@ def _where(request: Request, settings: AppSettings) -> tuple[str, int, str | Non
     return host, port, note
 
 
-@router.get("/viewer", response_model=ViewerOut)
+@router.get("", response_model=ViewerOut)
 def viewer(request: Request, settings: Settings) -> dict[str, Any]:
     """Where the viser client is served. Without a ticket (``POST /api/viewer``) it shows an empty scene."""
     host, port, note = _where(request, settings)
     return {"url": viewer_url(request.url.scheme, host, port, None), "port": port, "note": note}
 
 
-@router.post("/viewer", response_model=ViewerTicketOut, status_code=201)
+@router.post("", response_model=ViewerTicketOut, status_code=201)
 def open_viewer(
     request: Request, settings: Settings, scene: Scene, registry: Registry, body: ViewerRequest
 ) -> dict[str, Any]:
@@ -60,3 +61,6 @@ def open_viewer(
         "ttl": scene.tickets.ttl,
         "note": note,
     }
+
+
+routers = [health_router, router]

@@ -25,6 +25,7 @@ from urllib.parse import parse_qs, quote, urlsplit
 import viser
 
 from app.scene.tickets import Ticket, TicketBook
+from app.security import same_origin
 
 log = logging.getLogger(__name__)
 
@@ -36,11 +37,7 @@ def origin_refusal(origin: str | None, host: str | None, allowed_origins: Collec
     """Why a websocket handshake with these ``Origin`` and ``Host`` headers is refused, or None."""
     if origin is None or origin == "null":
         return "no Origin header"
-    if host is not None and urlsplit(origin).netloc.lower() == host.lower():
-        return None
-    if origin.rstrip("/") in {o.rstrip("/") for o in allowed_origins}:
-        return None
-    return f"foreign Origin {origin!r}"
+    return None if same_origin(origin, host, allowed_origins) else f"foreign Origin {origin!r}"
 
 
 def ticket_in(path: str) -> str | None:

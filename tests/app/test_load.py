@@ -24,7 +24,7 @@ from apphelpers import SMALL, Live, free_port, running_server
 from app.settings import AppSettings
 from devices.config import CameraConfig
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("heavy")]  # tests/conftest.py
 
 SPECS = [("l-block", 1), ("mug", 2), ("two-boxes", 3), ("sphere", 4), ("box", 5)]
 CONFIG = {**SMALL, "termination": {"stop_without_frontier": False, "max_views": 10}}

@@ -33,6 +33,7 @@ from hypothesis import HealthCheck, Phase, settings
 from app.main import create_app
 from app.settings import AppSettings
 
+pytestmark = pytest.mark.xdist_group("heavy")  # tests/conftest.py: not beside the load test
 MAX_EXAMPLES = 15
 BUDGET_SECONDS = 240.0  # all default checks (about 500 requests); measured 137 s at load average 20 on 2 cores
 _CALLS = itertools.count()

@@ -43,8 +43,8 @@ def test_the_diagram_check_sees_a_wrong_line(monkeypatch: pytest.MonkeyPatch) ->
 
 def test_every_action_has_a_row_and_only_live_states_appear() -> None:
     assert set(TRANSITIONS) == set(Action)
-    assert BUSY == {State.CAPTURING, State.PLANNING, State.MOVING, State.AUTO, State.DISCARDING}
-    assert RESTING == {State.NEW, State.READY, State.PLANNED, State.DONE, State.ERROR}
+    assert {State.CAPTURING, State.PLANNING, State.MOVING, State.AUTO, State.DISCARDING} == BUSY
+    assert {State.NEW, State.READY, State.PLANNED, State.DONE, State.ERROR} == RESTING
     for t in TRANSITIONS.values():
         assert t.sources <= RESTING  # an action starts from a resting state only
     assert not {str(s) for s in Listed} & {str(s) for s in State}  # listing-only states are not live ones

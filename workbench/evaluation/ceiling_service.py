@@ -11,7 +11,6 @@ the metrics say ``"ceiling": null``.
 from __future__ import annotations
 
 import logging
-import multiprocessing
 import threading
 from collections.abc import Callable
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -21,6 +20,7 @@ import trimesh
 
 from devices.config import DeviceConfig
 from planner import PlannerConfig
+from workbench.workers.client import worker_context
 
 log = logging.getLogger(__name__)
 
@@ -55,8 +55,8 @@ class CeilingService:
         with self._lock:
             if key in self._pending:
                 return
-            if self._pool is None:  # spawn: the server has threads, a fork could copy a held lock
-                self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+            if self._pool is None:  # the workers' forkserver: not a fork of the server and its threads, and ready
+                self._pool = ProcessPoolExecutor(1, mp_context=worker_context())  # in milliseconds (open3d loaded)
             future = self._pool.submit(compute_ceiling, mesh, devices, planner, self.cache_dir)
             self._pending[key] = future
 

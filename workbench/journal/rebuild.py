@@ -6,7 +6,7 @@ in their journaled order: ``capture`` -> ``Planner.integrate`` of the stored fra
 ``plan`` -> ``Planner.plan`` with the cell's reachability, ``config`` -> the same
 change; a discarded view (workbench/journal/discard.py) is left out. Every step is checked against what the journal recorded (points, voxel
 counts, iteration, coverage, best view and its score); differences are listed
-in ``Rebuilt.mismatches``. Used by ``POST /api/sessions/{id}/resume`` and ``nbv replay``.
+in ``Rebuilt.mismatches``. Used by a resume, a discard and ``nbv replay``.
 """
 
 from __future__ import annotations

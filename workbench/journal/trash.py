@@ -1,7 +1,7 @@
 """Deleted sessions wait in a trash folder until the server restarts, or sooner at its age or size limit:
 ``data_dir/sessions/.trash/<id>-<deleted ns>``.
 
-``DELETE /api/sessions/{id}`` marks the journal ``deleted`` and moves the session's folder (journal and frames)
+Deleting a session marks the journal ``deleted`` and moves the session's folder (journal and frames)
 here with one rename; :func:`prune` removes what is older than ``trash_max_age`` and then the oldest until the
 trash is under ``trash_max_bytes``. The registry prunes on every delete and at start-up, so frames of deleted
 sessions never pile up (a fuzzing run once left 150 MB). Nothing outside the trash folder is ever removed.

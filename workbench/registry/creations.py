@@ -1,8 +1,8 @@
 """Creates (and resumes) in flight: their progress, for the page that follows one, and their cancellation.
 
 A create on a big mesh takes seconds (reading, checking and sampling the mesh, building the cell). The page
-names its create with a ``progress_id`` it chose, follows it on ``/api/events?create=ID`` and may cancel it
-(``DELETE /api/creations/ID``): a cancelled create stops at its next stage with :class:`Conflict`, nothing
+names its create with a ``progress_id`` it chose, follows its progress by that name and may cancel
+it: a cancelled create stops at its next stage with :class:`Conflict`, nothing
 created, nothing kept.
 """
 
@@ -38,7 +38,7 @@ class Creation:
 
     def stage(self, name: str) -> None:
         if self.cancelled.is_set():
-            raise Conflict(f"create {self.progress_id}: cancelled (DELETE /api/creations/{self.progress_id})")
+            raise Conflict(f"create {self.progress_id}: cancelled")
         self.tracker.stage(name)
 
 

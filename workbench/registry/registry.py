@@ -32,7 +32,8 @@ from workbench.session.values import SessionEvent
 from workbench.settings import WorkbenchSettings
 from workbench.sources.limits import check_config
 from workbench.sources.parts import SURFACE_SAMPLES, SessionParts, build_parts, session_devices
-from workbench.workers.pool import Engine, JobKilled, offload_rendering, render_spec
+from workbench.workers.client import JobKilled, offload_rendering, render_spec
+from workbench.workers.pool import Engine
 
 __all__ = ["SURFACE_SAMPLES", "DormantSession", "SessionRegistry"]
 log = logging.getLogger(__name__)
@@ -40,7 +41,7 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class DormantSession:
-    """A journaled session of an earlier server process (not loaded): what ``GET /api/sessions`` shows of it.
+    """A journaled session of an earlier server process (not loaded): what the session list shows of it.
 
     ``damage`` (a line of the journal is not an event) lists it as ``damaged`` with the reason; resume then
     recovers everything before the damage and says what was dropped."""
@@ -56,19 +57,12 @@ class DormantSession:
 
     def status(self) -> dict[str, Any]:
         if self.damage is not None:
-            return {"planner": self.planner} | session_status(
-                self.record,
-                state=Listed.DAMAGED,
-                source="journal",
-                error=f"damaged journal: {self.damage}; POST /api/sessions/{self.id}/resume recovers what comes "
-                "before the damage",
-            )
-        return {"planner": self.planner} | session_status(
-            self.record,
-            state=Listed.INTERRUPTED,
-            source="journal",
-            error=f"the server stopped during this session; POST /api/sessions/{self.id}/resume to continue it",
-        )
+            state = Listed.DAMAGED
+            error = f"damaged journal: {self.damage}; a resume of {self.id} recovers what comes before the damage"
+        else:
+            state = Listed.INTERRUPTED
+            error = f"the server stopped during this session; resume {self.id} to continue it"
+        return session_status(self.record, state=state, planner=self.planner, source="journal", error=error)
 
 
 def _release(parts: SessionParts) -> None:
@@ -312,10 +306,7 @@ class SessionRegistry:
             if rebuilding:
                 raise Conflict(f"session {session_id!r} is being resumed; it is live in a moment")
             if dormant:
-                raise Conflict(
-                    f"session {session_id!r} was interrupted (the server stopped); "
-                    f"POST /api/sessions/{session_id}/resume"
-                )
+                raise Conflict(f"session {session_id!r} was interrupted (the server stopped); resume it first")
             raise NotFound(f"session {session_id!r}: unknown")
         return wb
 

@@ -19,7 +19,7 @@ from workbench.session.core import SessionCore
 from workbench.session.loop import make_plan, no_frame_yet, take_view
 from workbench.session.states import TRANSITIONS, Action, State
 from workbench.session.values import Decision, DecisionKind, SessionEvent
-from workbench.workers.pool import JobKilled
+from workbench.workers.client import JobKilled
 
 
 class AutoRunner:

@@ -42,7 +42,7 @@ from workbench.session.summaries import capture_fields, plan_fields, session_sta
 from workbench.session.values import CustomPose, Decision, FailedStep, PendingPlan, SceneData, SessionEvent
 from workbench.session.view_step import ViewOutcome, ViewStep, failure_of
 from workbench.sources.parts import SessionParts
-from workbench.workers.pool import SessionWorker
+from workbench.workers.client import SessionWorker
 
 log = logging.getLogger(__name__)
 Listener = Callable[[Any, SessionEvent], None]
@@ -126,6 +126,10 @@ class SessionCore:
         """Starts computing ``ceiling`` (set by the registry for sessions with a ground truth)."""
         self.progress = Tracker(self._on_progress)
         """The long operation running now (a plan: its stages as the planner reports them)."""
+        self._compose()
+
+    def _compose(self) -> None:
+        """Build the parts made of this session (a subclass's; the core has none)."""
 
     # ------------------------------------------------------------------ the state machine
 
@@ -230,9 +234,10 @@ class SessionCore:
         """The session summary (``SessionStatus``, the fields of workbench/session/summaries.py)."""
         with self.lock:
             failed = self._failed
-            return {"planner": self.evaluator} | session_status(
+            return session_status(
                 self.record,
                 state=self._state,
+                planner=self.evaluator,
                 source=str(self.source.get("kind", "sim")),
                 pending=self._pending,
                 selected=self._selected,

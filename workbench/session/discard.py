@@ -18,7 +18,7 @@ from workbench.session.core import SessionCore
 from workbench.session.loop import replay
 from workbench.session.states import Action
 from workbench.session.values import SessionEvent
-from workbench.workers.pool import JobKilled
+from workbench.workers.client import JobKilled
 
 
 def discard_last_view(s: SessionCore) -> dict[str, Any]:

@@ -24,7 +24,7 @@ from workbench.session.core import SessionCore
 from workbench.session.states import BUSY, Action, State
 from workbench.session.values import CustomPose, Decision, DecisionKind, FailedStep, PendingPlan, SessionEvent
 from workbench.sources.limits import check_config
-from workbench.workers.pool import JobKilled, SessionWorker
+from workbench.workers.client import JobKilled, SessionWorker
 
 MUTABLE_SECTIONS = ("termination", "candidates", "partitions")
 """Config sections a running session may change (the planner reads them on every plan); the rest are fixed."""
@@ -111,7 +111,7 @@ def make_plan(s: SessionCore, stopping: Callable[[], bool] = lambda: False) -> P
             raise  # Stop killed the plan: auto mode ends and the session settles, no error
         if s.stop_plan_asked:  # the state comes back; map and pending plan are unchanged
             raise Conflict(
-                f"session {s.id}: the plan was stopped (POST .../stop); the map and the pending plan are unchanged"
+                f"session {s.id}: the plan was stopped; the map and the pending plan are unchanged"
             ) from None
         s.fail_plan(str(exc))
     finally:

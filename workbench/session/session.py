@@ -16,18 +16,15 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from devices.config import DeviceConfig
-from planner import PlannerConfig, Pose
+from planner import Pose
 from workbench.journal.rebuild import Rebuilt
-from workbench.journal.store import Journal, JournalWriter
+from workbench.journal.store import Journal
 from workbench.session import loop
 from workbench.session.auto import AutoRunner
 from workbench.session.core import SessionCore
 from workbench.session.discard import discard_last_view
 from workbench.session.states import BUSY, Action
 from workbench.session.values import CustomPose, PendingPlan
-from workbench.sources.parts import SessionParts
-from workbench.workers.pool import SessionWorker
 
 STOP_WAIT = 5.0
 """How long ``stop`` waits for a halted move to end (the session then shows its error state), seconds."""
@@ -36,38 +33,11 @@ STOP_WAIT = 5.0
 class Session(SessionCore):
     """A supervised scan of one object. Every state change of a session goes through here."""
 
-    def __init__(
-        self,
-        session_id: str,
-        parts: SessionParts,
-        config: PlannerConfig,
-        devices: DeviceConfig,
-        seed: int = 0,
-        *,
-        journal: JournalWriter | None = None,
-        capture_timeout: float = 30.0,
-        move_timeout: float = 120.0,
-        evaluator: str = "projection",
-        worker: SessionWorker | None = None,
-        plan_budget: float = 60.0,
-        capture_budget: float = 30.0,
-    ) -> None:
-        super().__init__(
-            session_id,
-            parts,
-            config,
-            devices,
-            seed,
-            journal=journal,
-            capture_timeout=capture_timeout,
-            move_timeout=move_timeout,
-            evaluator=evaluator,
-            worker=worker,
-            plan_budget=plan_budget,
-            capture_budget=capture_budget,
-        )
+    auto: AutoRunner
+    """Step and auto mode (``auto.step(n)``, ``auto.start(n)``, ``auto.stop()``)."""
+
+    def _compose(self) -> None:
         self.auto = AutoRunner(self)
-        """Step and auto mode (``auto.step(n)``, ``auto.start(n)``, ``auto.stop()``)."""
 
     # ------------------------------------------------------------------ the loop
 
@@ -82,6 +52,10 @@ class Session(SessionCore):
     def plan(self) -> PendingPlan:
         """Score the candidates and make a new pending plan (an older one goes stale)."""
         return loop.plan(self)
+
+    def candidate_of(self, entry: PendingPlan, index: int) -> int:
+        """``index`` when ``entry``'s plan has that candidate; NotFound otherwise."""
+        return loop.candidate_of(entry, index)
 
     def select(self, index: int) -> None:
         """Highlight candidate ``index`` of the pending plan (from the list or a click in the scene)."""

@@ -4,6 +4,7 @@ the CLI) uses these, so each fact has one shape."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 from planner import Planner, PlanResult, VoxelClass
@@ -84,11 +85,48 @@ def capture_fields(report: IntegrationReport, voxels: dict[str, int], coverage: 
     }
 
 
+def _doc(text: str) -> dict[str, str]:
+    """A field's documentation, as its metadata (the response schema's description)."""
+    return {"doc": text}
+
+
+@dataclass(frozen=True)
+class SessionStatus:
+    """The status of a session, live or listed from the journal of an earlier server: the one shape of it (the
+    web layer's response schema is built from these fields and their docs)."""
+
+    id: str
+    model: str
+    source: str = field(metadata=_doc("sim, replay, hardware (a cell file's devices, or its dry run), or journal"))
+    state: str = field(metadata=_doc(f"{', '.join([*State, *Listed])} (the last two: listed from a journal, not live)"))
+    iteration: int = field(metadata=_doc("views integrated"))
+    coverage: float | None = field(metadata=_doc("ground-truth coverage of the last view; null without a ground truth"))
+    points: int = field(metadata=_doc("points in the accumulated cloud"))
+    voxels: dict[str, int] = field(metadata=_doc("voxel counts by class: occupied, frontier, unknown, empty"))
+    pending_plan: dict[str, Any] | None = field(metadata=_doc("the plan waiting for a decision (its summary)"))
+    selected: int | None = field(metadata=_doc("the highlighted candidate of the pending plan"))
+    custom_pose: dict[str, Any] | None = field(
+        metadata=_doc("the custom view proposed, and whether the cell reaches it")
+    )
+    error: str | None = field(metadata=_doc("what went wrong last (a fault, a journal that cannot be written)"))
+    retry: str | None = field(metadata=_doc("in state error: the failed step a retry re-does"))
+    terminated: str | None = field(metadata=_doc("why the planner's termination rule fired"))
+    auto_remaining: int = field(metadata=_doc("steps auto mode still has to go"))
+    moves: int = field(metadata=_doc("moves of the cell"))
+    seed: int = field(metadata=_doc("seeds the planner's fits and the simulated noise"))
+    planner: str = field(default="projection", metadata=_doc("the view evaluator this session plans with"))
+    progress: dict[str, Any] | None = field(default=None, metadata=_doc("the long operation running now, if any"))
+
+    def to_json(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
 def session_status(
     record: Any,
     *,
     state: State | Listed,
     source: str,
+    planner: str = "projection",
     pending: PendingPlan | None = None,
     selected: int | None = None,
     custom: CustomPose | None = None,
@@ -99,29 +137,30 @@ def session_status(
     moves: int = 0,
     progress: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """The session summary (its status), for a live and for an interrupted session alike.
+    """The :class:`SessionStatus` of a live or an interrupted session, as JSON.
 
     record: the session's :class:`workbench.session.record.SessionRecord` (id, model, seed and the last capture).
     progress: the running long operation (``workbench.progress.Progress.to_json``), None when none runs.
     """
     last = record.iterations[-1] if record.iterations else None
-    return {
-        "id": record.session_id,
-        "model": record.model,
-        "source": source,
-        "state": str(state),
-        "iteration": len(record.iterations),
-        "coverage": None if last is None else last["coverage"],
-        "points": 0 if last is None else last["points"],
-        "voxels": dict(record.voxels),
-        "pending_plan": None if pending is None else plan_summary(pending),
-        "selected": selected,
-        "custom_pose": None if custom is None else custom.to_json(),
-        "error": error,
-        "retry": retry,
-        "terminated": terminated,
-        "auto_remaining": auto_remaining,
-        "moves": moves,
-        "seed": record.seed,
-        "progress": progress,
-    }
+    return SessionStatus(
+        id=record.session_id,
+        model=record.model,
+        source=source,
+        state=str(state),
+        iteration=len(record.iterations),
+        coverage=None if last is None else last["coverage"],
+        points=0 if last is None else last["points"],
+        voxels=dict(record.voxels),
+        pending_plan=None if pending is None else plan_summary(pending),
+        selected=selected,
+        custom_pose=None if custom is None else custom.to_json(),
+        error=error,
+        retry=retry,
+        terminated=terminated,
+        auto_remaining=auto_remaining,
+        moves=moves,
+        seed=record.seed,
+        planner=planner,
+        progress=progress,
+    ).to_json()

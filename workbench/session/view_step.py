@@ -25,7 +25,7 @@ from workbench.errors import DeviceFault, Unreachable, WorkbenchError
 from workbench.evaluation.coverage import coverage
 from workbench.journal.store import JournalWriter
 from workbench.session.summaries import voxel_counts
-from workbench.workers.pool import JobKilled, SessionWorker
+from workbench.workers.client import JobKilled, SessionWorker
 
 
 @dataclass(frozen=True, eq=False)
@@ -141,5 +141,5 @@ def failure_of(exc: Exception, session_id: str, restored_plan: bool) -> tuple[st
         message = f"journal: cannot store the frame ({exc.strerror or exc})"
     else:
         return f"internal error: {type(exc).__name__}: {exc}", None
-    hint = "retry (POST .../retry)" + (" or approve the plan again" if restored_plan else "")
+    hint = "retry" + (" or approve the plan again" if restored_plan else "")
     return message, DeviceFault(f"session {session_id}: {message}. The map is unchanged; state error: {hint}")

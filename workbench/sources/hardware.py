@@ -7,7 +7,7 @@ the cell file (hand-eye transform, mount, joint limits and names, speed and acce
 previews and the driver agree. Captures are placed by forward kinematics of the arm's reported joints and the
 plate angle; the device errors become domain errors here.
 
-Source (``POST /api/sessions``): ``{"kind": "hardware", "dry_run": false, "truth": null}``. Requests never
+Source (of a create request): ``{"kind": "hardware", "dry_run": false, "truth": null}``. Requests never
 name a path: the server's cell file is used, and the journal header records it (``cell``), so a resumed
 session reopens the same devices. ``truth``: a model name whose surface measures coverage (a known test
 object on the plate); without it a hardware session has no coverage.

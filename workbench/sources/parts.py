@@ -1,6 +1,6 @@
 """What a new (or resumed) session is made of: the object, the cell (simulated or replay), the faults.
 
-Sources (the ``source`` of ``POST /api/sessions``):
+Sources (the ``source`` of a create request):
 
 - ``{"kind": "sim"}`` (default): the model on the simulated cell.
 - ``{"kind": "replay", "recording": NAME, "mode": "sequence" | "nearest"}``: a recording folder

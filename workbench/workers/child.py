@@ -1,6 +1,6 @@
 """What runs inside a session's worker process: the heavy, GIL-holding work of a session, on request.
 
-The server (workbench/workers/pool.py) sends ``(kind, payload)`` over a Pipe and receives ``("ok", result)`` or
+The server (workbench/workers/client.py) sends ``(kind, payload)`` over a Pipe and receives ``("ok", result)`` or
 ``("error", exception)``. Every job carries the state it needs (the planner is pickled in and the planner
 after the job pickled back), so a killed worker loses nothing: the server process keeps the session's planner
 and a fresh worker takes up the next job. Jobs:
