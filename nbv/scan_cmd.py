@@ -115,6 +115,7 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
     console = Console(highlight=False)
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
+
     def start(name: str) -> None:
         console.print(f"[bold]{name}[/bold]: {config.termination.max_views} views, planner {args.planner}")
         console.print(_header(), highlight=False)

@@ -266,9 +266,7 @@ def take_view(
     return s.record.iterations[-1]
 
 
-def replay(
-    s: SessionCore, journal: Journal, progress: Callable[[str, int, int], None] | None = None
-) -> Rebuilt:
+def replay(s: SessionCore, journal: Journal, progress: Callable[[str, int, int], None] | None = None) -> Rebuilt:
     """This session's state rebuilt from ``journal`` (a resume, a discard), to take over: in its worker when it
     has one (killed with it on DELETE and at shutdown), else here. ValueError / KeyError / TypeError for a
     journal that cannot be replayed; JobKilled when the worker was killed."""
