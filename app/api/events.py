@@ -62,14 +62,14 @@ async def events(ws: WebSocket, session: str | None = None, create: str | None =
     if refused is not None:
         await ws.close(code=refused[0], reason=refused[1])
         return
-    wb: Session | None = None
+    live: Session | None = None
     first: dict[str, Any] | None = None
     if session is not None:
         try:
             first = registry.status(session)  # an interrupted session has a status too (state "interrupted")
-            wb = registry.get(session)
+            live = registry.get(session)
         except Conflict:
-            wb = None  # interrupted: followed once it is resumed
+            live = None  # interrupted: followed once it is resumed
         except WorkbenchError as exc:
             await ws.accept()
             await ws.send_text(json.dumps({"type": "error", "detail": exc.detail}))
@@ -96,20 +96,20 @@ async def events(ws: WebSocket, session: str | None = None, create: str | None =
             push({"type": "progress", "progress": value})
 
     def on_create(s: Session) -> None:
-        nonlocal wb
+        nonlocal live
         push({"type": "sessions", "change": "created", "id": s.id})
-        if s.id == session and wb is None:  # resumed: follow it from now on
-            wb = s
+        if s.id == session and live is None:  # resumed: follow it from now on
+            live = s
             s.listeners.append(on_session)
             push({"type": "status", "event": "state", "status": s.status()})
 
     def on_delete(s: Session) -> None:
         push({"type": "sessions", "change": "deleted", "id": s.id})
-        if wb is not None and s.id == wb.id:
+        if live is not None and s.id == live.id:
             push({"type": "deleted"})
 
-    if wb is not None:
-        wb.listeners.append(on_session)
+    if live is not None:
+        live.listeners.append(on_session)
     registry.on_create.append(on_create)
     registry.on_delete.append(on_delete)
     registry.creations.listeners.append(on_create_progress)
@@ -136,9 +136,9 @@ async def events(ws: WebSocket, session: str | None = None, create: str | None =
             registry.on_delete.remove(on_delete)
         with contextlib.suppress(ValueError):
             registry.creations.listeners.remove(on_create_progress)
-        if wb is not None:
+        if live is not None:
             with contextlib.suppress(ValueError):
-                wb.listeners.remove(on_session)
+                live.listeners.remove(on_session)
 
 
 async def _drain(ws: WebSocket) -> None:

@@ -50,12 +50,12 @@ def open_viewer(
 ) -> dict[str, Any]:
     """A viewer of ``session`` for one tab: its URL carries a single-use, short-lived ticket that binds the
     viewer's websocket to this session (the viewer's Origin is checked too)."""
-    wb = registry.get(body.session)
+    session = registry.get(body.session)
     host, port, note = _where(request, settings)
-    ticket = scene.open_viewer(wb)
+    ticket = scene.open_viewer(session)
     return {
         "viewer": ticket.viewer,
-        "session": wb.id,
+        "session": session.id,
         "url": viewer_url(request.url.scheme, host, port, ticket.secret),
         "port": port,
         "ttl": scene.tickets.ttl,

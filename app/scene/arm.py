@@ -81,13 +81,13 @@ def selected_target(data: SceneData) -> tuple[tuple[Any, ...], str, int | None, 
 
 
 class SessionArm:
-    """The arm of session ``wb`` (whose cell has kinematics): the move to the selection, unreachable reasons."""
+    """The arm of session ``session`` (whose cell has kinematics): the move to the selection, unreachable reasons."""
 
-    def __init__(self, wb: Any) -> None:
-        self.wb = wb
-        self.cell = wb.cell
+    def __init__(self, session: Any) -> None:
+        self.session = session
+        self.cell = session.cell
         if self.cell.kinematics is None:
-            raise ValueError(f"session {wb.id}: its cell has no arm model (kinematics)")
+            raise ValueError(f"session {session.id}: its cell has no arm model (kinematics)")
         self.model: ArmModel = self.cell.kinematics.model
         self._lock = threading.Lock()
         self._target: ArmTarget | None = None
@@ -113,7 +113,7 @@ class SessionArm:
         with self._lock:
             if self._target is not None and self._target.key == key:
                 return self._target
-            if self.wb.state in BUSY:
+            if self.session.state in BUSY:
                 return None
             try:
                 motion, reason = self.cell.plan_motion(pose), None
@@ -130,7 +130,7 @@ class SessionArm:
         with self._lock:
             if self._reasons_of is plan:
                 return dict(self._reasons)
-            if self.wb.state in BUSY:
+            if self.session.state in BUSY:
                 return {}
             reasons = plan.ineligible_reasons
             indices = [i for i, r in enumerate(reasons) if r == "unreachable"]

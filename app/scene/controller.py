@@ -103,14 +103,14 @@ class SceneController:
 
     # ------------------------------------------------------------------ viewers
 
-    def open_viewer(self, wb: Session) -> Ticket:
-        """A ticket for a new viewer of ``wb`` (the viewer exists from now on, drawn once it connects)."""
-        ticket = self.tickets.issue(wb.id)
+    def open_viewer(self, session: Session) -> Ticket:
+        """A ticket for a new viewer of ``session`` (the viewer exists from now on, drawn once it connects)."""
+        ticket = self.tickets.issue(session.id)
         now = time.monotonic()
         with self._lock:
             for key in [k for k, v in self._viewers.items() if v.client is None and v.expires < now]:
                 del self._viewers[key]
-            self._viewers[ticket.viewer] = Viewer(ticket.viewer, wb.id, expires=ticket.expires + 5.0)
+            self._viewers[ticket.viewer] = Viewer(ticket.viewer, session.id, expires=ticket.expires + 5.0)
         return ticket
 
     def viewer(self, viewer_id: str) -> Viewer:
@@ -135,18 +135,18 @@ class SceneController:
         if v is None:
             return  # unbound: the empty shared scene only
         try:
-            wb = self.registry.get(v.session_id)
+            session = self.registry.get(v.session_id)
         except WorkbenchError:
             return
         with self._lock:
             v.client = client
-            v.drawing = SessionDrawing(client, v.layers, self._selector(wb), self._custom_setter(wb))
-            if wb.id not in self._watched:
-                self._watched.add(wb.id)
-                wb.listeners.append(self._on_event)
-            data = wb.scene_data()
+            v.drawing = SessionDrawing(client, v.layers, self._selector(session), self._custom_setter(session))
+            if session.id not in self._watched:
+                self._watched.add(session.id)
+                session.listeners.append(self._on_event)
+            data = session.scene_data()
             v.drawing.update(data)
-        arm = self.arm_of(wb)
+        arm = self.arm_of(session)
         if arm is not None:
             target = arm.target(data)
             robot = arm.new_scene(client)
@@ -165,20 +165,20 @@ class SceneController:
             if robot is not None:
                 robot.stop()
 
-    def _on_event(self, wb: Session, event: SessionEvent) -> None:
+    def _on_event(self, session: Session, event: SessionEvent) -> None:
         if event not in REDRAW_EVENTS:
             return
-        data = wb.scene_data()
+        data = session.scene_data()
         with self._lock:
             for v in self._viewers.values():
-                if v.session_id == wb.id and v.drawing is not None:
+                if v.session_id == session.id and v.drawing is not None:
                     v.drawing.update(data)
-        arm = self.arm_of(wb)
-        robots = self._robots_of(wb.id)
+        arm = self.arm_of(session)
+        robots = self._robots_of(session.id)
         if arm is None or not robots:
             return  # no tab shows this session's arm: plan no move for it
         # in auto mode the next move starts at once: no ghost (the arm animates each executed move)
-        show_target = event != SessionEvent.CAPTURED and wb.state != State.AUTO
+        show_target = event != SessionEvent.CAPTURED and session.state != State.AUTO
         target = arm.target(data) if show_target else None
         for robot in robots:
             if event == SessionEvent.CAPTURED:
@@ -186,11 +186,11 @@ class SceneController:
             else:
                 arm.show_target(robot, target)
 
-    def _on_session_deleted(self, wb: Session) -> None:
+    def _on_session_deleted(self, session: Session) -> None:
         with self._lock:
-            self._watched.discard(wb.id)
-            self._arms.pop(wb.id, None)
-            for v in [v for v in self._viewers.values() if v.session_id == wb.id]:
+            self._watched.discard(session.id)
+            self._arms.pop(session.id, None)
+            for v in [v for v in self._viewers.values() if v.session_id == session.id]:
                 if v.drawing is not None:
                     v.drawing.clear()
                 v.drawing = None
@@ -200,51 +200,51 @@ class SceneController:
 
     # ------------------------------------------------------------------ the arm
 
-    def arm_of(self, wb: Session) -> SessionArm | None:
-        """The arm of ``wb`` as the views show it (None when its cell has no arm model)."""
-        if wb.cell.kinematics is None:
+    def arm_of(self, session: Session) -> SessionArm | None:
+        """The arm of ``session`` as the views show it (None when its cell has no arm model)."""
+        if session.cell.kinematics is None:
             return None
         with self._lock:
-            arm = self._arms.get(wb.id)
-            if arm is None or arm.wb is not wb:
-                arm = self._arms[wb.id] = SessionArm(wb)
+            arm = self._arms.get(session.id)
+            if arm is None or arm.session is not session:
+                arm = self._arms[session.id] = SessionArm(session)
             return arm
 
     def _robots_of(self, session_id: str) -> list[RobotScene]:
         with self._lock:
             return [v.robot for v in self._viewers.values() if v.session_id == session_id and v.robot is not None]
 
-    def preview(self, wb: Session, speed: float = 1.0) -> tuple[ArmTarget, int]:
-        """Animate the move to ``wb``'s selected target on the ghost in every tab showing ``wb``; returns the
+    def preview(self, session: Session, speed: float = 1.0) -> tuple[ArmTarget, int]:
+        """Animate the move to ``session``'s selected target on the ghost in every tab showing ``session``; returns the
         target and the number of tabs animating. Conflict without an arm, a pending plan or a reachable target."""
-        arm = self.arm_of(wb)
+        arm = self.arm_of(session)
         if arm is None:
-            raise Conflict(f"session {wb.id}: its cell has no arm model to preview")
-        target = arm.target(wb.scene_data())
+            raise Conflict(f"session {session.id}: its cell has no arm model to preview")
+        target = arm.target(session.scene_data())
         if target is None:
-            raise Conflict(f"session {wb.id}: no pending plan to preview a move of (plan first)")
+            raise Conflict(f"session {session.id}: no pending plan to preview a move of (plan first)")
         if target.motion is None or target.motion.trajectory is None:
             raise Unreachable(f"preview: the selected target is unreachable ({target.reason})")
-        robots = self._robots_of(wb.id)
+        robots = self._robots_of(session.id)
         for robot in robots:
             robot.animate(target.motion.trajectory, target.motion.angle, ghost=True, speed=speed)
         return target, len(robots)
 
     @staticmethod
-    def _selector(wb: Session) -> Any:
+    def _selector(session: Session) -> Any:
         def select(index: int) -> None:
             try:
-                wb.select(index)
+                session.select(index)
             except WorkbenchError as exc:
                 log.info("click on candidate %s ignored: %s", index, exc.detail)
 
         return select
 
     @staticmethod
-    def _custom_setter(wb: Session) -> Any:
+    def _custom_setter(session: Session) -> Any:
         def set_custom(pose: Pose) -> None:
             try:
-                wb.set_custom(pose)
+                session.set_custom(pose)
             except (WorkbenchError, ValueError) as exc:
                 log.info("gizmo pose ignored: %s", exc)
 
@@ -298,8 +298,8 @@ class SceneController:
     def look_at_candidate(self, viewer_id: str, index: int, distance: float = 0.3) -> int:
         """Point the viewer's camera at candidate ``index`` from outside the hemisphere; 1 if moved, else 0."""
         v = self.viewer(viewer_id)
-        wb = self.registry.get(v.session_id)
-        entry = wb.plan_for()
+        session = self.registry.get(v.session_id)
+        entry = session.plan_for()
         if not 0 <= index < len(entry.plan.candidates):
             raise NotFound(f"candidate {index}: out of range")
         target = entry.plan.candidates[index].position

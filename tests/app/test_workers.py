@@ -22,6 +22,7 @@ from apphelpers import SMALL, free_port, running_server
 from test_admission import HealthProbe
 
 from app.settings import AppSettings
+from tests.helpers import wait_until
 from workbench.planning import plan_in
 
 REPO = Path(__file__).resolve().parents[2]
@@ -81,7 +82,9 @@ def test_delete_kills_the_heaviest_plan_at_once_while_health_answers(settings: A
         with HealthProbe(live.url) as probe:
             thread, box = in_thread(lambda: api.post(f"/api/sessions/{sid}/plan"))
             pid = busy_worker(live, sid)
-            time.sleep(1.0)  # the plan is well under way
+            wait_until(
+                lambda: (live.registry.get(sid).progress_json() or {}).get("step", 0) >= 2, 30.0, "plan under way"
+            )
             t0 = time.monotonic()
             assert httpx.delete(f"{live.url}/api/sessions/{sid}", timeout=5).status_code == 204
             assert time.monotonic() - t0 < 1.0
@@ -166,7 +169,7 @@ def test_sigterm_stops_the_server_within_5_s_during_a_plan(tmp_path: Path, model
         sid = api.post("/api/sessions", json={"config": PLAN_HEAVY}).json()["id"]
         assert api.post(f"/api/sessions/{sid}/capture").status_code == 200
         in_thread(lambda: httpx.post(f"http://127.0.0.1:{port}/api/sessions/{sid}/plan", timeout=120))
-        time.sleep(1.5)  # the plan runs in the worker
+        wait_until(lambda: api.get(f"/api/sessions/{sid}").json()["progress"] is not None, 30.0, "the plan runs")
         t0 = time.monotonic()
         proc.send_signal(signal.SIGTERM)
         proc.wait(10)

@@ -13,7 +13,7 @@ import pytest
 
 from devices.sim import SimulatedArm
 from planner import Pose
-from tests.helpers import SMALL
+from tests.helpers import SMALL, wait_until
 from workbench.errors import DeviceFault
 from workbench.registry.registry import SessionRegistry
 from workbench.session.session import Session
@@ -97,5 +97,5 @@ def test_a_move_that_does_not_stop_blocks_the_next_one(registry: SessionRegistry
     with pytest.raises(DeviceFault, match="the previous move has not ended"):
         session.retry()
     assert len(arm.started_at) == 1 and session.status()["state"] == "error"  # no second move was sent
-    time.sleep(1.2)  # it has ended now
+    wait_until(lambda: arm.ended_at, 10.0, "the braking move ended")
     assert session.retry()["iteration"] == 2 and arm.overlap == 1 and len(arm.started_at) == 2

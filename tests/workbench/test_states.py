@@ -50,28 +50,25 @@ def test_every_action_has_a_row_and_only_live_states_appear() -> None:
     assert not {str(s) for s in Listed} & {str(s) for s in State}  # listing-only states are not live ones
 
 
-def _writes(path: Path, attribute: str) -> list[int]:
-    """Lines of ``path`` that assign ``<anything>.<attribute>``."""
-    lines = []
+def assigned(path: Path) -> list[tuple[int, ast.Attribute]]:
+    """(line, target) of every assignment to an attribute (``x.name = ...``, ``x.name += ...``) in ``path``."""
+    found = []
     for node in ast.walk(ast.parse(path.read_text())):
-        targets = (
-            node.targets
-            if isinstance(node, ast.Assign)
-            else [node.target]
-            if isinstance(node, ast.AnnAssign | ast.AugAssign)
-            else []
-        )
-        for target in targets:
-            if isinstance(target, ast.Attribute) and target.attr == attribute:
-                lines.append(node.lineno)
-    return lines
+        if isinstance(node, ast.Assign):
+            targets = node.targets
+        elif isinstance(node, ast.AnnAssign | ast.AugAssign):
+            targets = [node.target]
+        else:
+            continue
+        found += [(node.lineno, t) for t in targets if isinstance(t, ast.Attribute)]
+    return found
 
 
 def test_the_state_is_assigned_in_one_place() -> None:
     found = {
-        str(path.relative_to(ROOT)): _writes(path, "_state")
+        str(path.relative_to(ROOT)): lines
         for path in sorted((ROOT / "workbench").rglob("*.py"))
-        if _writes(path, "_state")
+        if (lines := [n for n, target in assigned(path) if target.attr == "_state"])
     }
     core = ROOT / "workbench/session/core.py"
     assert list(found) == ["workbench/session/core.py"]
@@ -81,23 +78,11 @@ def test_the_state_is_assigned_in_one_place() -> None:
 
 def test_no_other_file_writes_the_private_fields_of_a_session() -> None:
     """Outside the core, no ``x._field = ...`` on a session (the other files call the core's methods)."""
-    wrong = []
-    for path in sorted((ROOT / "workbench" / "session").glob("*.py")):
-        if path.name == "core.py":
-            continue
-        for node in ast.walk(ast.parse(path.read_text())):
-            targets = (
-                node.targets
-                if isinstance(node, ast.Assign)
-                else [node.target]
-                if isinstance(node, ast.AnnAssign | ast.AugAssign)
-                else []
-            )
-            for target in targets:
-                if (
-                    isinstance(target, ast.Attribute)
-                    and target.attr.startswith("_")
-                    and not (isinstance(target.value, ast.Name) and target.value.id == "self")
-                ):
-                    wrong.append(f"{path.name}:{node.lineno} {ast.unparse(target)}")
+    wrong = [
+        f"{path.name}:{n} {ast.unparse(target)}"
+        for path in sorted((ROOT / "workbench" / "session").glob("*.py"))
+        if path.name != "core.py"
+        for n, target in assigned(path)
+        if target.attr.startswith("_") and not (isinstance(target.value, ast.Name) and target.value.id == "self")
+    ]
     assert wrong == []
