@@ -1,7 +1,7 @@
 """The suite's one rule for parallel runs (``make test``: pytest-xdist, ``-n 2 --dist loadgroup``): the tests of a
 file run in one worker process, so a module's fixtures (a served app, a bench run) are built once; a file marked
 ``xdist_group("name")`` shares its worker with the other files of that group (the long, CPU-heavy ones, which
-must not starve each other's budgets)."""
+must not starve each other's budgets). Every test gets its own node id (xdist runs one test per id)."""
 
 from __future__ import annotations
 
@@ -11,5 +11,8 @@ import pytest
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
+        if item.nodeid.rpartition("::")[2] != item.name and item.parent is not None:
+            # schemathesis gives every operation's test one node id; xdist needs one each (pytest's own rule)
+            item._id = item.parent.id.child(item.name)  # type: ignore[attr-defined]
         if item.get_closest_marker("xdist_group") is None:
             item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
