@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from workbench.session import states
+import workbench.session.states as states
 from workbench.session.states import BUSY, RESTING, TRANSITIONS, Action, Listed, State
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -16,10 +16,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+import workbench.session.loop as loop
 from planner import Pose
 from workbench.journal.rebuild import Rebuilt
 from workbench.journal.store import Journal
-from workbench.session import loop
 from workbench.session.auto import AutoRunner
 from workbench.session.core import SessionCore
 from workbench.session.discard import discard_last_view
