@@ -2,7 +2,7 @@
 
 ``nbv bench --models l-block mug --planners projection,raycast-apora,random --seeds 2 --yaws 0,90``
 runs every (model, placement, seed, planner) combination as one simulated scan
-(:func:`nbv.scan_cmd.simulate`) on an executor (:mod:`nbv.executors`: ``--executor local`` with
+(:func:`nbv.scan_cmd.simulate`) on an executor (:mod:`workbench.evaluation.executors`: ``--executor local`` with
 ``--jobs`` worker processes, or ``--executor dask`` on a Dask cluster) and writes
 
 - ``DIR/results.csv``: one row per (model, planner, seed, yaw, iteration), rewritten as runs complete;
@@ -30,9 +30,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from nbv.executors import execute, one_line, run_dask, run_local
 from nbv.options import CliError, add_scan_options, planner_config_from_args
-from nbv.runs import MeshPayload, RunOutcome, RunTask
+from workbench.evaluation import MeshPayload, RunOutcome, RunTask, execute, one_line, run_dask, run_local
 
 DEFAULT_PLANNERS = "projection,raycast-apora,raycast-oa,random"
 DEFAULT_CEILING_CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "nbv" / "ceilings"

@@ -1,6 +1,6 @@
 """The outputs of ``nbv bench``: results.csv, runs.json, summary.md, report.html and the plots.
 
-Everything here works on the finished runs (:class:`nbv.runs.RunOutcome`) of one bench and the
+Everything here works on the finished runs (:class:`workbench.evaluation.runs.RunOutcome`) of one bench and the
 ceilings of its (model, placement) pairs. results.csv, per iteration:
 
 - ``coverage``: fraction of the surface samples with a scanned point within 5 mm;
@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import Any
 
 from nbv.bench_summary import run_metrics_of, summary_markdown
-from nbv.runs import RunOutcome
+from workbench.evaluation import RunOutcome
 
 COLUMNS = (
     "model",

@@ -11,8 +11,7 @@ from collections import defaultdict
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from nbv.runs import RunOutcome
-from workbench.evaluation import THRESHOLDS, Paired, RunMetrics, mean_std, paired_comparison, run_metrics
+from workbench.evaluation import THRESHOLDS, Paired, RunMetrics, RunOutcome, mean_std, paired_comparison, run_metrics
 
 Row = dict[str, Any]
 

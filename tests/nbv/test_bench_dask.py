@@ -14,9 +14,9 @@ from pathlib import Path
 import pytest
 
 from nbv.cli import main
-from nbv.executors import run_dask
-from nbv.runs import MeshPayload, RunOutcome, RunTask
 from planner.config import PlannerConfig
+from workbench.evaluation.executors import run_dask
+from workbench.evaluation.runs import MeshPayload, RunOutcome, RunTask
 
 TINY = ["--views", "2", "--candidates", "40", "--resolution", "0.02", "--t-min", "2", "--t-max", "6"]
 GRID = ["--models", "l-block", "box", "--planners", "projection,random", "--seeds", "2", *TINY]

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from nbv.bench_html import markdown_to_html, report_html
-from nbv.runs import MeshPayload
+from workbench.evaluation.runs import MeshPayload
 
 SUMMARY = """# nbv bench
 

@@ -7,7 +7,9 @@
 - object_ceiling.py: the ceiling of one (mesh, placement, cell), keyed and cached on disk;
 - ceiling_service.py: a session's ceiling computed in a worker process, one at a time;
 - scan.py: Algorithm 1 headless (``run_scan``), with metrics per iteration;
-- simulate.py: one simulated scan of a model (load, place, build the cell, run, measure).
+- simulate.py: one simulated scan of a model (load, place, build the cell, run, measure);
+- runs.py: one run of a bench (RunTask) and what it gave (RunOutcome), picklable;
+- executors.py: running many of them, in local processes (forkserver) or on a Dask cluster.
 """
 
 from workbench.evaluation.ceiling import DEFAULT_CEILING, CeilingConfig
@@ -23,7 +25,9 @@ from workbench.evaluation.curves import (
     run_metrics,
     views_to_reach,
 )
+from workbench.evaluation.executors import execute, one_line, run_dask, run_local
 from workbench.evaluation.object_ceiling import Ceiling, cached_ceiling, ceiling_mask, object_ceiling, reference_mask
+from workbench.evaluation.runs import MeshPayload, RunOutcome, RunTask
 from workbench.evaluation.scan import PLAN_STAGES, STAGES, IterationRecord, ScanResult, make_record, run_scan
 from workbench.evaluation.simulate import SimScan, simulate
 
@@ -35,20 +39,27 @@ __all__ = [
     "Ceiling",
     "CeilingConfig",
     "IterationRecord",
+    "MeshPayload",
     "Paired",
     "RunMetrics",
+    "RunOutcome",
+    "RunTask",
     "ScanResult",
     "SimScan",
     "area_under_curve",
     "cached_ceiling",
     "ceiling_mask",
     "coverage",
+    "execute",
     "make_record",
     "mean_std",
     "object_ceiling",
+    "one_line",
     "paired_comparison",
     "ratio_curve",
     "reference_mask",
+    "run_dask",
+    "run_local",
     "run_metrics",
     "run_scan",
     "simulate",

@@ -1,7 +1,7 @@
 """Where the runs of ``nbv bench`` execute: inline, a local process pool, or a Dask cluster.
 
-Every engine runs the same pure function, :func:`execute` (one :class:`~nbv.runs.RunTask` in, one
-:class:`~nbv.runs.RunOutcome` out, never raising for a failure of the run itself), and calls
+Every engine runs the same pure function, :func:`execute` (one :class:`~workbench.evaluation.runs.RunTask` in, one
+:class:`~workbench.evaluation.runs.RunOutcome` out, never raising for a failure of the run itself), and calls
 ``done(outcome)`` in the calling process as each run finishes, so the progress bar counts
 finished runs and a failed run is reported without losing the others.
 
@@ -11,7 +11,7 @@ finished runs and a failed run is reported without losing the others.
   ``distributed`` cluster: a ``LocalCluster`` of ``--workers`` processes when no ``--address`` is
   given, else the scheduler at ``--address`` (so clusters from ``dask-jobqueue`` on Slurm/PBS or
   ``dask-kubernetes`` work unchanged). **Mesh files travel with the tasks**: the client loads and
-  places each mesh once and scatters its vertex and face arrays (:class:`~nbv.runs.MeshPayload`) to
+  places each mesh once and scatters its vertex and face arrays (:class:`~workbench.evaluation.runs.MeshPayload`) to
   the cluster; workers never read the client's file system. They need this package importable
   (the same environment) and nothing else.
 """
@@ -24,9 +24,16 @@ from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 
-from nbv.runs import MeshPayload, RunOutcome, RunTask
+from workbench.evaluation.runs import MeshPayload, RunOutcome, RunTask
 
-PRELOAD = ("nbv.executors", "workbench.evaluation", "planner.baselines", "devices.sim", "open3d", "sklearn.mixture")
+PRELOAD = (
+    "workbench.evaluation.executors",
+    "workbench.evaluation",
+    "planner.baselines",
+    "devices.sim",
+    "open3d",
+    "sklearn.mixture",
+)
 """Modules the fork server imports once, so a run's process starts in milliseconds, not seconds."""
 
 Done = Callable[[RunOutcome], None]
