@@ -384,7 +384,8 @@ class SessionRegistry:
         except JournalBusyError as exc:
             _release(parts)
             raise Conflict(str(exc)) from None
-        wb = self._session(dormant.id, parts, config, devices, seed, None, str(header.get("planner", "projection")))
+        planner = str(header.get("planner", "projection"))
+        wb = self._session(dormant.id, parts, config, devices, seed, writer, planner)  # journaled from the start
         try:
             rebuilt = wb.replay(journal, progress)
         except (ValueError, KeyError, TypeError, JobKilled) as exc:
@@ -397,7 +398,6 @@ class SessionRegistry:
             journal.cut(rebuilt.kept)
             writer.cut_to(journal)
         wb.restore(rebuilt)
-        wb.journal = writer
         writer.append(
             "resume",
             verified=not rebuilt.mismatches,

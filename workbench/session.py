@@ -107,7 +107,7 @@ class Session:
         self.evaluator = evaluator
         """The planner's view evaluator (planner/evaluators.py EVALUATORS): "projection", a baseline, "random"."""
         self.planner = Planner(config, evaluator=evaluator)
-        self.journal = journal
+        self._journal = journal
         self.worker = worker
         """The worker process of the heavy steps (workbench/engine.py); None: they run in this process."""
         self.plan_budget = plan_budget
@@ -142,6 +142,12 @@ class Session:
         self._stop_plan = False  # Stop asked for the running plan
 
     # ------------------------------------------------------------------ reading
+
+    @property
+    def journal(self) -> JournalWriter | None:
+        """The session's journal, given once at construction (the view step writes its frames to the same one;
+        nothing sets it later, so no part of a session can hold a stale journal)."""
+        return self._journal
 
     @property
     def state(self) -> State:
