@@ -398,13 +398,17 @@ class SessionRegistry:
             journal.cut(rebuilt.kept)
             writer.cut_to(journal)
         wb.restore(rebuilt)
-        writer.append(
-            "resume",
-            verified=not rebuilt.mismatches,
-            mismatches=rebuilt.mismatches,
-            interrupted=rebuilt.interrupted,
-            dropped=rebuilt.dropped,
-        )
+        try:
+            writer.append(
+                "resume",
+                verified=not rebuilt.mismatches,
+                mismatches=rebuilt.mismatches,
+                interrupted=rebuilt.interrupted,
+                dropped=rebuilt.dropped,
+            )
+        except OSError as exc:  # a full disk: it stays interrupted (nothing it did could be journaled)
+            wb.close()
+            raise StorageFault(f"session {dormant.id}: cannot resume: {exc.strerror or exc}") from None
         if rebuilt.dropped:
             log.warning("session %s resumed up to the damage; dropped: %s", dormant.id, "; ".join(rebuilt.dropped))
         if rebuilt.mismatches:
@@ -441,8 +445,12 @@ class SessionRegistry:
             except ValueError:  # unreadable: nothing to mark, it goes to the trash as it is
                 writer = None
             if writer is not None:
-                writer.append("deleted")
-                writer.close()
+                try:  # a full disk: the folder still goes to the trash (a rename needs no space)
+                    writer.append("deleted")
+                except OSError as exc:
+                    log.warning("session %s: cannot mark the journal deleted: %s", session_id, exc)
+                finally:
+                    writer.close()
         if directory is not None:
             self._trash(directory)
 

@@ -547,14 +547,17 @@ class Session:
         fields = decision.to_json()
         self._emit("decision", decision=fields.pop("kind"), **fields)
 
-    def _emit(self, kind: str, **data: Any) -> None:
+    def _emit(self, kind: str, strict: bool = False, **data: Any) -> None:
         """Journal one event and take it into the record (caller holds the lock). A failing disk does not stop
-        the session; the problem is reported in its status."""
+        the session; the problem is reported in its status. ``strict``: a write that fails raises (OSError)
+        and the event is not taken (a view that is not journaled is not acknowledged)."""
         event = None
         if self.journal is not None:
             try:
                 event = self.journal.append(kind, **data)
             except (OSError, ValueError) as exc:
+                if strict:
+                    raise
                 self._journal_error = f"journal: cannot write ({exc}); this session may not resume completely"
                 log.error("session %s: %s", self.id, self._journal_error)
         if event is None:
@@ -583,27 +586,35 @@ class Session:
 
         try:
             outcome = self.step_runner.run(self.planner, decision.pose, moved)
+            self._publish(outcome, decision)
         except Exception as exc:
             self._step_failed(exc, FailedStep(decision, entry))
-        self._publish(outcome, decision)
         self.notify(SessionEvent.CAPTURED)
         return self.record.iterations[-1]
 
     def _publish(self, outcome: ViewOutcome, decision: Decision) -> None:
+        """Journal the view, then take it over. A view whose ``capture`` event cannot be written is not taken
+        (OSError, its frame removed again): the caller is never told of a view a restart would not bring back."""
         with self._lock:
-            self.planner = outcome.planner
             stored = outcome.stored
-            self._emit(
-                "capture",
-                **capture_fields(outcome.report, outcome.voxels, outcome.coverage),
-                frame=None if stored is None else stored[0],
-                frame_sha256=None if stored is None else stored[1],
-                requested_pose=decision.pose.to_dict(),
-                pose=outcome.frame.T_world_camera.to_dict(),
-                decision=str(decision.kind),
-                plan_id=decision.plan_id,
-                device_state=self.cell.device_state(),
-            )
+            try:
+                self._emit(
+                    "capture",
+                    **capture_fields(outcome.report, outcome.voxels, outcome.coverage),
+                    frame=None if stored is None else stored[0],
+                    frame_sha256=None if stored is None else stored[1],
+                    requested_pose=decision.pose.to_dict(),
+                    pose=outcome.frame.T_world_camera.to_dict(),
+                    decision=str(decision.kind),
+                    plan_id=decision.plan_id,
+                    device_state=self.cell.device_state(),
+                    strict=True,
+                )
+            except OSError:
+                if stored is not None:
+                    self.step_runner.discard_frame(stored[0])
+                raise
+            self.planner = outcome.planner
             self._terminated = self.planner.terminated
             self._occupied = outcome.occupied
             self._region = None

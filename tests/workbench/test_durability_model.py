@@ -13,13 +13,9 @@ machine with many more examples.
 
 from __future__ import annotations
 
-import errno
-import io
-import os
 import shutil
 import tempfile
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -27,10 +23,9 @@ import hypothesis.strategies as st
 from hypothesis import HealthCheck, settings
 from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, rule
 
-import devices.frames
-import workbench.journal.store as store
 from devices.config import CameraConfig, DeviceConfig
 from planner import PlannerConfig
+from tests.full_disk import FullDisk
 from workbench.errors import WorkbenchError
 from workbench.journal.discard import without_discarded
 from workbench.journal.store import list_journals, read_journal, sessions_dir
@@ -46,45 +41,6 @@ TINY = {
 CAMERA = CameraConfig(width=96, height=72, fx=92.0, fy=92.0, cx=48.0, cy=36.0)
 """A small depth image: fast rendering, small frames."""
 MODELS = ("l-block", "mug")
-
-class FullDisk:
-    """Simulates a full disk at the journal's write boundary: while ``full``, the journal's ``os.write`` and the
-    frame files' writes (``devices.frames``) raise ENOSPC; the files themselves are created, as on a real disk."""
-
-    def __init__(self) -> None:
-        self.full = False
-
-    @contextmanager
-    def installed(self) -> Iterator[None]:
-        disk = self
-        real_os = store.os
-
-        class _Os:  # the journal store's ``os`` with a write that fails on a full disk
-            def __getattr__(self, name: str) -> Any:
-                return getattr(real_os, name)
-
-            @staticmethod
-            def write(fd: int, data: Any) -> int:
-                if disk.full:
-                    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-                return real_os.write(fd, data)
-
-        class _File(io.FileIO):  # a frame file whose writes fail on a full disk
-            def write(self, data: Any) -> int:
-                if disk.full:
-                    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-                return super().write(data)
-
-        def frame_open(path: Any, mode: str = "r", *args: Any, **kwargs: Any) -> Any:
-            return _File(path, mode.replace("b", "")) if "w" in mode else open(path, mode, *args, **kwargs)
-
-        store.os = _Os()  # type: ignore[assignment]
-        devices.frames.open = frame_open  # type: ignore[attr-defined]
-        try:
-            yield
-        finally:
-            store.os = real_os
-            del devices.frames.open  # type: ignore[attr-defined]
 
 
 def _pose_key(pose: dict[str, Any]) -> tuple[float, ...]:
@@ -140,7 +96,7 @@ class Durability(RuleBasedStateMachine):
             assert event.get("frame") is not None, f"capture {event['iteration']} journaled without its frame"
             assert (directory / event["frame"]).is_file(), f"frame {event['frame']} is missing"
             journal.frame(event)  # the frame reads back with its sha256
-            poses.append(_pose_key(event["pose"]))
+            poses.append(_pose_key(event.get("pose_used", event["pose"])))  # as the record reads it
         return poses
 
     live_ids = property(lambda self: sorted(self.live))
@@ -237,7 +193,9 @@ class Durability(RuleBasedStateMachine):
         self.live.add(sid)
         assert rebuilt.dropped == [], rebuilt.dropped
         poses = [_pose_key(it["pose"]) for it in session.record.iterations]
-        assert poses == self.views[sid], f"session {sid}: resumed {len(poses)} views, {len(self.views[sid])} acknowledged"
+        assert poses == self.views[sid], (
+            f"session {sid}: resumed {len(poses)} views, {len(self.views[sid])} acknowledged"
+        )
         assert session.planner.iteration == len(self.views[sid])
 
     @rule(full=st.booleans())
