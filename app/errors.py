@@ -5,6 +5,7 @@ from __future__ import annotations
 from workbench.errors import (
     Conflict,
     DeviceFault,
+    Gone,
     Invalid,
     NotFound,
     StorageFault,
@@ -21,6 +22,7 @@ STATUS: dict[type[WorkbenchError], int] = {
     Invalid: 422,
     StorageFault: 503,
     DeviceFault: 503,
+    Gone: 410,
 }
 """The status of each error type (the most derived type listed wins)."""
 

@@ -61,8 +61,15 @@ def ply_header_bomb(vertices: int = 1_500_000, faces: int = 1_500_000) -> bytes:
     return header.encode()
 
 
-def obj_parser_bomb(triangles: int = 1_900_000) -> bytes:
-    """An OBJ of ``triangles`` triangles over as many vertices, each line short: within the limits, but a
-    parser's lists of Python objects make it cost gigabytes (``f 1 2 3`` reuses vertices; ratio stays < 16)."""
+def obj_parser_bomb(lines: int = 327, corners: int = 4000) -> bytes:
+    """An OBJ of 4 vertices and ``lines`` polygons of ``corners`` indices (5 MB that triangulate into 1.3 M
+    overlapping triangles on 4 vertices: a ray-casting and parser bomb)."""
+    face = "f " + " ".join(str(1 + i % 4) for i in range(corners)) + "\n"
+    return ("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 1\n" + face * lines).encode()
+
+
+def obj_slow_parse(triangles: int = 1_900_000) -> bytes:
+    """An OBJ within the pre-scan's limits that takes a parser many seconds (1.9 M triangles, 17 MB) and uses
+    only 3 of its vertices: refused after loading (triangles per vertex), by the reader's child."""
     vertices = triangles // 8
     return b"".join([b"v 0 0 0\nv 1 0 0\nv 0 1 0\n" * (vertices // 3), b"f 1 2 3\n" * triangles])

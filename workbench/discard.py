@@ -50,6 +50,8 @@ def discard_last_view(wb: Session) -> dict[str, Any]:
         with wb._lock:
             wb._state = before
         wb.notify(SessionEvent.STATE)
+        if wb.deleted:
+            raise wb.gone() from None
         raise Invalid(f"session {wb.id}: cannot rebuild without the last view: {exc}") from None
     finally:
         wb.progress.end()

@@ -427,6 +427,7 @@ class SessionRegistry:
             raise NotFound(f"session {session_id!r}: unknown")
         directory = None
         if wb is not None:
+            wb.deleted = True  # a request this cuts off answers Gone (410), not "retry"
             if wb.journal is not None:
                 directory = wb.journal.directory
                 with contextlib.suppress(OSError):

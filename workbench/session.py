@@ -42,7 +42,7 @@ from devices.protocols import UnreachableError
 from planner import Planner, PlannerConfig, Pose
 from workbench.auto import AutoRunner
 from workbench.engine import JobKilled, SessionWorker
-from workbench.errors import Conflict, DeviceFault, Invalid, NotFound, Unreachable
+from workbench.errors import Conflict, DeviceFault, Gone, Invalid, NotFound, Unreachable
 from workbench.factory import SessionParts
 from workbench.journal.rebuild import Rebuilt, rebuild
 from workbench.journal.store import Journal, JournalWriter, make_event
@@ -140,6 +140,8 @@ class Session:
         self.progress = Tracker(self._on_progress)
         """The long operation running now (a plan: its stages as the planner reports them)."""
         self._stop_plan = False  # Stop asked for the running plan
+        self.deleted = False
+        """Set by the registry's delete before it closes the session: a request it cut off answers Gone."""
 
     # ------------------------------------------------------------------ reading
 
@@ -331,7 +333,13 @@ class Session:
             self._stop_plan = True
         return self.worker.cancel("stopped by the operator")
 
+    def gone(self) -> Gone:
+        """The error of a request cut off because this session was deleted meanwhile."""
+        return Gone(f"session {self.id} was deleted (DELETE /api/sessions/{self.id}) while this request ran")
+
     def _plan_killed(self, reason: str) -> NoReturn:
+        if self.deleted:
+            raise self.gone()
         message = f"stopped: {reason}"
         with self._lock:
             self._state = State.ERROR
@@ -627,6 +635,8 @@ class Session:
 
     def _step_failed(self, exc: Exception, step: FailedStep) -> NoReturn:
         """Enter state error after a failed step (the map is untouched, the plan pending again); always raises."""
+        if self.deleted:
+            raise self.gone() from None
         message, error = failure_of(exc, self.id, step.entry is not None)
         with self._lock:
             self._state = State.ERROR
