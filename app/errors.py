@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from workbench.errors import (
+    AtCapacity,
     Conflict,
     DeviceFault,
     Gone,
@@ -22,6 +23,7 @@ STATUS: dict[type[WorkbenchError], int] = {
     Invalid: 422,
     StorageFault: 503,
     DeviceFault: 503,
+    AtCapacity: 503,
     Gone: 410,
 }
 """The status of each error type (the most derived type listed wins)."""
