@@ -20,8 +20,8 @@ from pathlib import Path
 from typing import Any
 
 import hypothesis.strategies as st
-from hypothesis import HealthCheck, settings
-from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, rule
+from hypothesis import HealthCheck, Phase, settings
+from hypothesis.stateful import RuleBasedStateMachine, initialize, invariant, precondition, rule
 
 from devices.config import CameraConfig, DeviceConfig
 from planner import PlannerConfig
@@ -110,6 +110,12 @@ class Durability(RuleBasedStateMachine):
 
     # ------------------------------------------------------------------ rules
 
+    @initialize(model=st.sampled_from(MODELS))
+    def a_scan_under_way(self, model: str) -> None:
+        """Every run starts from a session with one view (the runs that matter are about what follows)."""
+        self.create(model, 0)
+        self._capture(self.live_ids[0])
+
     @rule(model=st.sampled_from(MODELS), seed=st.integers(0, 3))
     def create(self, model: str, seed: int) -> None:
         session = self._try(lambda: self.registry.create(model, seed=seed))
@@ -120,7 +126,9 @@ class Durability(RuleBasedStateMachine):
     @precondition(lambda self: self.live)
     @rule(data=st.data())
     def capture(self, data: st.DataObject) -> None:
-        sid = data.draw(st.sampled_from(self.live_ids))
+        self._capture(data.draw(st.sampled_from(self.live_ids)))
+
+    def _capture(self, sid: str) -> None:
         result = self._try(self.registry.get(sid).capture)
         if result is not None:
             self._acknowledge(sid, result)
@@ -193,10 +201,19 @@ class Durability(RuleBasedStateMachine):
         self.registry = SessionRegistry(self.settings)
         self.live.clear()
 
+    @rule(abrupt=st.booleans())
+    def restart_and_resume_all(self, abrupt: bool) -> None:
+        """A restart after which the person resumes every session (what the page's Resume button does)."""
+        self.restart_abrupt() if abrupt else self.restart_graceful()
+        for sid in self.dormant_ids:
+            self._resume(sid)
+
     @precondition(lambda self: set(self.views) - self.live)
     @rule(data=st.data())
     def resume(self, data: st.DataObject) -> None:
-        sid = data.draw(st.sampled_from(self.dormant_ids))
+        self._resume(data.draw(st.sampled_from(self.dormant_ids)))
+
+    def _resume(self, sid: str) -> None:
         resumed = self._try(lambda: self.registry.resume(sid))
         if resumed is None:
             return
@@ -239,4 +256,5 @@ TestDurability.settings = settings(
     deadline=None,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
     derandomize=True,
+    phases=[Phase.explicit, Phase.reuse, Phase.generate],  # no shrinking in the suite: a failure reports at once
 )
