@@ -61,8 +61,8 @@ class Durability(RuleBasedStateMachine):
             planner=PlannerConfig().replace(**TINY),
             devices=DeviceConfig(camera=CAMERA),
         )
-        self.disk = FullDisk()
-        self._patch = self.disk.installed()
+        self.storage = FullDisk()
+        self._patch = self.storage.installed()
         self._patch.__enter__()
         self.registry = SessionRegistry(self.settings)
         self.views: dict[str, list[tuple[float, ...]]] = {}
@@ -228,7 +228,7 @@ class Durability(RuleBasedStateMachine):
 
     @rule(full=st.booleans())
     def disk(self, full: bool) -> None:
-        self.disk.full = full
+        self.storage.full = full
 
     # ------------------------------------------------------------------ the invariant
 
