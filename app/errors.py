@@ -2,7 +2,18 @@
 
 from __future__ import annotations
 
-from workbench import Conflict, DeviceFault, Invalid, NotFound, StorageFault, TooLarge, Unreachable, WorkbenchError
+from workbench import (
+    AtCapacity,
+    Conflict,
+    DeviceFault,
+    Gone,
+    Invalid,
+    NotFound,
+    StorageFault,
+    TooLarge,
+    Unreachable,
+    WorkbenchError,
+)
 
 STATUS: dict[type[WorkbenchError], int] = {
     NotFound: 404,
@@ -12,6 +23,8 @@ STATUS: dict[type[WorkbenchError], int] = {
     Invalid: 422,
     StorageFault: 503,
     DeviceFault: 503,
+    AtCapacity: 503,
+    Gone: 410,
 }
 """The status of each error type (the most derived type listed wins)."""
 

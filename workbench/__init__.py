@@ -9,8 +9,10 @@ These names are the public API the web layer (app/), the command line (nbv/) and
 """
 
 from workbench.errors import (
+    AtCapacity,
     Conflict,
     DeviceFault,
+    Gone,
     Invalid,
     NotFound,
     StorageFault,
@@ -32,8 +34,10 @@ from workbench.sources.parts import list_recordings
 
 __all__ = [
     "BUSY",
+    "AtCapacity",
     "Conflict",
     "DeviceFault",
+    "Gone",
     "Invalid",
     "Listed",
     "NotFound",

@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from devices.config import DeviceConfig
 from planner import Planner, PlannerConfig, PlanResult, VoxelClass
-from workbench.errors import Conflict, DeviceFault
+from workbench.errors import Conflict, DeviceFault, Gone
 from workbench.evaluation.curves import ceiling_metrics
 from workbench.journal.rebuild import Rebuilt
 from workbench.journal.store import JournalWriter, make_event
@@ -89,7 +89,7 @@ class SessionCore:
         self.evaluator = evaluator
         """The planner's view evaluator (planner/evaluators.py EVALUATORS): "projection", a baseline, "random"."""
         self.planner = Planner(config, evaluator=evaluator)
-        self.journal = journal
+        self._journal = journal
         self.worker = worker
         """The worker process of the heavy steps (workbench/workers/); None: they run in this process."""
         self.plan_budget = plan_budget
@@ -126,6 +126,8 @@ class SessionCore:
         """Starts computing ``ceiling`` (set by the registry for sessions with a ground truth)."""
         self.progress = Tracker(self._on_progress)
         """The long operation running now (a plan: its stages as the planner reports them)."""
+        self.deleted = False
+        """Set by the registry's delete before it closes the session: a request it cut off answers Gone."""
         self._compose()
 
     def _compose(self) -> None:
@@ -136,6 +138,25 @@ class SessionCore:
     @property
     def state(self) -> State:
         return self._state
+
+    @property
+    def journal(self) -> JournalWriter | None:
+        """The session's journal, given once at construction (the view step writes its frames to the same one;
+        nothing sets it later, so no part of a session can hold a stale journal)."""
+        return self._journal
+
+    def close_state(self) -> bool:
+        """Close the session for good unless an action runs (then False): every action is refused from now on (it
+        is being put to sleep, its journal kept)."""
+        with self.lock:
+            if self._state in BUSY:
+                return False
+            self._set_state(State.CLOSED)
+            return True
+
+    def gone(self) -> Gone:
+        """The error of a request cut off because this session was deleted meanwhile."""
+        return Gone(f"session {self.id} was deleted while this request ran")
 
     @contextlib.contextmanager
     def enter(
@@ -361,21 +382,29 @@ class SessionCore:
         return entry
 
     def publish_view(self, outcome: ViewOutcome, decision: Decision) -> None:
-        """A view integrated: the planner after it and its ``capture`` event, journaled."""
+        """Journal the view, then take it over (the planner after it). A view whose ``capture`` event cannot be
+        written is not taken (OSError, its frame removed again): the caller is never told of a view a restart
+        would not bring back."""
         with self.lock:
-            self.planner = outcome.planner
             stored = outcome.stored
-            self.emit(
-                "capture",
-                **capture_fields(outcome.report, outcome.voxels, outcome.coverage),
-                frame=None if stored is None else stored[0],
-                frame_sha256=None if stored is None else stored[1],
-                requested_pose=decision.pose.to_dict(),
-                pose=outcome.frame.T_world_camera.to_dict(),
-                decision=str(decision.kind),
-                plan_id=decision.plan_id,
-                device_state=self.cell.device_state(),
-            )
+            try:
+                self.emit(
+                    "capture",
+                    strict=True,
+                    **capture_fields(outcome.report, outcome.voxels, outcome.coverage),
+                    frame=None if stored is None else stored[0],
+                    frame_sha256=None if stored is None else stored[1],
+                    requested_pose=decision.pose.to_dict(),
+                    pose=outcome.frame.T_world_camera.to_dict(),
+                    decision=str(decision.kind),
+                    plan_id=decision.plan_id,
+                    device_state=self.cell.device_state(),
+                )
+            except OSError:
+                if stored is not None:
+                    self.step_runner.discard_frame(stored[0])
+                raise
+            self.planner = outcome.planner
             self._terminated = self.planner.terminated
             self._occupied = outcome.occupied
             self._region = None
@@ -387,7 +416,9 @@ class SessionCore:
 
     def fail_step(self, exc: Exception, step: FailedStep) -> NoReturn:
         """Enter state error after a failed view step (the map is untouched, the plan pending again); raises the
-        domain error of ``exc``."""
+        domain error of ``exc`` (Gone when the session was deleted meanwhile)."""
+        if self.deleted:
+            raise self.gone() from None
         message, error = failure_of(exc, self.id, step.entry is not None)
         with self.lock:
             self._set_state(State.ERROR)
@@ -410,7 +441,10 @@ class SessionCore:
         raise error from None
 
     def fail_plan(self, reason: str) -> NoReturn:
-        """Enter state error after a plan killed in its worker (budget, DELETE); map and pending plan unchanged."""
+        """Enter state error after a plan killed in its worker (budget); map and pending plan unchanged. Gone when
+        the session was deleted meanwhile."""
+        if self.deleted:
+            raise self.gone()
         message = f"stopped: {reason}"
         with self.lock:
             self._set_state(State.ERROR)
@@ -451,14 +485,17 @@ class SessionCore:
 
     # ------------------------------------------------------------------ journal and listeners
 
-    def emit(self, kind: str, **data: Any) -> None:
+    def emit(self, kind: str, strict: bool = False, **data: Any) -> None:
         """Journal one event and take it into the record (caller holds the lock). A failing disk does not stop
-        the session; the problem is reported in its status."""
+        the session; the problem is reported in its status. ``strict``: a write that fails raises (OSError) and
+        the event is not taken (a view that is not journaled is not acknowledged)."""
         event = None
         if self.journal is not None:
             try:
                 event = self.journal.append(kind, **data)
             except (OSError, ValueError) as exc:
+                if strict:
+                    raise
                 self._journal_error = f"journal: cannot write ({exc}); this session may not resume completely"
                 log.error("session %s: %s", self.id, self._journal_error)
         if event is None:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from workbench.errors import Conflict, Invalid
+from workbench.errors import Conflict, Invalid, StorageFault
 from workbench.journal.discard import last_capture
 from workbench.journal.rebuild import REPLAY_STAGE
 from workbench.journal.store import JournalWriter, read_journal
@@ -35,7 +35,10 @@ def discard_last_view(s: SessionCore) -> dict[str, Any]:
         last = last_capture(read_journal(journal.directory).events)
         if last is None:
             raise Conflict(f"session {s.id}: no view to discard")
-        journal.append("discard", capture_seq=last["seq"], iteration=last["iteration"])
+        try:
+            journal.append("discard", capture_seq=last["seq"], iteration=last["iteration"])
+        except OSError as exc:  # a full disk: nothing discarded, the session as it was
+            raise StorageFault(f"session {s.id}: cannot discard the last view: {exc.strerror or exc}") from None
         return last
 
     with s.enter(Action.DISCARD, prepare) as claim:
@@ -45,6 +48,8 @@ def discard_last_view(s: SessionCore) -> dict[str, Any]:
         try:
             rebuilt = replay(s, read_journal(journal.directory), s.progress.stage)
         except (ValueError, KeyError, TypeError, JobKilled) as exc:
+            if s.deleted:
+                raise s.gone() from None
             raise Invalid(f"session {s.id}: cannot rebuild without the last view: {exc}") from None
         finally:
             s.progress.end()

@@ -256,9 +256,9 @@ def take_view(
     """
     try:
         outcome = s.step_runner.run(s.planner, decision.pose, s.add_move)
+        s.publish_view(outcome, decision)
     except Exception as exc:
         s.fail_step(exc, FailedStep(decision, entry))
-    s.publish_view(outcome, decision)
     if news is None:
         s.notify(SessionEvent.CAPTURED)
     else:

@@ -20,7 +20,8 @@ a device or of a worker job leaves it in ``error`` (the map unchanged, the plan 
 again); a refused or stopped action puts back the state it started from. ``done`` still plans and approves;
 ``error`` is left by ``retry``, by approving the restored plan or by a new plan.
 
-The busy states (``BUSY``) are the ones the table claims; every other state is a resting one. A session listed
+The busy states (``BUSY``) are the ones the table claims; every other state but ``closed`` (a session put to
+sleep, :meth:`SessionCore.close_state`) is a resting one. A session listed
 from a journal of an earlier server process is not live: :class:`Listed` names how it is listed.
 """
 
@@ -43,6 +44,8 @@ class State(StrEnum):
     DISCARDING = "discarding"
     DONE = "done"
     ERROR = "error"
+    CLOSED = "closed"
+    """Put to sleep (its journal kept, listed as interrupted) or deleted: no action starts from here."""
 
 
 class Listed(StrEnum):
@@ -99,4 +102,5 @@ TRANSITIONS: dict[Action, Transition] = {
 
 BUSY = frozenset(t.busy for t in TRANSITIONS.values() if t.busy is not None)
 """The states an action holds while it runs: another action meanwhile is refused (409)."""
-RESTING = frozenset(State) - BUSY
+RESTING = frozenset(State) - BUSY - {State.CLOSED}
+"""The states an action may start from (closed: none)."""

@@ -42,7 +42,9 @@ def worker_context() -> Any:
         if _context is None:
             ctx = multiprocessing.get_context("forkserver")
             # open3d is imported (no thread started by it) but no scene built: a worker builds its own after the fork
-            ctx.set_forkserver_preload(["workbench.workers.child", "devices.sim", "devices.arm.kinematics"])
+            ctx.set_forkserver_preload(
+                ["workbench.workers.child", "devices.sim", "devices.arm.kinematics", "workbench.sources.mesh_loader"]
+            )
             _context = ctx
         return _context
 
