@@ -23,14 +23,13 @@ on this branch the option says so and stops. Wall times on a shared machine are 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import statistics
 import sys
 import time
 from pathlib import Path
 from typing import Any
-
-import numpy as np
 
 from devices.mesh import sample_surface
 from nbv.run import simulate
@@ -84,10 +83,8 @@ def run_one(path: Path, seed: int, views: int) -> dict[str, Any]:
     def on_frame(frame: DepthFrame) -> None:
         t0 = time.perf_counter()
         integrator.integrate(frame)
-        try:
+        with contextlib.suppress(SurfaceError):  # nothing above the plate yet
             integrator.mesh()
-        except SurfaceError:
-            pass  # nothing above the plate yet
         updates.append(time.perf_counter() - t0)
         if keep_frames:
             frames.append(frame)
@@ -172,7 +169,7 @@ def summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     parser.add_argument("--models", type=Path, default=Path("../shared/models"))
     parser.add_argument("--no-extra", action="store_true", help="only the four meshes of MODELS, not MODELS/extra")
     parser.add_argument("--limit", type=int, default=None, help="only the first N meshes (a quick check)")

@@ -23,8 +23,8 @@ class SurfaceConfig:
     """TSDF voxel edge. 2.5 mm: F@5mm within 0.3 points of 2 mm on four objects at 60 % of the triangles and
     time; 3 mm loses up to 10 points of F@2mm (docs/method.md, "surface")."""
     truncation_voxels: float = 3.0
-    """TSDF truncation distance in voxels (7.5 mm at 2.5 mm voxels): 4 loses up to 2.5 points of F@2mm on thin
-    parts (the dragon), 6 up to 28."""
+    """TSDF truncation distance in voxels (7.5 mm at 2.5 mm voxels): 4 loses up to 2.4 points of F@2mm on thin
+    parts (the dragon), 6 up to 28 (the mug)."""
     weight_threshold: float = 0.5
     """Marching cubes keeps voxels whose weight (views that saw them) is above this: 0.5 keeps what one view saw;
     1.0 (two views) loses 1.3 points of F@5mm on the bunny at 10 views."""
