@@ -27,6 +27,7 @@ from workbench.surface import (
     reconstruct,
     simplify,
     surface_accuracy,
+    surface_block,
 )
 
 
@@ -235,3 +236,21 @@ def test_accuracy_of_known_offsets() -> None:
         cloud_accuracy(np.zeros((0, 3)), sphere)
     with pytest.raises(ValueError, match="non-finite"):
         cloud_accuracy(np.array([[np.nan, 0.0, 0.0]]), sphere)
+
+
+def test_surface_block_of_a_scan(box: trimesh.Trimesh, box_frames, box_surface: SurfaceMesh) -> None:
+    integrator = SurfaceIntegrator()
+    for frame in box_frames:
+        integrator.integrate(frame)
+    surface, block = surface_block(integrator, box)
+    assert surface == box_surface
+    assert block["triangles"] == box_surface.triangles and block["frames"] == len(box_frames)
+    assert block["fscore_5mm"] == surface_accuracy(box_surface, box).fscore_5mm
+    assert block["seconds"] >= sum(integrator.seconds) > 0
+    real, real_block = surface_block(integrator, None)  # a real object: no ground truth, no scores
+    assert real == box_surface and real_block["fscore_5mm"] is None and real_block["chamfer_mm"] is None
+    empty = SurfaceIntegrator()
+    for frame in ring_of_views(None, views=1):
+        empty.integrate(frame)
+    nothing, failed = surface_block(empty, box)
+    assert nothing is None and failed["triangles"] == 0 and "empty surface" in failed["error"]

@@ -50,9 +50,9 @@ class SurfaceMesh:
         them in (open3d's hash maps and threads), so a rebuild from the same frames is equal array for array."""
         v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
         f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-        used = np.unique(f)
+        used = np.bincount(f.ravel(), minlength=len(v)) > 0
         v = v[used]
-        f = np.searchsorted(used, f)
+        f = (np.cumsum(used) - 1)[f]
         order = np.lexsort((v[:, 2], v[:, 1], v[:, 0]))
         rank = np.empty_like(order)
         rank[order] = np.arange(len(order))
