@@ -118,6 +118,8 @@ def test_scan_is_reproducible(tmp_path: Path) -> None:
     poses = [[it["pose"]["position"] for it in d["iterations"]] for d in docs]
     assert np.allclose(poses[0], poses[1])
     assert [it["points"] for it in docs[0]["iterations"]] == [it["points"] for it in docs[1]["iterations"]]
+    assert (tmp_path / "a" / "surface.ply").read_bytes() == (tmp_path / "b" / "surface.ply").read_bytes()
+    assert docs[0]["surface"]["fscore_5mm"] == docs[1]["surface"]["fscore_5mm"]
 
 
 def test_yaw_turns_the_object_so_the_first_view_sees_another_side(tmp_path: Path) -> None:
