@@ -28,6 +28,10 @@ class SurfaceConfig:
     weight_threshold: float = 0.5
     """Marching cubes keeps voxels whose weight (views that saw them) is above this: 0.5 keeps what one view saw;
     1.0 (two views) loses 1.3 points of F@5mm on the bunny at 10 views."""
+    support_voxels: int = 1
+    """Marching-cubes vertices with no fused point within this many voxels (per axis) are dropped: the fins a
+    TSDF grows behind silhouette edges, up to the truncation distance long (0 keeps them). On the lion F@5mm
+    0.932 -> 0.980, precision@5mm 0.894 -> 0.988; on the bunny no change (-0.03 points)."""
     depth_max: float = 3.0
     """Depths beyond this are not fused."""
     plate_clearance: float = 0.002
@@ -56,6 +60,10 @@ class SurfaceConfig:
         for name in ("plate_clearance", "box_margin", "workspace_radius", "workspace_height"):
             v = getattr(self, name)
             require(finite(v) and v >= 0, f"surface.{name}: must be >= 0, got {v!r}")
+        require(
+            integer(self.support_voxels) and self.support_voxels >= 0,
+            f"surface.support_voxels: an integer >= 0, got {self.support_voxels!r}",
+        )
         require(
             integer(self.poisson_depth) and 4 <= self.poisson_depth <= 12,
             f"surface.poisson_depth: an integer in [4, 12], got {self.poisson_depth!r}",

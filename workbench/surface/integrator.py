@@ -41,6 +41,7 @@ class SurfaceIntegrator:
         self._lower: NDArray[np.float64] | None = None if box is None else box.lower.copy()
         self._upper: NDArray[np.float64] | None = None if box is None else box.upper.copy()
         self._grid: object | None = None
+        self._support = np.zeros(0, dtype=np.int64)  # keys of the voxels that hold a fused point above the plate
         self._cached: SurfaceMesh | None = None
         self.frames = 0
         """Frames integrated so far."""
@@ -71,18 +72,20 @@ class SurfaceIntegrator:
             raise SurfaceError("frame.T_world_camera: not a proper rotation")
         if not np.all(np.isfinite(frame.depth)):
             raise SurfaceError("frame.depth: non-finite values (NaN or inf)")
-        depth, lower, upper = self._object_pixels(frame)
+        depth, lower, upper, support = self._object_pixels(frame)
         if lower is not None and upper is not None:
             self._fuse(depth, frame, T_world_camera)
             self._lower, self._upper = lower, upper
+            self._support = np.union1d(self._support, support)
         self.frames += 1
         self._cached = None
         self.seconds.append(time.perf_counter() - t0)
 
     def _object_pixels(
         self, frame: DepthFrame
-    ) -> tuple[NDArray[np.float32], NDArray[np.float64] | None, NDArray[np.float64] | None]:
-        """(the depth with pixels outside the grown box zeroed, the box's lower, upper after this frame)."""
+    ) -> tuple[NDArray[np.float32], NDArray[np.float64] | None, NDArray[np.float64] | None, NDArray[np.int64]]:
+        """(the depth with pixels outside the grown box zeroed, the box's lower, upper after this frame, the
+        voxel keys of its fused points above the plate)."""
         cfg = self.config
         v, u = np.nonzero(frame.depth > 0)
         points_world = frame.points_world  # row-major valid pixels, the order of np.nonzero
@@ -100,13 +103,14 @@ class SurfaceIntegrator:
                 upper = hi if upper is None else np.maximum(upper, hi)
         depth = np.zeros_like(frame.depth)
         if lower is None or upper is None:
-            return depth, None, None
+            return depth, None, None, np.zeros(0, dtype=np.int64)
         m = cfg.box_margin
         inside = np.all((points_world >= lower - m) & (points_world <= upper + m), axis=1)
         if not cfg.fuse_plate:
             inside &= points_world[:, 2] >= cfg.plate_clearance
         depth[v[inside], u[inside]] = frame.depth[v[inside], u[inside]]
-        return depth, lower, upper
+        seen = points_world[inside & (points_world[:, 2] >= cfg.plate_clearance)]
+        return depth, lower, upper, np.unique(voxel_keys(voxel_indices(seen, cfg.voxel_size)))
 
     def _fuse(self, depth: NDArray[np.float32], frame: DepthFrame, T_world_camera: NDArray[np.float64]) -> None:
         import open3d as o3d
@@ -170,12 +174,53 @@ class SurfaceIntegrator:
         keep_vertex = (vertices[:, 2] >= self.config.plate_clearance) & np.all(
             (vertices >= box.lower - m) & (vertices <= box.upper + m), axis=1
         )
+        if self.config.support_voxels > 0:
+            keep_vertex &= self._supported(vertices)
         faces = faces[keep_vertex[faces].all(axis=1)] if len(faces) else faces.reshape(0, 3)
         if len(faces) == 0:
             raise SurfaceError(
                 f"empty surface: nothing of the object is left after the plate and box cuts ({self.frames} frame(s))"
             )
         return SurfaceMesh.canonical(vertices, faces)
+
+    def _supported(self, vertices: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """(V,) bool: a fused point lies within ``support_voxels`` voxels (per axis) of the vertex's voxel."""
+        from scipy import ndimage
+
+        if len(self._support) == 0:
+            return np.zeros(len(vertices), dtype=bool)
+        r = self.config.support_voxels
+        seen = keys_to_indices(self._support)
+        origin = seen.min(axis=0) - r
+        grid = np.zeros(tuple(seen.max(axis=0) - origin + r + 1), dtype=bool)
+        grid[tuple((seen - origin).T)] = True
+        grid = ndimage.binary_dilation(grid, structure=np.ones((3, 3, 3), dtype=bool), iterations=r)
+        ijk = voxel_indices(vertices, self.config.voxel_size) - origin
+        inside = np.all((ijk >= 0) & (ijk < grid.shape), axis=1)
+        supported = np.zeros(len(vertices), dtype=bool)
+        supported[inside] = grid[tuple(ijk[inside].T)]
+        return supported
+
+
+KEY_OFFSET = 2**20
+"""Voxel indices are offset by this before packing 21 bits per axis into one int64 key (+-2.6 km at 2.5 mm)."""
+
+
+def voxel_indices(points: NDArray[np.float64], voxel_size: float) -> NDArray[np.int64]:
+    """(N, 3) int64 indices of the voxels of edge ``voxel_size`` holding ``points`` (N, 3)."""
+    return np.floor(points / voxel_size).astype(np.int64)
+
+
+def voxel_keys(ijk: NDArray[np.int64]) -> NDArray[np.int64]:
+    """(N,) int64 keys of voxel indices (N, 3), 21 bits per axis."""
+    shifted = ijk + KEY_OFFSET
+    return (shifted[:, 0] << 42) | (shifted[:, 1] << 21) | shifted[:, 2]
+
+
+def keys_to_indices(keys: NDArray[np.int64]) -> NDArray[np.int64]:
+    """The voxel indices (N, 3) of :func:`voxel_keys` (N,)."""
+    mask = (1 << 21) - 1
+    return np.column_stack([(keys >> 42) & mask, (keys >> 21) & mask, keys & mask]) - KEY_OFFSET
 
 
 def reconstruct(
