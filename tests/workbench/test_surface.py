@@ -122,6 +122,17 @@ def test_rebuild_gives_the_same_surface(box_frames, box_surface: SurfaceMesh) ->
     assert incremental.frames == len(box_frames) and len(incremental.seconds) == len(box_frames)
 
 
+def test_every_vertex_has_a_fused_point_nearby(box_frames, box_surface: SurfaceMesh) -> None:
+    from scipy.spatial import KDTree
+
+    config = SurfaceConfig()
+    distance, _ = KDTree(points_above_plate(box_frames)).query(box_surface.vertices)
+    # A vertex's voxel or one of its 26 neighbours holds a point: at most two voxel diagonals away.
+    assert distance.max() <= 2 * np.sqrt(3) * config.voxel_size
+    unfiltered = reconstruct(box_frames, SurfaceConfig(support_voxels=0))
+    assert unfiltered.triangles >= box_surface.triangles
+
+
 def test_given_box_cuts_what_lies_outside(box_frames) -> None:
     half = BoundingBox(np.array([0.0, -0.1, 0.0]), np.array([0.1, 0.1, 0.2]))  # only the +x half of the box
     surface = reconstruct(box_frames, box=half)
@@ -208,6 +219,7 @@ def test_bad_frames_leave_the_integrator_as_it_was(box_frames, box_surface: Surf
         ("voxel_size", 0.0, "surface.voxel_size: must be > 0"),
         ("method", "marching", "surface.method: 'tsdf' or 'poisson'"),
         ("poisson_depth", 20, "surface.poisson_depth"),
+        ("support_voxels", -1, "surface.support_voxels"),
         ("plate_clearance", float("nan"), "surface.plate_clearance"),
     ],
 )
