@@ -7,6 +7,7 @@ import json
 import math
 import statistics
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -17,7 +18,7 @@ from rich.table import Table
 
 from nbv.options import planner_config_from_args
 from nbv.scan import STAGES, IterationRecord, ScanResult, run_scan
-from planner import Planner, PlannerConfig, PlanResult
+from planner import DepthFrame, Planner, PlannerConfig, PlanResult
 
 
 @dataclass
@@ -31,6 +32,8 @@ class SimScan:
     reachable_coverage: float | None
     surface_samples: np.ndarray
     cell: Any
+    mesh: Any = None
+    """The placed (and turned) ground-truth mesh in the table frame."""
 
 
 def simulate(
@@ -49,6 +52,7 @@ def simulate(
     console: Console | None = None,
     mesh: Any = None,
     arm: str = "urdf",
+    on_frame: Callable[[DepthFrame], None] | None = None,
 ) -> SimScan:
     """Load ``model``, build the simulated cell, run Algorithm 1, measure coverage.
 
@@ -58,7 +62,7 @@ def simulate(
     applied again). ``reachable``: also compute the reachable-coverage ceiling of the object
     and placement (:func:`workbench.object_ceiling.object_ceiling`, independent of the run).
     ``arm``: 'urdf' (the UR5 with IK, collision checks and joint trajectories) or 'reach_sphere'
-    (``CellConfig.kinematics``).
+    (``CellConfig.kinematics``). ``on_frame``: hears each frame with its registered pose (``run_scan``).
     """
     from devices.builtins import resolve_model
     from devices.config import CameraConfig, CellConfig
@@ -92,14 +96,14 @@ def simulate(
     if console is not None:
         console.print(f"[bold]{name}[/bold]: {config.termination.max_views} views, planner {planner_name}")
         console.print(_header(), highlight=False)
-    result = run_scan(planner, cell, samples, on_iteration=show, keep_plans=keep_plans)
+    result = run_scan(planner, cell, samples, on_iteration=show, keep_plans=keep_plans, on_frame=on_frame)
     ceiling = None
     if reachable:
         t0 = time.perf_counter()
         ceiling = object_ceiling(mesh, cell, CameraConfig(), config).coverage
         if console is not None:
             console.print(f"reachable coverage {ceiling:.4f} ({time.perf_counter() - t0:.1f} s)")
-    return SimScan(name, config, result, planner, ceiling, samples, cell)
+    return SimScan(name, config, result, planner, ceiling, samples, cell, mesh)
 
 
 def _header() -> str:
@@ -193,11 +197,20 @@ def print_stage_table(console: Console, stages: dict[str, dict[str, float]]) -> 
     console.print(table)
 
 
+def _surface_summary(block: dict[str, Any]) -> str:
+    if "error" in block:
+        return f"; no surface ({block['error']})"
+    score = "" if block["fscore_5mm"] is None else f" F@5mm {block['fscore_5mm']:.4f}"
+    return f"; surface{score}, {block['triangles']} triangles, {block['seconds']:.1f} s"
+
+
 def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
     """The body of ``nbv scan`` / ``nbv profile``; returns the JSON written."""
     from devices.ply import write_ply
+    from workbench.surface import SurfaceIntegrator, export_bytes, surface_block
 
     config = planner_config_from_args(args)
+    integrator = SurfaceIntegrator()
     console = Console(highlight=False)
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
@@ -215,19 +228,25 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
         keep_plans=profile and args.fidelity,
         console=console,
         arm=args.arm,
+        on_frame=integrator.integrate,
     )
     doc = metrics_json(scan, args.planner)
+    surface, doc["surface"] = surface_block(integrator, scan.mesh)
     (out / "metrics.json").write_text(json.dumps(doc, indent=2))
     write_ply(out / "cloud.ply", scan.planner.cloud)
+    if surface is not None:
+        (out / "surface.ply").write_bytes(export_bytes(surface, "ply"))
     records = scan.result.records
     stages = stage_table(records)
     plan_s = [r.plan_seconds for r in records]
     console.print(
         f"final coverage {doc['final_coverage']:.4f}"
         + (f" of reachable {scan.reachable_coverage:.4f}" if scan.reachable_coverage is not None else "")
+        + _surface_summary(doc["surface"])
         + f"; median plan {statistics.median(plan_s):.3f} s, max {max(plan_s):.3f} s;"
         + f" robot time {scan.result.robot_seconds:.1f} s;"
         + f" stopped: {scan.result.terminated}; wrote {out}/metrics.json, {out}/cloud.ply"
+        + ("" if surface is None else f", {out}/surface.ply")
     )
     if not profile:
         return doc
