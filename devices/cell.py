@@ -139,6 +139,9 @@ class Cell:
         self._arm_base = np.asarray(self.config.arm_base, dtype=np.float64)
         self.last_motion: Motion | None = None
         """The motion of the last :meth:`move_to` that started (the 3D view animates its trajectory)."""
+        self.errors: Any = None
+        """A simulated cell's calibration and motion errors (``devices.calibration_error.CellErrors``): the true
+        transforms beside the nominal ones the cell reports; None for a real cell."""
 
     # ------------------------------------------------------------------ geometry
 
