@@ -335,6 +335,33 @@ class RegistrationConfig:
 
 
 @dataclass(frozen=True)
+class NoiseConfig:
+    """The depth sensor's noise as the planner should expect it (``planner.noise``): sets the plate band and the
+    ICP gate. The defaults (0) describe a perfect sensor and leave the paper's fixed thresholds alone; the cell
+    fills them from its sensor model (``devices.sensors.noise_config``)."""
+
+    depth_std: float = 0.0
+    """Depth noise independent of range (std), metres."""
+    depth_z2: float = 0.0
+    """Depth noise growing with range: std = depth_z2 * z**2 at planar depth z (triangulation), 1/metres."""
+    plate_sigmas: float = 3.5
+    """Points within this many noise stds (projected on the vertical) of the plate top are plate, not object."""
+    icp_sigmas: float = 3.0
+    """ICP's rmse gate is at least this many times the expected residual (sqrt(2) x the depth std at the frame's
+    median depth)."""
+
+    def __post_init__(self) -> None:
+        for name in ("depth_std", "depth_z2", "plate_sigmas", "icp_sigmas"):
+            v = getattr(self, name)
+            require(finite(v) and v >= 0, f"noise.{name}: must be >= 0, got {v!r}")
+
+    @property
+    def exact(self) -> bool:
+        """True for a noise-free sensor."""
+        return self.depth_std == 0 and self.depth_z2 == 0
+
+
+@dataclass(frozen=True)
 class PlannerConfig:
     """Everything the planner needs; nested per component."""
 
@@ -348,6 +375,7 @@ class PlannerConfig:
     termination: TerminationConfig = field(default_factory=TerminationConfig)
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
     registration: RegistrationConfig = field(default_factory=RegistrationConfig)
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

@@ -34,6 +34,7 @@ from planner.partitions import (
     stalled_sector,
 )
 from planner.partitions import select_best as select_best_view
+from planner.noise import plate_heights, registration_for
 from planner.preprocess import preprocess_frame, voxel_downsample
 from planner.progress import ProgressFn, Stages
 from planner.registration import RegistrationResult, register
@@ -112,7 +113,8 @@ class Planner:
         timings: dict[str, float] = {}
 
         t0 = time.perf_counter()
-        points, dense = preprocess_frame(frame.points_world, self.voxel_map.bbox, self.config.preprocess)
+        plate = plate_heights(frame, self.config.preprocess, self.config.noise)
+        points, dense = preprocess_frame(frame.points_world, self.voxel_map.bbox, self.config.preprocess, plate)
         timings["preprocess"] = time.perf_counter() - t0
         if len(points) == 0:
             raise ValueError("empty frame: no point left on the object after cropping and plate removal")
@@ -120,7 +122,8 @@ class Planner:
         t0 = time.perf_counter()
         registration: RegistrationResult | None = None
         if self.config.registration.enabled and len(self.cloud) > 0:
-            registration = register(points, self.cloud, self.config.registration)
+            gates = registration_for(frame, self.config.registration, self.config.noise)
+            registration = register(points, self.cloud, gates)
             if registration.accepted:
                 frame = frame.with_pose(registration.correction @ frame.T_world_camera)
                 points = registration.correction.apply(points)
@@ -129,7 +132,7 @@ class Planner:
 
         t0 = time.perf_counter()
         # every point of the kept cells marks OCCUPIED (a voxel the surface only clips may hold no centroid)
-        self.voxel_map.integrate(self._plate_as_free_space(frame), dense)  # atomic: raises before changing anything
+        self.voxel_map.integrate(self._plate_as_free_space(frame, plate), dense)  # atomic: raises before changing anything
         timings["integrate"] = time.perf_counter() - t0
 
         merged = np.concatenate([self.cloud, points]) if len(self.cloud) else points
@@ -153,18 +156,19 @@ class Planner:
             timings=timings,
         )
 
-    def _plate_as_free_space(self, frame: DepthFrame) -> DepthFrame:
+    def _plate_as_free_space(self, frame: DepthFrame, plate: NDArray[np.float64]) -> DepthFrame:
         """The frame as the voxel map should carve it: pixels that hit the plate count as "no return".
 
         The plate is known geometry, not object: a ray that ends on it crossed free space all the way
-        down, and everything under the plate is below B's floor. Without this, the voxels where such
+        down, and everything under the plate is below B's floor. plate: (N,) the band of each point of
+        ``frame.points_world`` (:func:`planner.noise.plate_heights`). Without this, the voxels where such
         rays end (the layer resting on the plate) become UNKNOWN, and those next to the object's base
         stay FRONTIER for ever: no view can ever clear them, and the planner keeps looking at them.
         """
         if not self.config.voxel.floor:
             return frame
         v, u = np.nonzero(frame.depth > 0)  # the order of frame.points_world
-        on_plate = frame.points_world[:, 2] < self.config.voxel.floor_height + self.config.preprocess.plate_clearance
+        on_plate = frame.points_world[:, 2] < self.config.voxel.floor_height + plate
         if not np.any(on_plate):
             return frame
         depth = frame.depth.copy()

@@ -49,14 +49,20 @@ def preprocess(points_world: ArrayLike, bbox: BoundingBox | None, config: Prepro
     return preprocess_frame(points_world, bbox, config).points
 
 
-def preprocess_frame(points_world: ArrayLike, bbox: BoundingBox | None, config: PreprocessConfig) -> Preprocessed:
+def preprocess_frame(
+    points_world: ArrayLike,
+    bbox: BoundingBox | None,
+    config: PreprocessConfig,
+    plate_heights: ArrayLike | None = None,
+) -> Preprocessed:
     """The points of one frame that belong to the object.
 
     points_world: (N, 3) float64, finite (else ValueError).
     bbox: B; points farther than ``config.crop_margin`` outside it are dropped.
     None (first frame): keep points within ``workspace_radius`` of the turntable
     axis and below ``workspace_height``.
-    Points below ``plate_clearance`` (the plate) are always dropped. What is left is
+    Points below ``plate_clearance`` (the plate) are always dropped; ``plate_heights`` (N,), when given, is each
+    point's own band (``planner.noise.plate_heights``: it follows the sensor's noise). What is left is
     down-sampled to ``config.downsample`` cells (centroids) *before* the radius
     outlier removal (``outlier_radius``, ``outlier_min_neighbors``): the same cloud the
     accumulated one would keep, at a fraction of the neighbour-search cost. A cell's
@@ -68,7 +74,10 @@ def preprocess_frame(points_world: ArrayLike, bbox: BoundingBox | None, config: 
     else:
         r2 = p[:, 0] ** 2 + p[:, 1] ** 2
         keep = (r2 <= config.workspace_radius**2) & (p[:, 2] <= config.workspace_height)
-    keep &= p[:, 2] >= config.plate_clearance
+    if plate_heights is None:
+        keep &= p[:, 2] >= config.plate_clearance
+    else:
+        keep &= p[:, 2] >= checked_array("plate_heights", plate_heights, (len(p),))
     dense = p[keep]  # float64, a new (writable) array
     if config.downsample > 0 and len(dense):
         points, cell = _downsample(dense, config.downsample)

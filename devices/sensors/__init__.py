@@ -9,4 +9,10 @@ from devices.sensors.depth_effects import apply_effects
 from devices.sensors.occlusion import second_view_visible
 from devices.sensors.presets import SENSORS, SensorModel, sensor_named
 
-__all__ = ["SENSORS", "SensorModel", "apply_effects", "second_view_visible", "sensor_named"]
+__all__ = [
+    "SENSORS",
+    "SensorModel",
+    "apply_effects",
+    "second_view_visible",
+    "sensor_named",
+]
