@@ -22,6 +22,18 @@ def noise_config(camera: CameraConfig, base: NoiseConfig | None = None) -> Noise
     return dataclasses.replace(base, depth_std=flat, depth_z2=z2)
 
 
+SUPPORT_MIN_POINTS = 5
+"""For a sensor with flying pixels: a 1 cm cell with fewer of a frame's points is not surface
+(``PreprocessConfig.support_min_points``)."""
+
+
 def planner_config_for(config: PlannerConfig, camera: CameraConfig) -> PlannerConfig:
-    """``config`` with its ``noise`` section set from ``camera`` (a perfect camera leaves it at 0)."""
-    return dataclasses.replace(config, noise=noise_config(camera, config.noise))
+    """``config`` with its ``noise`` section set from ``camera`` (a perfect camera leaves it at 0) and, for a sensor
+    with flying pixels, the support filter on (``SUPPORT_MIN_POINTS`` per voxel of the map) unless already set."""
+    out = dataclasses.replace(config, noise=noise_config(camera, config.noise))
+    if sensor_named(camera.sensor).flying_probability > 0 and config.preprocess.support_min_points == 0:
+        pre = dataclasses.replace(
+            config.preprocess, support_min_points=SUPPORT_MIN_POINTS, support_voxel=config.voxel.resolution
+        )
+        out = dataclasses.replace(out, preprocess=pre)
+    return out

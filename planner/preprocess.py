@@ -61,6 +61,7 @@ def preprocess_frame(
     bbox: B; points farther than ``config.crop_margin`` outside it are dropped.
     None (first frame): keep points within ``workspace_radius`` of the turntable
     axis and below ``workspace_height``.
+    With ``support_min_points`` set, points in sparsely filled cells (:func:`supported`) go next.
     Points below ``plate_clearance`` (the plate) are always dropped; ``plate_heights`` (N,), when given, is each
     point's own band (``planner.noise.plate_heights``: it follows the sensor's noise). What is left is
     down-sampled to ``config.downsample`` cells (centroids) *before* the radius
@@ -79,6 +80,8 @@ def preprocess_frame(
     else:
         keep &= p[:, 2] >= checked_array("plate_heights", plate_heights, (len(p),))
     dense = p[keep]  # float64, a new (writable) array
+    if config.support_min_points > 0 and len(dense):
+        dense = dense[supported(dense, config.support_voxel, config.support_min_points)]
     if config.downsample > 0 and len(dense):
         points, cell = _downsample(dense, config.downsample)
     else:
@@ -87,6 +90,16 @@ def preprocess_frame(
         kept = radius_inliers(points, config.outlier_radius, config.outlier_min_neighbors)
         points, dense = points[kept], dense[kept[cell]]
     return Preprocessed(np.array(points, dtype=np.float64), dense)
+
+
+def supported(points: NDArray[np.float64], size: float, min_points: int) -> NDArray[np.bool_]:
+    """(N,) bool: True where the lattice cell of edge ``size`` (``floor(p / size)``) holding each of ``points``
+    (N, 3) holds at least ``min_points`` of them."""
+    if len(points) == 0:
+        return np.zeros(0, dtype=bool)
+    keys = np.floor(points / size).astype(np.int64)
+    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    return counts[inverse.ravel()] >= min_points
 
 
 def remove_radius_outliers(points: ArrayLike, radius: float, min_neighbors: int) -> NDArray[np.float64]:

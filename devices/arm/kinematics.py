@@ -123,8 +123,12 @@ class ArmKinematics:
         target, reason = self.reach.reachability(T_table_camera, q, angle)
         if target is None:
             return False, reason
-        blocked = self.turn_blocked(q, angle, target.angle)
-        return blocked is None, blocked
+        if self.turn_blocked(q, angle, target.angle) is None:
+            return True, None
+        target, reason = self.reach.best_target(  # another plate angle may turn clear
+            T_table_camera, q, angle, lambda a: self.turn_blocked(q, angle, a)
+        )
+        return target is not None, reason
 
     def violations(self, q: NDArray[np.float64], angle: float) -> str | None:
         """Why configuration (n,) ``q`` at plate ``angle`` is not allowed ('joint_limit' or a collision), or None."""
@@ -149,7 +153,7 @@ class ArmKinematics:
         shortest move and its trajectory. UnreachableError(reason) when there is none."""
         t0 = time.perf_counter()
         q = np.asarray(q, dtype=np.float64)
-        target, reason = self.reach.best_target(T_table_camera, q, angle)
+        target, reason = self.reach.best_target(T_table_camera, q, angle, lambda a: self.turn_blocked(q, angle, a))
         if target is None:
             raise UnreachableError(f"unreachable: {reason}", reason=reason or "no_ik")
         target = self._refined(T_table_camera, target)
