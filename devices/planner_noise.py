@@ -28,9 +28,12 @@ SUPPORT_MIN_POINTS = 5
 
 
 def planner_config_for(config: PlannerConfig, camera: CameraConfig) -> PlannerConfig:
-    """``config`` with its ``noise`` section set from ``camera`` (a perfect camera leaves it at 0) and, for a sensor
+    """``config`` with its ``noise`` section set from ``camera`` (a perfect camera leaves it at 0; a calibration
+    error turns ``fit_plate`` on) and, for a sensor
     with flying pixels, the support filter on (``SUPPORT_MIN_POINTS`` per voxel of the map) unless already set."""
     out = dataclasses.replace(config, noise=noise_config(camera, config.noise))
+    if camera.calibration != "none":  # the plate seen through the reported pose is tilted and offset
+        out = dataclasses.replace(out, noise=dataclasses.replace(out.noise, fit_plate=True))
     if sensor_named(camera.sensor).flying_probability > 0 and config.preprocess.support_min_points == 0:
         pre = dataclasses.replace(
             config.preprocess, support_min_points=SUPPORT_MIN_POINTS, support_voxel=config.voxel.resolution

@@ -365,16 +365,23 @@ class NoiseConfig:
     icp_sigmas: float = 3.0
     """ICP's rmse gate is at least this many times the expected residual (sqrt(2) x the depth std at the frame's
     median depth)."""
+    fit_plate: bool = False
+    """Fit the plate's plane in each frame (robust least squares on the points near z = 0) and measure the band
+    from it: with calibration error the plate seen through the reported pose is tilted and offset by millimetres
+    (a 0.3 degree hand-eye error lifts its rim by 1 mm). Off (the paper): the plate is z = 0."""
+    plate_fit_window: float = 0.01
+    """Points within this of z = 0 are the plate fit's candidates, metres."""
 
     def __post_init__(self) -> None:
-        for name in ("depth_std", "depth_z2", "plate_sigmas", "icp_sigmas"):
+        for name in ("depth_std", "depth_z2", "plate_sigmas", "icp_sigmas", "plate_fit_window"):
             v = getattr(self, name)
             require(finite(v) and v >= 0, f"noise.{name}: must be >= 0, got {v!r}")
+        require(isinstance(self.fit_plate, bool), f"noise.fit_plate: must be true or false, got {self.fit_plate!r}")
 
     @property
     def exact(self) -> bool:
-        """True for a noise-free sensor."""
-        return self.depth_std == 0 and self.depth_z2 == 0
+        """True for a noise-free sensor whose plate is where the kinematics say (nothing to adapt)."""
+        return self.depth_std == 0 and self.depth_z2 == 0 and not self.fit_plate
 
 
 @dataclass(frozen=True)

@@ -24,9 +24,42 @@ def depth_std(depth: NDArray[np.floating], noise: NoiseConfig) -> NDArray[np.flo
     return np.sqrt(noise.depth_std**2 + (noise.depth_z2 * z * z) ** 2)
 
 
-def plate_heights(frame: DepthFrame, preprocess: PreprocessConfig, noise: NoiseConfig) -> NDArray[np.float64]:
-    """(N,) per point of ``frame.points_world``: below this height above the plate top a point is plate.
+MAX_PLATE_TILT = math.radians(3.0)
+"""A fitted plate plane steeper than this (or offset by more than the fit window) is not believed: z = 0 is used."""
+MIN_PLATE_POINTS = 200
+"""Fewer plate candidates than this: no fit, z = 0."""
 
+
+def fit_plate(points_world: NDArray[np.float64], window: float, workspace_radius: float) -> NDArray[np.float64]:
+    """(3,) (a, b, c) of the plate plane ``z = a x + b y + c`` seen in one frame: a least-squares fit to the
+    points within ``window`` of z = 0 and ``workspace_radius`` of the axis, refitted three times to those within
+    3 robust stds (1.4826 MAD, at least 0.5 mm) of the plane (the object's foot and the plate's rim drop out).
+    (0, 0, 0) when there are too few points or the plane is implausible."""
+    p = points_world
+    near = (np.abs(p[:, 2]) <= window) & (p[:, 0] ** 2 + p[:, 1] ** 2 <= workspace_radius**2)
+    q = p[near]
+    zero = np.zeros(3)
+    if len(q) < MIN_PLATE_POINTS:
+        return zero
+    coef = zero
+    keep = np.ones(len(q), dtype=bool)
+    A = np.column_stack([q[:, 0], q[:, 1], np.ones(len(q))])
+    for _ in range(4):
+        if np.count_nonzero(keep) < MIN_PLATE_POINTS:
+            return zero
+        coef, *_ = np.linalg.lstsq(A[keep], q[keep, 2], rcond=None)
+        residual = q[:, 2] - A @ coef
+        scale = max(1.4826 * float(np.median(np.abs(residual[keep]))), 0.0005)
+        keep = np.abs(residual) <= 3.0 * scale
+    if math.hypot(coef[0], coef[1]) > math.tan(MAX_PLATE_TILT) or abs(coef[2]) > window:
+        return zero
+    return np.asarray(coef, dtype=np.float64)
+
+
+def plate_heights(frame: DepthFrame, preprocess: PreprocessConfig, noise: NoiseConfig) -> NDArray[np.float64]:
+    """(N,) per point of ``frame.points_world``: below this height above z = 0 a point is plate.
+
+    The plate's surface (z = 0, or the frame's fitted plane with ``noise.fit_plate``) plus
     ``max(plate_clearance, plate_sigmas * sigma_z)``, where sigma_z is the depth std at the point's depth times
     the vertical component of its ray (a ray along the vertical moves the point up and down by its whole error,
     a grazing one hardly at all)."""
@@ -36,7 +69,11 @@ def plate_heights(frame: DepthFrame, preprocess: PreprocessConfig, noise: NoiseC
     depth = frame.depth[frame.valid].astype(np.float64)
     points = frame.points_world
     vertical = np.abs(points[:, 2] - frame.T_world_camera.translation[2]) / np.maximum(depth, 1e-9)
-    return np.maximum(preprocess.plate_clearance, noise.plate_sigmas * depth_std(depth, noise) * vertical)
+    band = np.maximum(preprocess.plate_clearance, noise.plate_sigmas * depth_std(depth, noise) * vertical)
+    if not noise.fit_plate:
+        return band
+    a, b, c = fit_plate(points, noise.plate_fit_window, preprocess.workspace_radius)
+    return band + a * points[:, 0] + b * points[:, 1] + c
 
 
 def registration_for(frame: DepthFrame, config: RegistrationConfig, noise: NoiseConfig) -> RegistrationConfig:

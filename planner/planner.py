@@ -156,17 +156,19 @@ class Planner:
             timings=timings,
         )
 
-    def _plate_as_free_space(self, frame: DepthFrame, plate: NDArray[np.float64]) -> DepthFrame:
+    def _plate_as_free_space(self, frame: DepthFrame, plate: NDArray[np.float64] | None = None) -> DepthFrame:
         """The frame as the voxel map should carve it: pixels that hit the plate count as "no return".
 
         The plate is known geometry, not object: a ray that ends on it crossed free space all the way
         down, and everything under the plate is below B's floor. plate: (N,) the band of each point of
-        ``frame.points_world`` (:func:`planner.noise.plate_heights`). Without this, the voxels where such
+        ``frame.points_world`` (:func:`planner.noise.plate_heights`; None: computed here). Without this, the voxels where such
         rays end (the layer resting on the plate) become UNKNOWN, and those next to the object's base
         stay FRONTIER for ever: no view can ever clear them, and the planner keeps looking at them.
         """
         if not self.config.voxel.floor:
             return frame
+        if plate is None:
+            plate = plate_heights(frame, self.config.preprocess, self.config.noise)
         v, u = np.nonzero(frame.depth > 0)  # the order of frame.points_world
         on_plate = frame.points_world[:, 2] < self.config.voxel.floor_height + plate
         if not np.any(on_plate):
