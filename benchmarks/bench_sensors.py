@@ -54,7 +54,7 @@ def ceilings(models: list[Path], views: int, cache: Path) -> dict[str, float]:
     out: dict[str, float] = {}
     config = PlannerConfig().replace(termination={"max_views": views})
     for path in models:
-        name, mesh = resolve_model(str(path), up="y", size=0.2)
+        _, mesh = resolve_model(str(path), up="y", size=0.2)
         cell = make_sim_cell(mesh, CameraConfig(), CellConfig())
         out[path.stem] = cached_ceiling(mesh, cell, CameraConfig(), config, cache).coverage
     return out
@@ -188,7 +188,7 @@ def main() -> None:
         s["wall_seconds"] = time.perf_counter() - t0
         report[f"{sensor}:{calibration}"] = s
 
-        def f(key: str, digits: int = 4, width: int = 7) -> str:
+        def f(key: str, digits: int = 4, width: int = 7, s: dict[str, Any] = s) -> str:
             v = s[key]
             return f"{'-':>{width}}" if v is None else f"{v:>{width}.{digits}f}"
 

@@ -142,11 +142,14 @@ class SimulatedCamera:
         if sensor.baseline > 0:
             flat = depth.reshape(-1)
             hit = np.flatnonzero(flat > 0)
-            points = rays[hit, :3].astype(np.float64) + flat[hit, None].astype(np.float64) * dirs[hit].astype(np.float64)
+            points = rays[hit, :3].astype(np.float64) + flat[hit, None].astype(np.float64) * dirs[hit].astype(
+                np.float64
+            )
             origin = T_table_camera.translation + sensor.baseline * T_table_camera.rotation[:, 0]
             flat[hit[~second_view_visible(self._scene, origin, points)]] = 0.0
-        out = apply_effects(depth, cos.reshape(k.height, k.width).astype(np.float32), sensor,
-                            self.config.depth_noise_std, self._rng)
+        out = apply_effects(
+            depth, cos.reshape(k.height, k.width).astype(np.float32), sensor, self.config.depth_noise_std, self._rng
+        )
         return self._cut(out)
 
     def _cut(self, depth: NDArray[np.float32]) -> NDArray[np.float32]:

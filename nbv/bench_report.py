@@ -36,6 +36,7 @@ from typing import Any
 
 from nbv.bench_summary import run_metrics_of, summary_markdown
 from nbv.runs import RunOutcome
+from workbench.evaluation import ACCURACY_COLUMNS
 
 COLUMNS = (
     "model",
@@ -55,13 +56,7 @@ COLUMNS = (
     "views_to_90",
     "views_to_95",
     "views_to_98",
-    "precision_5mm",
-    "recall_5mm",
-    "fscore_5mm",
-    "precision_2mm",
-    "recall_2mm",
-    "fscore_2mm",
-    "chamfer_mm",
+    *ACCURACY_COLUMNS,
 )
 """The columns of results.csv, in order."""
 

@@ -59,7 +59,8 @@ def execute(task: RunTask, mesh: MeshPayload | None = None) -> RunOutcome:
 
 
 def _execute(task: RunTask, mesh: MeshPayload | None, t0: float) -> RunOutcome:
-    from nbv.run import ACCURACY_COLUMNS, icp_rejections, simulate
+    from nbv.run import icp_rejections, simulate
+    from workbench.evaluation import ACCURACY_COLUMNS
 
     scan = simulate(
         task.model if mesh is None else task.label,

@@ -18,6 +18,7 @@ from rich.table import Table
 from nbv.options import planner_config_from_args
 from nbv.scan import STAGES, IterationRecord, ScanResult, run_scan
 from planner import Planner, PlannerConfig, PlanResult
+from workbench.evaluation import ACCURACY_COLUMNS
 
 
 @dataclass
@@ -147,11 +148,6 @@ def metrics_json(scan: SimScan, planner_name: str) -> dict[str, Any]:
         "seconds": scan.result.seconds,
         "robot_seconds": scan.result.robot_seconds,
     }
-
-
-ACCURACY_COLUMNS = ("precision_5mm", "recall_5mm", "fscore_5mm", "precision_2mm", "recall_2mm", "fscore_2mm",
-                    "chamfer_mm")
-"""The accuracy figures metrics.json and the bench's results.csv carry (``workbench.evaluation.Accuracy``)."""
 
 
 def final_accuracy(records: list[IterationRecord]) -> dict[str, Any]:

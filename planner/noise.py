@@ -86,6 +86,4 @@ def registration_for(frame: DepthFrame, config: RegistrationConfig, noise: Noise
     gate = noise.icp_sigmas * math.sqrt(2.0) * sigma
     if gate <= config.max_rmse:
         return config
-    return dataclasses.replace(
-        config, max_rmse=gate, max_correspondence=max(config.max_correspondence, 3.0 * gate)
-    )
+    return dataclasses.replace(config, max_rmse=gate, max_correspondence=max(config.max_correspondence, 3.0 * gate))

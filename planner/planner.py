@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from planner.candidates import propose_candidates
 from planner.config import PlannerConfig
 from planner.evaluators import EvaluationContext, ViewEvaluator, make_evaluator
+from planner.noise import plate_heights, registration_for
 from planner.partitions import (
     azimuth_of,
     default_tolerance,
@@ -34,7 +35,6 @@ from planner.partitions import (
     stalled_sector,
 )
 from planner.partitions import select_best as select_best_view
-from planner.noise import plate_heights, registration_for
 from planner.preprocess import preprocess_frame, voxel_downsample
 from planner.progress import ProgressFn, Stages
 from planner.registration import RegistrationResult, register
@@ -132,7 +132,9 @@ class Planner:
 
         t0 = time.perf_counter()
         # every point of the kept cells marks OCCUPIED (a voxel the surface only clips may hold no centroid)
-        self.voxel_map.integrate(self._plate_as_free_space(frame, plate), dense)  # atomic: raises before changing anything
+        self.voxel_map.integrate(
+            self._plate_as_free_space(frame, plate), dense
+        )  # atomic: raises before changing anything
         timings["integrate"] = time.perf_counter() - t0
 
         merged = np.concatenate([self.cloud, points]) if len(self.cloud) else points

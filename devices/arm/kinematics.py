@@ -95,7 +95,7 @@ class ArmKinematics:
         views and the move ask the same question with the same answer."""
         q = np.asarray(q, dtype=np.float64)
         step = 1.0 / TURN_CHECKS_PER_RADIAN
-        n = int(math.floor(abs(turn) / step))
+        n = math.floor(abs(turn) / step)
         offsets = [math.copysign(k * step, turn) for k in range(n + 1)] + [turn]
         for offset in offsets:
             key = (q.tobytes(), round(angle + offset, 9))

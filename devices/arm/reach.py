@@ -68,7 +68,15 @@ class ArmTarget:
 
 
 def _severity(reason: str) -> int:
-    return 3 if reason.startswith("turn:") else 2 if reason.startswith("collision") else 1 if reason == "joint_limit" else 0
+    return (
+        3
+        if reason.startswith("turn:")
+        else 2
+        if reason.startswith("collision")
+        else 1
+        if reason == "joint_limit"
+        else 0
+    )
 
 
 class ArmReach:

@@ -92,7 +92,7 @@ def holes(shape: tuple[int, int], fraction: float, size_px: int, rng: np.random.
     mask = np.zeros(shape, dtype=bool)
     if fraction <= 0:
         return mask
-    count = int(round(fraction * h * w / (size_px * size_px)))
+    count = round(fraction * h * w / (size_px * size_px))
     vs = rng.integers(0, max(1, h - size_px + 1), count)
     us = rng.integers(0, max(1, w - size_px + 1), count)
     for v, u in zip(vs, us, strict=True):

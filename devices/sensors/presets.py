@@ -57,9 +57,7 @@ class SensorModel:
         for field in ("baseline", "subpixel", "focal_px", "min_range", "depth_unit", "lateral_px", "flying_jump"):
             v = getattr(self, field)
             require(finite(v) and v >= 0, f"sensor.{field}: must be >= 0, got {v!r}")
-        require(
-            self.max_range > self.min_range, f"sensor.max_range: must be > min_range, got {self.max_range!r}"
-        )
+        require(self.max_range > self.min_range, f"sensor.max_range: must be > min_range, got {self.max_range!r}")
         require(
             finite(self.max_incidence_deg) and 0 < self.max_incidence_deg <= 90,
             f"sensor.max_incidence_deg: must be in (0, 90], got {self.max_incidence_deg!r}",

@@ -18,7 +18,9 @@ from planner.types import Pose
 def offset(a: Pose, b: Pose) -> tuple[float, float]:
     """(metres, degrees) between two poses."""
     d = a.inverse() @ b
-    return float(np.linalg.norm(a.translation - b.translation)), math.degrees(Rotation.from_matrix(d.rotation).magnitude())
+    return float(np.linalg.norm(a.translation - b.translation)), math.degrees(
+        Rotation.from_matrix(d.rotation).magnitude()
+    )
 
 
 def test_none_renders_from_the_reported_pose() -> None:

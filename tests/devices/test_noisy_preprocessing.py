@@ -36,7 +36,11 @@ def test_fixed_band_keeps_the_noisy_plate(noiseless: Planner) -> None:
 
 @pytest.mark.parametrize(
     "camera",
-    [CameraConfig(depth_noise_std=0.002), CameraConfig(sensor="realsense-d435"), CameraConfig(sensor="structured-light")],
+    [
+        CameraConfig(depth_noise_std=0.002),
+        CameraConfig(sensor="realsense-d435"),
+        CameraConfig(sensor="structured-light"),
+    ],
 )
 def test_noise_band_removes_the_plate_and_keeps_B(noiseless: Planner, camera: CameraConfig) -> None:
     noisy = first_frame_planner(camera, tuned=True)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -160,7 +159,7 @@ def test_deterministic_from_the_seed() -> None:
 
 
 def test_unknown_sensor_lists_the_names() -> None:
-    with pytest.raises(ValueError, match="camera.sensor: unknown sensor 'kinect'; known: ideal, realsense-d435"):
+    with pytest.raises(ValueError, match=r"camera\.sensor: unknown sensor 'kinect'; known: ideal, realsense-d435"):
         CameraConfig(sensor="kinect")
     with pytest.raises(ValueError, match="unknown calibration 'perfect'; known: none, typical, poor"):
         CameraConfig(calibration="perfect")

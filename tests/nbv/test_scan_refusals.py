@@ -30,7 +30,9 @@ def test_a_refused_move_is_recorded_and_the_scan_goes_on() -> None:
     assert result.terminated == "max_views"
     assert len(result.records) == 4
     third = result.records[2]
-    assert third.refused_moves == [{"candidate": refusals[0], "reason": "injected", "message": "unreachable: injected stop"}]
+    assert third.refused_moves == [
+        {"candidate": refusals[0], "reason": "injected", "message": "unreachable: injected stop"}
+    ]
     assert result.refused_moves == [{"after_view": 2, **third.refused_moves[0]}]
     assert result.records[1].refused_moves == [] and result.records[3].refused_moves == []
     assert third.to_json()["refused_moves"] == third.refused_moves

@@ -44,5 +44,5 @@ def test_icp_gate_rises_with_the_noise() -> None:
 
 
 def test_bad_noise_config() -> None:
-    with pytest.raises(ValueError, match="noise.depth_std: must be >= 0"):
+    with pytest.raises(ValueError, match=r"noise\.depth_std: must be >= 0"):
         NoiseConfig(depth_std=-1.0)

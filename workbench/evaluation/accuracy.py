@@ -22,6 +22,16 @@ from scipy.spatial import KDTree
 
 TAUS_MM = (2, 5)
 """The distances at which precision, recall and F are reported, millimetres."""
+ACCURACY_COLUMNS = (
+    "precision_5mm",
+    "recall_5mm",
+    "fscore_5mm",
+    "precision_2mm",
+    "recall_2mm",
+    "fscore_2mm",
+    "chamfer_mm",
+)
+"""The figures nbv scan's metrics.json and nbv bench's results.csv carry (fields of :class:`Accuracy`)."""
 
 
 @dataclass(frozen=True)
@@ -68,9 +78,7 @@ class GroundTruth:
         if len(self.samples) == 0:
             raise ValueError("samples: need at least one sample")
         self._scene = o3d.t.geometry.RaycastingScene()
-        self._scene.add_triangles(
-            o3d.core.Tensor.from_numpy(self._vertices), o3d.core.Tensor.from_numpy(self._faces)
-        )
+        self._scene.add_triangles(o3d.core.Tensor.from_numpy(self._vertices), o3d.core.Tensor.from_numpy(self._faces))
 
     @staticmethod
     def of(mesh: Any, samples: ArrayLike) -> GroundTruth:
