@@ -371,17 +371,36 @@ class NoiseConfig:
     (a 0.3 degree hand-eye error lifts its rim by 1 mm). Off (the paper): the plate is z = 0."""
     plate_fit_window: float = 0.01
     """Points within this of z = 0 are the plate fit's candidates, metres."""
+    flying_jump: float = 0.0
+    """Opt-in (0 = off): drop the pixels at depth discontinuities, where a 4-neighbour's depth differs by more
+    than this fraction of the pixel's (a real sensor's flying pixels sit there). Their rays carve like holes."""
+    dropout_fill_px: int = 0
+    """Opt-in (0 = off, the paper: a pixel without depth is free space to the sensor's range): a pixel without
+    depth within this many pixels of one with depth is a dropout (a hole, a shadow of the second viewpoint, a
+    grazing surface), not free space: its ray is free only up to the nearest depth around it and unknown beyond.
+    Only pixels far from every return (the void around the object) stay free."""
 
     def __post_init__(self) -> None:
         for name in ("depth_std", "depth_z2", "plate_sigmas", "icp_sigmas", "plate_fit_window"):
             v = getattr(self, name)
             require(finite(v) and v >= 0, f"noise.{name}: must be >= 0, got {v!r}")
         require(isinstance(self.fit_plate, bool), f"noise.fit_plate: must be true or false, got {self.fit_plate!r}")
+        require(finite(self.flying_jump) and self.flying_jump >= 0, "noise.flying_jump: must be >= 0")
+        require(
+            integer(self.dropout_fill_px) and 0 <= self.dropout_fill_px <= 100,
+            f"noise.dropout_fill_px: must be an integer in [0, 100], got {self.dropout_fill_px!r}",
+        )
 
     @property
     def exact(self) -> bool:
         """True for a noise-free sensor whose plate is where the kinematics say (nothing to adapt)."""
-        return self.depth_std == 0 and self.depth_z2 == 0 and not self.fit_plate
+        return (
+            self.depth_std == 0
+            and self.depth_z2 == 0
+            and not self.fit_plate
+            and self.flying_jump == 0
+            and self.dropout_fill_px == 0
+        )
 
 
 @dataclass(frozen=True)

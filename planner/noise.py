@@ -76,6 +76,43 @@ def plate_heights(frame: DepthFrame, preprocess: PreprocessConfig, noise: NoiseC
     return band + a * points[:, 0] + b * points[:, 1] + c
 
 
+def without_flying_pixels(frame: DepthFrame, jump: float) -> DepthFrame:
+    """``frame`` with the pixels at depth discontinuities set to "no return": a pixel whose 4-neighbour (with a
+    return) differs by more than ``jump`` times its depth, on both sides of the edge. ``jump`` 0: unchanged."""
+    if jump <= 0:
+        return frame
+    d = frame.depth
+    edge = np.zeros(d.shape, dtype=bool)
+    for a, b, sa, sb in (
+        (d[:-1], d[1:], (slice(None, -1),), (slice(1, None),)),
+        (d[:, :-1], d[:, 1:], (slice(None), slice(None, -1)), (slice(None), slice(1, None))),
+    ):
+        jumps = (a > 0) & (b > 0) & (np.abs(a - b) > jump * np.minimum(a, b))
+        edge[sa] |= jumps
+        edge[sb] |= jumps
+    if not np.any(edge):
+        return frame
+    return DepthFrame(np.where(edge, np.float32(0.0), d).astype(np.float32), frame.T_world_camera, frame.intrinsics)
+
+
+def dropouts_filled(frame: DepthFrame, radius_px: int) -> DepthFrame:
+    """The frame as the voxel map should carve it when a missing depth may be a dropout: every pixel without a
+    return within ``radius_px`` (a square window) of one with a return takes the nearest (smallest) depth of that
+    window, so its ray is free only up to there and unknown beyond (no point is added for it). ``radius_px`` 0:
+    unchanged."""
+    if radius_px <= 0:
+        return frame
+    from scipy.ndimage import minimum_filter
+
+    d = frame.depth
+    hole = d == 0
+    if not np.any(hole):
+        return frame
+    near = minimum_filter(np.where(hole, np.float32(np.inf), d), size=2 * radius_px + 1, mode="constant", cval=np.inf)
+    filled = np.where(hole & np.isfinite(near), near, d).astype(np.float32)
+    return DepthFrame(filled, frame.T_world_camera, frame.intrinsics)
+
+
 def registration_for(frame: DepthFrame, config: RegistrationConfig, noise: NoiseConfig) -> RegistrationConfig:
     """``config`` with its rmse gate raised to ``icp_sigmas * sqrt(2) * sigma(median depth)`` when that is larger
     (two noisy clouds: the frame's and the accumulated one's), and the correspondence distance kept above three

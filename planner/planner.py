@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from planner.candidates import propose_candidates
 from planner.config import PlannerConfig
 from planner.evaluators import EvaluationContext, ViewEvaluator, make_evaluator
-from planner.noise import plate_heights, registration_for
+from planner.noise import dropouts_filled, plate_heights, registration_for, without_flying_pixels
 from planner.partitions import (
     azimuth_of,
     default_tolerance,
@@ -113,6 +113,7 @@ class Planner:
         timings: dict[str, float] = {}
 
         t0 = time.perf_counter()
+        frame = without_flying_pixels(frame, self.config.noise.flying_jump)
         plate = plate_heights(frame, self.config.preprocess, self.config.noise)
         points, dense = preprocess_frame(frame.points_world, self.voxel_map.bbox, self.config.preprocess, plate)
         timings["preprocess"] = time.perf_counter() - t0
@@ -132,9 +133,11 @@ class Planner:
 
         t0 = time.perf_counter()
         # every point of the kept cells marks OCCUPIED (a voxel the surface only clips may hold no centroid)
-        self.voxel_map.integrate(
-            self._plate_as_free_space(frame, plate), dense
-        )  # atomic: raises before changing anything
+        if self.config.noise.dropout_fill_px > 0:  # dropouts are unknown, not free; the plate's pixels stay free
+            carve = self._plate_as_free_space(dropouts_filled(frame, self.config.noise.dropout_fill_px))
+        else:
+            carve = self._plate_as_free_space(frame, plate)
+        self.voxel_map.integrate(carve, dense)  # atomic: raises before changing anything
         timings["integrate"] = time.perf_counter() - t0
 
         merged = np.concatenate([self.cloud, points]) if len(self.cloud) else points

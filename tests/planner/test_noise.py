@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from planner.config import NoiseConfig, PreprocessConfig, RegistrationConfig
-from planner.noise import depth_std, plate_heights, registration_for
+from planner.noise import depth_std, dropouts_filled, plate_heights, registration_for, without_flying_pixels
 from planner.types import DepthFrame, Intrinsics, Pose
 
 K = Intrinsics(64, 48, 60.0, 60.0, 31.5, 23.5)
@@ -46,3 +46,33 @@ def test_icp_gate_rises_with_the_noise() -> None:
 def test_bad_noise_config() -> None:
     with pytest.raises(ValueError, match=r"noise\.depth_std: must be >= 0"):
         NoiseConfig(depth_std=-1.0)
+
+
+def step_frame() -> DepthFrame:
+    """Left half at 0.4 m, right half at 0.5 m; a 3 x 3 hole in the left half."""
+    depth = np.full((K.height, K.width), 0.5, dtype=np.float32)
+    depth[:, : K.width // 2] = 0.4
+    depth[10:13, 10:13] = 0.0
+    return DepthFrame(depth, DOWN, K)
+
+
+def test_flying_pixel_filter_drops_both_sides_of_a_depth_edge_only() -> None:
+    frame = step_frame()
+    out = without_flying_pixels(frame, 0.01)
+    dropped = (frame.depth > 0) & (out.depth == 0)
+    cols = np.unique(np.nonzero(dropped)[1])
+    assert cols.tolist() == [K.width // 2 - 1, K.width // 2]
+    assert without_flying_pixels(frame, 0.0) is frame
+
+
+def test_dropouts_carve_to_the_nearest_depth_around_them() -> None:
+    frame = step_frame()
+    filled = dropouts_filled(frame, 4)
+    assert np.all(filled.depth[10:13, 10:13] == np.float32(0.4))  # the hole is a surface of unknown beyond
+    depth = np.zeros((K.height, K.width), dtype=np.float32)
+    depth[0, 0] = 0.3
+    void = DepthFrame(depth, DOWN, K)
+    far = dropouts_filled(void, 4)
+    assert far.depth[20, 40] == 0  # far from every return: still free space
+    assert far.depth[3, 3] == np.float32(0.3)
+    assert dropouts_filled(frame, 0) is frame
