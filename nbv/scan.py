@@ -136,26 +136,34 @@ class ScanResult:
         return float(sum(r.robot_seconds for r in self.records))
 
 
-def _move(cell: Any, pose: Pose, plan: PlanResult | None) -> tuple[Pose | None, Any, list[dict[str, Any]]]:
-    """Move to ``pose``; while the cell refuses (UnreachableError: e.g. no collision-free path), try the next
-    best eligible candidate of ``plan``, every one in turn. Returns (the pose reached or None when every
-    eligible view was refused, the cell's Motion or None, the refusals: ``candidate`` index, ``reason``,
-    ``message``). Without a plan (the first view) a refusal is raised: there is nothing else to try."""
+def _move(
+    cell: Any, pose: Pose, plan: PlanResult | None, skip: set[int]
+) -> tuple[int | None, Pose | None, Any, list[dict[str, Any]]]:
+    """Move to ``pose`` (``plan``'s best view, or the first view without a plan); while the cell refuses
+    (UnreachableError: e.g. no collision-free path), try the next best eligible candidate of ``plan``, every one
+    in turn, leaving out the candidates in ``skip`` (tried already). Returns (the candidate index reached or
+    None, the pose reached or None when every eligible view was refused, the cell's Motion or None, the
+    refusals: ``candidate`` index, ``reason``, ``message``). Without a plan (the first view) a refusal is raised:
+    there is nothing else to try."""
     from devices.protocols import UnreachableError
 
-    tries: list[tuple[int | None, Pose]] = [(None if plan is None else plan.best_index, pose)]
-    if plan is not None:
-        ranked = sorted((s for s in plan.scores if s.eligible and s.index != plan.best_index), key=lambda s: -s.score)
+    tries: list[tuple[int | None, Pose]] = []
+    if plan is None:
+        tries.append((None, pose))
+    else:
+        ranked = sorted((s for s in plan.scores if s.eligible and s.index not in skip), key=lambda s: -s.score)
+        best = [s for s in ranked if s.index == plan.best_index]
+        ranked = best + [s for s in ranked if s.index != plan.best_index]
         tries += [(s.index, plan.candidates[s.index].T_world_camera) for s in ranked]
     refused: list[dict[str, Any]] = []
     for index, target in tries:
         try:
-            return target, cell.move_to(target), refused
+            return index, target, cell.move_to(target), refused
         except UnreachableError as exc:
             if plan is None:
                 raise
             refused.append({"candidate": index, "reason": getattr(exc, "reason", None), "message": str(exc)})
-    return None, None, refused
+    return None, None, None, refused
 
 
 def run_scan(
@@ -170,8 +178,10 @@ def run_scan(
     """Run Algorithm 1 until the planner's termination rule or no eligible view is left.
 
     A view the cell refuses never ends the scan: the next best eligible view is taken and the refusal recorded
-    (``IterationRecord.refused_moves``, ``ScanResult.refused_moves``); only "every eligible view refused / none
-    left" ends it (``no_eligible_view``).
+    (``IterationRecord.refused_moves``, ``ScanResult.refused_moves``); so is a view whose frame the planner
+    cannot use (reason ``empty_frame``: no return, or nothing left on the object, e.g. beyond a short-range
+    sensor's reach). Only "every eligible view refused / none left" ends it (``no_eligible_view``); an unusable
+    first frame is raised (there is no plan to go on from).
 
     A plan is made after every frame (also the last), so every iteration has
     a plan time. ``surface_samples`` (M, 3) enables coverage per iteration, ``truth`` the accuracy
@@ -184,9 +194,13 @@ def run_scan(
     terminated: str | None = None
     plan: PlanResult | None = None
     refusals: list[dict[str, Any]] = []
+    tried: set[int] = set()  # candidates of the current plan refused or unusable
+    pending: list[dict[str, Any]] = []  # the refusals since the last view taken
     while True:
-        reached, motion, refused = _move(cell, pose, plan)
+        index, reached, motion, refused = _move(cell, pose, plan, tried)
         refusals += [{"after_view": len(records), **r} for r in refused]
+        pending += refused
+        tried |= {r["candidate"] for r in refused if r["candidate"] is not None}
         if reached is None:
             terminated = "no_eligible_view"  # every eligible view was refused: recorded in refused_moves
             break
@@ -194,7 +208,17 @@ def run_scan(
         t0 = time.perf_counter()
         frame = cell.capture()
         capture_seconds = time.perf_counter() - t0
-        report = planner.integrate(frame)
+        try:
+            report = planner.integrate(frame)
+        except ValueError as exc:  # an unusable frame (state unchanged): the next eligible view of the same plan
+            if plan is None or index is None:
+                raise
+            empty = {"candidate": index, "reason": "empty_frame", "message": str(exc)}
+            refusals.append({"after_view": len(records), **empty})
+            pending.append(empty)
+            tried.add(index)
+            continue
+        refused, pending, tried = pending, [], set()
         plan = plan_in(cell, planner)
         cov = coverage(surface_samples, planner.cloud) if surface_samples is not None else None
         record = make_record(report, plan, voxel_counts(planner), cov)

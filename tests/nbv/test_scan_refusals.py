@@ -52,3 +52,28 @@ def test_only_every_eligible_view_refused_ends_the_scan() -> None:
     assert len(result.records) == 2
     assert len(result.refused_moves) == eligible[0] > 1  # every eligible view was tried, each refusal recorded
     assert all(r["after_view"] == 2 and "arm_reach" in r["message"] for r in result.refused_moves)
+
+
+def test_an_empty_frame_is_recorded_and_the_next_view_taken() -> None:
+    """A view beyond a short-range sensor's reach gives no usable frame: the scan goes on from the same plan."""
+    cell = make_sim_cell(make_builtin("l-block"), CameraConfig(), CellConfig(kinematics="reach_sphere"), seed=0)
+    far: dict[str, int] = {}
+
+    def blind_once(record: IterationRecord, plan: PlanResult) -> None:
+        if record.index == 2:  # the next capture sees nothing (a lens cap)
+            cell.camera.config = dataclasses.replace(cell.camera.config, max_depth=0.11)
+            far["best"] = plan.best_index if plan.best_index is not None else -1
+
+    real_capture = cell.camera.capture
+
+    def capture_then_restore() -> object:
+        frame = real_capture()
+        cell.camera.config = dataclasses.replace(cell.camera.config, max_depth=1.5)
+        return frame
+
+    cell.camera.capture = capture_then_restore  # type: ignore[method-assign]
+    result = run_scan(Planner(small_config(4)), cell, on_iteration=blind_once)
+    assert result.terminated == "max_views" and len(result.records) == 4
+    empty = [r for r in result.refused_moves if r["reason"] == "empty_frame"]
+    assert len(empty) == 1 and empty[0]["after_view"] == 2 and empty[0]["candidate"] == far["best"]
+    assert result.records[2].refused_moves[0]["reason"] == "empty_frame"
