@@ -8,7 +8,7 @@ import dataclasses
 from devices.builtins import make_builtin
 from devices.config import CameraConfig, CellConfig
 from devices.protocols import UnreachableError
-from devices.sim import make_sim_cell
+from devices.sim import SimulatedCamera, make_sim_cell
 from nbv.scan import IterationRecord, run_scan
 from planner import Planner, PlannerConfig, PlanResult
 
@@ -57,21 +57,23 @@ def test_only_every_eligible_view_refused_ends_the_scan() -> None:
 def test_an_empty_frame_is_recorded_and_the_next_view_taken() -> None:
     """A view beyond a short-range sensor's reach gives no usable frame: the scan goes on from the same plan."""
     cell = make_sim_cell(make_builtin("l-block"), CameraConfig(), CellConfig(kinematics="reach_sphere"), seed=0)
+    camera = cell.camera
+    assert isinstance(camera, SimulatedCamera)
     far: dict[str, int] = {}
 
     def blind_once(record: IterationRecord, plan: PlanResult) -> None:
         if record.index == 2:  # the next capture sees nothing (a lens cap)
-            cell.camera.config = dataclasses.replace(cell.camera.config, max_depth=0.11)
+            camera.config = dataclasses.replace(camera.config, max_depth=0.11)
             far["best"] = plan.best_index if plan.best_index is not None else -1
 
-    real_capture = cell.camera.capture
+    real_capture = camera.capture
 
     def capture_then_restore() -> object:
         frame = real_capture()
-        cell.camera.config = dataclasses.replace(cell.camera.config, max_depth=1.5)
+        camera.config = dataclasses.replace(camera.config, max_depth=1.5)
         return frame
 
-    cell.camera.capture = capture_then_restore  # type: ignore[method-assign]
+    camera.capture = capture_then_restore  # type: ignore[method-assign]
     result = run_scan(Planner(small_config(4)), cell, on_iteration=blind_once)
     assert result.terminated == "max_views" and len(result.records) == 4
     empty = [r for r in result.refused_moves if r["reason"] == "empty_frame"]
