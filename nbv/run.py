@@ -19,6 +19,7 @@ from rich.table import Table
 from nbv.options import planner_config_from_args
 from nbv.scan import STAGES, IterationRecord, ScanResult, run_scan
 from planner import DepthFrame, Planner, PlannerConfig, PlanResult
+from workbench.evaluation import ACCURACY_COLUMNS
 
 
 @dataclass
@@ -53,6 +54,8 @@ def simulate(
     mesh: Any = None,
     arm: str = "urdf",
     on_frame: Callable[[DepthFrame], None] | None = None,
+    sensor: str = "ideal",
+    calibration: str = "none",
 ) -> SimScan:
     """Load ``model``, build the simulated cell, run Algorithm 1, measure coverage.
 
@@ -63,11 +66,17 @@ def simulate(
     and placement (:func:`workbench.object_ceiling.object_ceiling`, independent of the run).
     ``arm``: 'urdf' (the UR5 with IK, collision checks and joint trajectories) or 'reach_sphere'
     (``CellConfig.kinematics``). ``on_frame``: hears each frame with its registered pose (``run_scan``).
+    ``sensor``, ``calibration``: the camera's sensor model and the cell's
+    calibration error by name (``CameraConfig.sensor`` / ``.calibration``); the planner's noise settings
+    follow them (``devices.planner_noise.planner_config_for``). Accuracy per view against the mesh is in
+    ``IterationRecord.accuracy``.
     """
     from devices.builtins import resolve_model
     from devices.config import CameraConfig, CellConfig
     from devices.mesh import sample_surface, turned_about_plate_axis
+    from devices.planner_noise import planner_config_for
     from devices.sim import make_sim_cell
+    from workbench.evaluation import GroundTruth
     from workbench.object_ceiling import object_ceiling
 
     if not (math.isfinite(size) and size > 0):
@@ -82,7 +91,10 @@ def simulate(
         name = model
     if yaw_deg % 360.0 != 0.0:
         mesh = turned_about_plate_axis(mesh, yaw_deg)
-    camera = CameraConfig(depth_noise_std=depth_noise, pose_noise_translation=pose_noise)
+    camera = CameraConfig(
+        depth_noise_std=depth_noise, pose_noise_translation=pose_noise, sensor=sensor, calibration=calibration
+    )
+    config = planner_config_for(config, camera)
     if arm not in ("urdf", "reach_sphere"):
         raise ValueError(f"--arm: 'urdf' or 'reach_sphere', got {arm!r}")
     cell = make_sim_cell(mesh, camera, CellConfig(kinematics=arm), seed=seed)  # type: ignore[arg-type]
@@ -96,7 +108,10 @@ def simulate(
     if console is not None:
         console.print(f"[bold]{name}[/bold]: {config.termination.max_views} views, planner {planner_name}")
         console.print(_header(), highlight=False)
-    result = run_scan(planner, cell, samples, on_iteration=show, keep_plans=keep_plans, on_frame=on_frame)
+    truth = GroundTruth.of(mesh, samples)
+    result = run_scan(
+        planner, cell, samples, on_iteration=show, keep_plans=keep_plans, on_frame=on_frame, truth=truth
+    )
     ceiling = None
     if reachable:
         t0 = time.perf_counter()
@@ -128,12 +143,33 @@ def metrics_json(scan: SimScan, planner_name: str) -> dict[str, Any]:
         "config": scan.config.to_dict(),
         "reachable_coverage": scan.reachable_coverage,
         "arm": scan.cell.config.kinematics,
+        "sensor": scan.cell.camera.config.sensor,
+        "calibration": scan.cell.camera.config.calibration,
+        "calibration_error": None if scan.cell.errors is None else scan.cell.errors.summary(),
         "iterations": [r.to_json() for r in records],
         "final_coverage": records[-1].coverage if records else 0.0,
+        **final_accuracy(records),
+        "refused_moves": scan.result.refused_moves,
+        "icp_rejected": icp_rejections(records),
         "terminated": scan.result.terminated,
         "seconds": scan.result.seconds,
         "robot_seconds": scan.result.robot_seconds,
     }
+
+
+def final_accuracy(records: list[IterationRecord]) -> dict[str, Any]:
+    """The last view's :data:`ACCURACY_COLUMNS` (None each without a ground truth)."""
+    acc = records[-1].accuracy if records else None
+    return {k: None if acc is None else acc[k] for k in ACCURACY_COLUMNS}
+
+
+def icp_rejections(records: list[IterationRecord]) -> list[dict[str, Any]]:
+    """The views whose ICP result was rejected, and why (``view``, ``reason``)."""
+    return [
+        {"view": r.index, "reason": r.registration.get("reason")}
+        for r in records
+        if r.registration is not None and not r.registration.get("accepted", True)
+    ]
 
 
 def stage_table(records: list[IterationRecord]) -> dict[str, dict[str, float]]:
@@ -229,6 +265,8 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
         console=console,
         arm=args.arm,
         on_frame=integrator.integrate,
+        sensor=args.sensor,
+        calibration=args.calibration,
     )
     doc = metrics_json(scan, args.planner)
     surface, doc["surface"] = surface_block(integrator, scan.mesh)
@@ -239,8 +277,17 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
     records = scan.result.records
     stages = stage_table(records)
     plan_s = [r.plan_seconds for r in records]
+    for rej in doc["icp_rejected"]:
+        console.print(f"ICP rejected view {rej['view']}: {rej['reason']}")
+    for ref in doc["refused_moves"]:
+        console.print(f"move refused after view {ref['after_view']} (candidate {ref['candidate']}): {ref['message']}")
     console.print(
         f"final coverage {doc['final_coverage']:.4f}"
+        + (
+            f", precision@5mm {doc['precision_5mm']:.4f}, F@5mm {doc['fscore_5mm']:.4f}"
+            if doc["precision_5mm"] is not None
+            else ""
+        )
         + (f" of reachable {scan.reachable_coverage:.4f}" if scan.reachable_coverage is not None else "")
         + _surface_summary(doc["surface"])
         + f"; median plan {statistics.median(plan_s):.3f} s, max {max(plan_s):.3f} s;"
