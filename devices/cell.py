@@ -77,6 +77,9 @@ class Motion:
     duration: float = 0.0
     path_method: str = ""
     planning_seconds: float = 0.0
+    retract: JointTrajectory | None = None
+    """URDF arm: the trajectory to the retracted configuration that runs before the plate turns, when the turn
+    would sweep the object's box into the standing arm (None: the arm stands still while the plate turns)."""
 
     @property
     def path_length(self) -> float:
@@ -93,6 +96,7 @@ class Motion:
             "move_duration": float(self.duration),
             "path_method": self.path_method or None,
             "motion_planning_seconds": float(self.planning_seconds),
+            "retracted": self.retract is not None,
         }
 
 
@@ -139,6 +143,9 @@ class Cell:
         self._arm_base = np.asarray(self.config.arm_base, dtype=np.float64)
         self.last_motion: Motion | None = None
         """The motion of the last :meth:`move_to` that started (the 3D view animates its trajectory)."""
+        self.errors: Any = None
+        """A simulated cell's calibration and motion errors (``devices.calibration_error.CellErrors``): the true
+        transforms beside the nominal ones the cell reports; None for a real cell."""
 
     # ------------------------------------------------------------------ geometry
 
@@ -192,7 +199,14 @@ class Cell:
             move = self.kinematics.plan(T_table_camera, self.arm.joint_positions(), self.turntable.angle)
             t = move.target
             return Motion(
-                t.angle, t.T_base_camera, t.q, move.trajectory, move.duration, move.path_method, move.planning_seconds
+                t.angle,
+                t.T_base_camera,
+                t.q,
+                move.trajectory,
+                move.duration,
+                move.path_method,
+                move.planning_seconds,
+                move.retract,
             )
         x, y, z = T_table_camera.translation
         cfg = self.config
@@ -309,7 +323,8 @@ class Cell:
     # ------------------------------------------------------------------ actions
 
     def move_to(self, T_table_camera: Pose) -> Motion:
-        """Turn the plate, then move the arm, so the camera is at ``T_table_camera``.
+        """Turn the plate, then move the arm, so the camera is at ``T_table_camera`` (a URDF arm retracts first
+        when the turn would sweep the object's box into it: ``Motion.retract``).
 
         Plans first: an unreachable view raises UnreachableError and moves nothing.
         A device fault (DeviceError) after the turntable moved leaves the plate at its
@@ -317,6 +332,8 @@ class Cell:
         """
         motion = self.plan_motion(T_table_camera)
         self.last_motion = motion
+        if motion.retract is not None:
+            self.arm.execute(motion.retract)
         self.turntable.rotate_to(motion.angle)
         if motion.trajectory is not None:
             self.arm.execute(motion.trajectory)

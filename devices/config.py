@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from devices.arm.config import ArmConfig
+from devices.calibration_error import calibration_named
+from devices.sensors.presets import sensor_named
 from planner.types import Intrinsics
 from planner.validate import finite, integer, require
 
@@ -33,6 +35,13 @@ class CameraConfig(Intrinsics):
     """Std of the error of the reported camera position, per axis, metres (the render uses the true pose)."""
     pose_noise_rotation_deg: float = 0.0
     """Std of the error of the reported camera orientation, per rotation-vector component, degrees."""
+    sensor: str = "ideal"
+    """The depth sensor's error model, a name of ``devices.sensors.SENSORS``: 'ideal' (exact depth, the default),
+    'realsense-d435', 'realsense-d405', 'structured-light' (docs/method.md, "Sensor models"). Its noise adds to
+    ``depth_noise_std``; its range narrows [min_depth, max_depth]."""
+    calibration: str = "none"
+    """The cell's calibration and motion error, a name of ``devices.calibration_error.CALIBRATIONS``: 'none' (the
+    default), 'typical', 'poor'. The reported pose is the nominal kinematics; the render uses the true one."""
 
     def __post_init__(self) -> None:
         for name in ("width", "height"):  # Intrinsics takes any whole number; a config refuses bools and strings
@@ -55,6 +64,11 @@ class CameraConfig(Intrinsics):
         for name in ("depth_noise_std", "pose_noise_translation", "pose_noise_rotation_deg"):
             v = getattr(self, name)
             require(finite(v) and v >= 0, f"camera.{name}: must be >= 0, got {v!r}")
+        try:
+            sensor_named(self.sensor)
+            calibration_named(self.calibration)
+        except ValueError as exc:
+            raise ValueError(f"camera.{exc}") from None
 
     @property
     def intrinsics(self) -> Intrinsics:

@@ -9,6 +9,12 @@ z-depth directly. (``RaycastingScene.create_rays_pinhole`` also scales its rays
 to z = 1, but puts pixel centres at u + 0.5, half a pixel off this convention,
 so the rays are built here.)
 
+A sensor model (``CameraConfig.sensor``, :mod:`devices.sensors`) other than 'ideal' renders with jittered rays
+(lateral noise), reads the surface normals (grazing incidence), casts a second set of rays from the other imager or
+the projector (occlusion by the second viewpoint) and applies the per-pixel effects (flying pixels, noise, holes,
+quantisation, range). A calibration model (``CameraConfig.calibration``, :mod:`devices.calibration_error`) makes the
+pose the camera renders from differ from the nominal kinematics the cell reports.
+
 Fault injection: set ``fail_next`` on any simulated device to an exception; its
 next action raises it (and clears it) without changing the state.
 """
@@ -24,9 +30,11 @@ import trimesh
 from numpy.typing import NDArray
 
 from devices.arm.sim_arm import SimulatedJointArm
+from devices.calibration_error import CellErrors, calibration_named, configuration_key
 from devices.cell import Cell, rz, wrap_angle
 from devices.config import CameraConfig, CellConfig, DeviceConfig
 from devices.protocols import CaptureError, DeviceError
+from devices.sensors import apply_effects, second_view_visible, sensor_named
 from planner.types import DepthFrame, Intrinsics, Pose
 
 
@@ -59,6 +67,7 @@ class SimulatedCamera:
         import open3d as o3d
 
         self.config = config if config is not None else CameraConfig()
+        self.sensor = sensor_named(self.config.sensor)
         self._intrinsics = self.config.intrinsics
         self.pose_source = pose_source
         self.fail_next: Exception | None = None
@@ -92,19 +101,56 @@ class SimulatedCamera:
     def intrinsics(self) -> Intrinsics:
         return self._intrinsics
 
-    def render(self, T_table_camera: Pose) -> NDArray[np.float32]:
-        """(H, W) float32 noise-free planar z-depth from ``T_table_camera``; 0 outside [min_depth, max_depth]."""
-        import open3d as o3d
-
+    def _rays(self, T_table_camera: Pose, dir_x: NDArray[np.float32], dir_y: NDArray[np.float32]) -> np.ndarray:
+        """(H*W, 6) float32 rays (origin, direction with camera-frame z = 1) in the table frame."""
         k = self._intrinsics
         rays = np.empty((k.height * k.width, 6), dtype=np.float32)
         rays[:, :3] = T_table_camera.translation.astype(np.float32)
         R = T_table_camera.rotation.astype(np.float32)
         for i in range(3):  # R @ (x, y, 1) elementwise: no BLAS threads competing with open3d's
-            rays[:, 3 + i] = self._dir_x * R[i, 0] + self._dir_y * R[i, 1] + R[i, 2]
+            rays[:, 3 + i] = dir_x * R[i, 0] + dir_y * R[i, 1] + R[i, 2]
+        return rays
+
+    def render(self, T_table_camera: Pose) -> NDArray[np.float32]:
+        """(H, W) float32 noise-free planar z-depth from ``T_table_camera``; 0 outside [min_depth, max_depth]."""
+        import open3d as o3d
+
+        k = self._intrinsics
+        rays = self._rays(T_table_camera, self._dir_x, self._dir_y)
         hits = self._scene.cast_rays(o3d.core.Tensor.from_numpy(rays.reshape(k.height, k.width, 6)))
         depth = hits["t_hit"].numpy()
         return self._cut(depth)
+
+    def render_sensor(self, T_table_camera: Pose) -> NDArray[np.float32]:
+        """(H, W) float32 depth as ``self.sensor`` measures it from ``T_table_camera`` (draws from the camera's RNG):
+        lateral ray jitter, grazing incidence, the second viewpoint's occlusion (at ``sensor.baseline`` along the
+        camera's +x), then :func:`devices.sensors.apply_effects` with ``config.depth_noise_std`` added."""
+        import open3d as o3d
+
+        k, sensor = self._intrinsics, self.sensor
+        dir_x, dir_y = self._dir_x, self._dir_y
+        if sensor.lateral_px > 0:
+            n = k.width * k.height
+            dir_x = (dir_x + self._rng.normal(0.0, sensor.lateral_px, n) / k.fx).astype(np.float32)
+            dir_y = (dir_y + self._rng.normal(0.0, sensor.lateral_px, n) / k.fy).astype(np.float32)
+        rays = self._rays(T_table_camera, dir_x, dir_y)
+        hits = self._scene.cast_rays(o3d.core.Tensor.from_numpy(rays))
+        depth = self._cut(hits["t_hit"].numpy().reshape(k.height, k.width))
+        normals = hits["primitive_normals"].numpy()
+        dirs = rays[:, 3:]
+        cos = np.abs(np.einsum("ij,ij->i", normals, dirs)) / np.linalg.norm(dirs, axis=1)
+        if sensor.baseline > 0:
+            flat = depth.reshape(-1)
+            hit = np.flatnonzero(flat > 0)
+            points = rays[hit, :3].astype(np.float64) + flat[hit, None].astype(np.float64) * dirs[hit].astype(
+                np.float64
+            )
+            origin = T_table_camera.translation + sensor.baseline * T_table_camera.rotation[:, 0]
+            flat[hit[~second_view_visible(self._scene, origin, points)]] = 0.0
+        out = apply_effects(
+            depth, cos.reshape(k.height, k.width).astype(np.float32), sensor, self.config.depth_noise_std, self._rng
+        )
+        return self._cut(out)
 
     def _cut(self, depth: NDArray[np.float32]) -> NDArray[np.float32]:
         in_range = np.isfinite(depth) & (depth >= self.config.min_depth) & (depth <= self.config.max_depth)
@@ -125,6 +171,9 @@ class SimulatedCamera:
         if self.pose_source is None:
             raise CaptureError("simulated camera: no pose source (it is not mounted in a cell)")
         pose = self.pose_source()
+        if not self.sensor.is_ideal:
+            self.captures += 1
+            return DepthFrame(self.render_sensor(pose), pose, self._intrinsics)
         depth = self.render(pose)
         if self.config.depth_noise_std > 0:
             valid = depth > 0
@@ -211,12 +260,15 @@ def make_sim_cell(
     initial view (turntable at the angle that view needs; the URDF arm at its IK solution nearest its home).
     The camera's pose source is ``Rz(-theta) @ T_base_camera`` (forward kinematics of the arm's joints for
     a URDF arm): the true camera pose in the table frame.
-    ``seed`` seeds the depth noise and (independently) the pose noise.
+    ``seed`` seeds the depth noise and (independently) the pose noise and the calibration error
+    (``camera_config.calibration``; the drawn errors are ``cell.errors``, a :class:`CellErrors`: the camera renders
+    from ``errors.true_T_table_camera(...)``, the cell reports the nominal kinematics).
     ValueError naming the field for a bad arm (unloadable URDF, missing flange frame, ...).
     """
     camera_config = camera_config if camera_config is not None else CameraConfig()
     cell_config = cell_config if cell_config is not None else CellConfig()
-    depth_seed, pose_seed = np.random.SeedSequence(seed).spawn(2)
+    depth_seed, pose_seed, error_seed = np.random.SeedSequence(seed).spawn(3)
+    errors = CellErrors(calibration_named(camera_config.calibration), int(error_seed.generate_state(1)[0]))
     turntable = SimulatedTurntable()
     kinematics = None
     arm: SimulatedArm | SimulatedJointArm
@@ -229,13 +281,20 @@ def make_sim_cell(
 
         def pose_source() -> Pose:
             assert kinematics is not None
-            return rz(-turntable.angle) @ kinematics.camera_pose(joint_arm.joint_positions())
+            q = joint_arm.joint_positions()
+            if errors.model.is_exact:
+                return rz(-turntable.angle) @ kinematics.camera_pose(q)
+            key = configuration_key(q, Pose.identity())
+            return errors.true_T_table_camera(kinematics.camera_pose(q), turntable.angle, key)
     else:
         sphere_arm = SimulatedArm()
         arm = sphere_arm
 
         def pose_source() -> Pose:
-            return rz(-turntable.angle) @ sphere_arm.pose
+            if errors.model.is_exact:
+                return rz(-turntable.angle) @ sphere_arm.pose
+            key = configuration_key(None, sphere_arm.pose)
+            return errors.true_T_table_camera(sphere_arm.pose, turntable.angle, key)
 
     camera = SimulatedCamera(
         mesh,
@@ -255,6 +314,7 @@ def make_sim_cell(
         pose_noise_rotation_deg=camera_config.pose_noise_rotation_deg,
         seed=int(pose_seed.generate_state(1)[0]),
     )
+    cell.errors = errors
     try:
         motion = cell.plan_motion(cell.initial_pose())
     except DeviceError:

@@ -186,6 +186,8 @@ def make_tasks(args: argparse.Namespace, models: Sequence[tuple[str, str, Any]] 
                             pose_noise=args.pose_noise,
                             threads=threads,
                             arm=args.arm,
+                            sensor=args.sensor,
+                            calibration=args.calibration,
                         )
                     )
     return tasks

@@ -13,7 +13,9 @@ ceilings of its (model, placement) pairs. results.csv, per iteration:
 - ``eval_seconds``: the candidate-evaluation stage alone (``timings["score"]``): for
   ``projection`` the projection of the ellipsoids, for the ray casters everything they do;
 - ``fit_seconds``: ``projection``'s clustering + ellipsoid fitting (0 for the baselines).
-  ``projection``'s full evaluation cost is eval + fit.
+  ``projection``'s full evaluation cost is eval + fit;
+- ``precision_5mm``, ``recall_5mm``, ``fscore_5mm``, the same at 2 mm, ``chamfer_mm``: the cloud's accuracy
+  after the view against the mesh (:mod:`workbench.evaluation.accuracy`; recall at 5 mm is the coverage).
 
 Plots: ``ratio.png`` (coverage / ceiling against view, one panel per model, mean over seeds and
 placements with a ± one standard deviation band), ``coverage.png`` (raw coverage, ceiling dashed),
@@ -33,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from nbv.bench_summary import run_metrics_of, summary_markdown
-from workbench.evaluation import RunOutcome
+from workbench.evaluation import ACCURACY_COLUMNS, RunOutcome
 
 COLUMNS = (
     "model",
@@ -53,6 +55,7 @@ COLUMNS = (
     "views_to_90",
     "views_to_95",
     "views_to_98",
+    *ACCURACY_COLUMNS,
 )
 """The columns of results.csv, in order."""
 

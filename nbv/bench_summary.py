@@ -56,6 +56,19 @@ METRICS: tuple[tuple[str, str, bool, float, int], ...] = (
 """(key, label, higher is better, tie tolerance, digits) of the paired comparisons."""
 
 
+FSCORE_LABEL = "F@5mm at the last view"
+"""The accuracy row of the paired comparisons (precision and recall at 5 mm: ``workbench.evaluation``)."""
+
+
+def final_fscores(outcomes: Sequence[RunOutcome], planner: str) -> dict[tuple[str, int, float], float]:
+    """(model, seed, yaw) -> F@5mm at the last view of ``planner``'s finished runs (runs without one left out)."""
+    out: dict[tuple[str, int, float], float] = {}
+    for o in outcomes:
+        if o.planner == planner and o.error is None and o.rows and o.rows[-1].get("fscore_5mm") is not None:
+            out[o.key] = float(o.rows[-1]["fscore_5mm"])
+    return out
+
+
 def _metric(m: RunMetrics, key: str) -> float:
     return {"final": m.final_ratio, "auc": m.auc, "v95": float(m.views_to[THRESHOLDS.index(0.95)])}[key]
 
@@ -119,6 +132,14 @@ def ceiling_sections(
                 continue
             body.append(
                 [p, label, str(c.n), f"{c.mean:+.{digits}f}", _interval(c, digits), f"{c.wins} / {c.ties} / {c.losses}"]
+            )
+        mine_f, ref_f = final_fscores(ok, p), final_fscores(ok, reference)
+        c = paired_comparison(mine_f, ref_f, higher_is_better=True, tie=TIE)
+        if c is None:
+            body.append([p, FSCORE_LABEL, "0", "–", "–", "–"])
+        else:
+            body.append(
+                [p, FSCORE_LABEL, str(c.n), f"{c.mean:+.4f}", _interval(c, 4), f"{c.wins} / {c.ties} / {c.losses}"]
             )
     lines += _table(head, body, left=2)
     lines += [

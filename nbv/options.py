@@ -7,6 +7,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from devices.calibration_error import CALIBRATIONS, calibration_named
+from devices.sensors.presets import SENSORS, sensor_named
 from planner.config import PlannerConfig
 
 EXIT_BAD_INPUT = 2
@@ -39,6 +41,18 @@ def add_scan_options(p: argparse.ArgumentParser, *, model_required: bool = True)
     p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
     p.add_argument("--depth-noise", type=float, default=0.0, help="std of Gaussian depth noise, m (default 0)")
     p.add_argument("--pose-noise", type=float, default=0.0, help="std of reported-pose translation noise, m")
+    p.add_argument(
+        "--sensor",
+        type=sensor_name,
+        default="ideal",
+        help=f"the depth sensor's error model: {', '.join(SENSORS)} (default ideal)",
+    )
+    p.add_argument(
+        "--calibration",
+        type=calibration_name,
+        default="none",
+        help=f"the cell's calibration and motion error: {', '.join(CALIBRATIONS)} (default none)",
+    )
     p.add_argument("--config", type=Path, default=None, help="a TOML file with planner settings")
     p.add_argument(
         "--arm",
@@ -52,6 +66,22 @@ def add_scan_options(p: argparse.ArgumentParser, *, model_required: bool = True)
         default=None,
         help="trade F against move duration (selection.move_cost_weight, default 0 = the paper's rule)",
     )
+
+
+def sensor_name(value: str) -> str:
+    """argparse type of ``--sensor``: a known name (the error lists them)."""
+    try:
+        return sensor_named(value).name
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def calibration_name(value: str) -> str:
+    """argparse type of ``--calibration``: a known name (the error lists them)."""
+    try:
+        return calibration_named(value).name
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def planner_config_from_args(args: argparse.Namespace) -> PlannerConfig:

@@ -13,7 +13,14 @@ from rich.console import Console
 from rich.table import Table
 
 from nbv.options import planner_config_from_args
-from workbench.evaluation import STAGES, IterationRecord, SimScan, simulate
+from workbench.evaluation import (
+    STAGES,
+    IterationRecord,
+    SimScan,
+    final_accuracy,
+    icp_rejections,
+    simulate,
+)
 
 
 def _header() -> str:
@@ -38,8 +45,14 @@ def metrics_json(scan: SimScan, planner_name: str) -> dict[str, Any]:
         "config": scan.config.to_dict(),
         "reachable_coverage": scan.reachable_coverage,
         "arm": scan.cell.config.kinematics,
+        "sensor": scan.cell.camera.config.sensor,
+        "calibration": scan.cell.camera.config.calibration,
+        "calibration_error": None if scan.cell.errors is None else scan.cell.errors.summary(),
         "iterations": [r.to_json() for r in records],
         "final_coverage": records[-1].coverage if records else 0.0,
+        **final_accuracy(records),
+        "refused_moves": scan.result.refused_moves,
+        "icp_rejected": icp_rejections(records),
         "terminated": scan.result.terminated,
         "seconds": scan.result.seconds,
         "robot_seconds": scan.result.robot_seconds,
@@ -107,11 +120,20 @@ def print_stage_table(console: Console, stages: dict[str, dict[str, float]]) -> 
     console.print(table)
 
 
+def _surface_summary(block: dict[str, Any]) -> str:
+    if "error" in block:
+        return f"; no surface ({block['error']})"
+    score = "" if block["fscore_5mm"] is None else f" F@5mm {block['fscore_5mm']:.4f}"
+    return f"; surface{score}, {block['triangles']} triangles, {block['seconds']:.1f} s"
+
+
 def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
     """The body of ``nbv scan`` / ``nbv profile``; returns the JSON written."""
     from devices.ply import write_ply
+    from workbench.surface import SurfaceIntegrator, export_bytes, surface_block
 
     config = planner_config_from_args(args)
+    integrator = SurfaceIntegrator()
     console = Console(highlight=False)
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
@@ -135,21 +157,38 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
         on_start=start,
         on_iteration=lambda record, plan: console.print(_row(record), highlight=False),
         arm=args.arm,
+        on_frame=integrator.integrate,
+        sensor=args.sensor,
+        calibration=args.calibration,
     )
     if scan.reachable_coverage is not None:
         console.print(f"reachable coverage {scan.reachable_coverage:.4f} ({scan.ceiling_seconds:.1f} s)")
     doc = metrics_json(scan, args.planner)
+    surface, doc["surface"] = surface_block(integrator, scan.mesh)
     (out / "metrics.json").write_text(json.dumps(doc, indent=2))
     write_ply(out / "cloud.ply", scan.planner.cloud)
+    if surface is not None:
+        (out / "surface.ply").write_bytes(export_bytes(surface, "ply"))
     records = scan.result.records
     stages = stage_table(records)
     plan_s = [r.plan_seconds for r in records]
+    for rej in doc["icp_rejected"]:
+        console.print(f"ICP rejected view {rej['view']}: {rej['reason']}")
+    for ref in doc["refused_moves"]:
+        console.print(f"move refused after view {ref['after_view']} (candidate {ref['candidate']}): {ref['message']}")
     console.print(
         f"final coverage {doc['final_coverage']:.4f}"
+        + (
+            f", precision@5mm {doc['precision_5mm']:.4f}, F@5mm {doc['fscore_5mm']:.4f}"
+            if doc["precision_5mm"] is not None
+            else ""
+        )
         + (f" of reachable {scan.reachable_coverage:.4f}" if scan.reachable_coverage is not None else "")
+        + _surface_summary(doc["surface"])
         + f"; median plan {statistics.median(plan_s):.3f} s, max {max(plan_s):.3f} s;"
         + f" robot time {scan.result.robot_seconds:.1f} s;"
         + f" stopped: {scan.result.terminated}; wrote {out}/metrics.json, {out}/cloud.ply"
+        + ("" if surface is None else f", {out}/surface.ply")
     )
     if not profile:
         return doc

@@ -288,6 +288,13 @@ class PreprocessConfig:
     (0 disables). Isolated specks go; every point of a sampled surface, its edges and thin parts stay."""
     downsample: float = 0.0025
     """Voxel down-sampling edge length for the accumulated cloud, metres (0 disables)."""
+    support_min_points: int = 0
+    """Opt-in (0 = off, the paper): drop the points of every cell of ``support_voxel`` that holds fewer than this
+    many of the frame's points, so sparse returns (a real sensor's flying pixels at depth edges, a veil in mid-air
+    that the radius filter keeps) neither grow B nor become occupied. The cell sets it for a noisy sensor
+    (``devices.planner_noise``); a surface at 0.6 m puts about 100 points in a 1 cm cell."""
+    support_voxel: float = 0.01
+    """Edge of the cells ``support_min_points`` counts in, metres (the voxel map's resolution)."""
 
     def __post_init__(self) -> None:
         for name in (
@@ -297,12 +304,21 @@ class PreprocessConfig:
             "plate_clearance",
             "outlier_radius",
             "downsample",
+            "support_voxel",
         ):
             v = getattr(self, name)
             require(finite(v) and v >= 0, f"preprocess.{name}: must be >= 0, got {v!r}")
         require(
             integer(self.outlier_min_neighbors) and self.outlier_min_neighbors >= 0,
             "preprocess.outlier_min_neighbors: must be an integer >= 0",
+        )
+        require(
+            integer(self.support_min_points) and self.support_min_points >= 0,
+            f"preprocess.support_min_points: must be an integer >= 0, got {self.support_min_points!r}",
+        )
+        require(
+            self.support_min_points == 0 or self.support_voxel > 0,
+            "preprocess.support_voxel: must be > 0 when support_min_points is set",
         )
 
 
@@ -335,6 +351,59 @@ class RegistrationConfig:
 
 
 @dataclass(frozen=True)
+class NoiseConfig:
+    """The depth sensor's noise as the planner should expect it (``planner.noise``): sets the plate band and the
+    ICP gate. The defaults (0) describe a perfect sensor and leave the paper's fixed thresholds alone; the cell
+    fills them from its sensor model (``devices.sensors.noise_config``)."""
+
+    depth_std: float = 0.0
+    """Depth noise independent of range (std), metres."""
+    depth_z2: float = 0.0
+    """Depth noise growing with range: std = depth_z2 * z**2 at planar depth z (triangulation), 1/metres."""
+    plate_sigmas: float = 3.5
+    """Points within this many noise stds (projected on the vertical) of the plate top are plate, not object."""
+    icp_sigmas: float = 3.0
+    """ICP's rmse gate is at least this many times the expected residual (sqrt(2) x the depth std at the frame's
+    median depth)."""
+    fit_plate: bool = False
+    """Fit the plate's plane in each frame (robust least squares on the points near z = 0) and measure the band
+    from it: with calibration error the plate seen through the reported pose is tilted and offset by millimetres
+    (a 0.3 degree hand-eye error lifts its rim by 1 mm). Off (the paper): the plate is z = 0."""
+    plate_fit_window: float = 0.01
+    """Points within this of z = 0 are the plate fit's candidates, metres."""
+    flying_jump: float = 0.0
+    """Opt-in (0 = off): drop the pixels at depth discontinuities, where a 4-neighbour's depth differs by more
+    than this fraction of the pixel's (a real sensor's flying pixels sit there). Their rays carve like holes."""
+    dropout_fill_px: int = 0
+    """Opt-in (0 = off, the paper: a pixel without depth is free space to the sensor's range): a pixel without
+    depth within this many pixels of one with depth is a dropout (a hole, a shadow of the second viewpoint, a
+    grazing surface), not free space: its ray is free only up to the nearest depth around it and unknown beyond.
+    Only pixels far from every return (the void around the object) stay free."""
+
+    def __post_init__(self) -> None:
+        for name in ("depth_std", "depth_z2", "plate_sigmas", "icp_sigmas", "plate_fit_window"):
+            v = getattr(self, name)
+            require(finite(v) and v >= 0, f"noise.{name}: must be >= 0, got {v!r}")
+        require(isinstance(self.fit_plate, bool), f"noise.fit_plate: must be true or false, got {self.fit_plate!r}")
+        require(finite(self.flying_jump) and self.flying_jump >= 0, "noise.flying_jump: must be >= 0")
+        require(
+            integer(self.dropout_fill_px) and 0 <= self.dropout_fill_px <= 100,
+            f"noise.dropout_fill_px: must be an integer in [0, 100], got {self.dropout_fill_px!r}",
+        )
+
+    @property
+    def exact(self) -> bool:
+        """True for a noise-free sensor whose plate is where the kinematics say (nothing to adapt)."""
+        return (
+            self.depth_std == 0
+            and self.depth_z2 == 0
+            and not self.fit_plate
+            and self.flying_jump == 0
+            and self.dropout_fill_px == 0
+        )
+
+
+@dataclass(frozen=True)
 class PlannerConfig:
     """Everything the planner needs; nested per component."""
 
@@ -348,6 +417,7 @@ class PlannerConfig:
     termination: TerminationConfig = field(default_factory=TerminationConfig)
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
     registration: RegistrationConfig = field(default_factory=RegistrationConfig)
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from planner.candidates import propose_candidates
 from planner.config import PlannerConfig
 from planner.evaluators import EvaluationContext, ViewEvaluator, make_evaluator
+from planner.noise import dropouts_filled, plate_heights, registration_for, without_flying_pixels
 from planner.partitions import (
     azimuth_of,
     default_tolerance,
@@ -112,7 +113,9 @@ class Planner:
         timings: dict[str, float] = {}
 
         t0 = time.perf_counter()
-        points, dense = preprocess_frame(frame.points_world, self.voxel_map.bbox, self.config.preprocess)
+        frame = without_flying_pixels(frame, self.config.noise.flying_jump)
+        plate = plate_heights(frame, self.config.preprocess, self.config.noise)
+        points, dense = preprocess_frame(frame.points_world, self.voxel_map.bbox, self.config.preprocess, plate)
         timings["preprocess"] = time.perf_counter() - t0
         if len(points) == 0:
             raise ValueError("empty frame: no point left on the object after cropping and plate removal")
@@ -120,7 +123,8 @@ class Planner:
         t0 = time.perf_counter()
         registration: RegistrationResult | None = None
         if self.config.registration.enabled and len(self.cloud) > 0:
-            registration = register(points, self.cloud, self.config.registration)
+            gates = registration_for(frame, self.config.registration, self.config.noise)
+            registration = register(points, self.cloud, gates)
             if registration.accepted:
                 frame = frame.with_pose(registration.correction @ frame.T_world_camera)
                 points = registration.correction.apply(points)
@@ -129,7 +133,11 @@ class Planner:
 
         t0 = time.perf_counter()
         # every point of the kept cells marks OCCUPIED (a voxel the surface only clips may hold no centroid)
-        self.voxel_map.integrate(self._plate_as_free_space(frame), dense)  # atomic: raises before changing anything
+        if self.config.noise.dropout_fill_px > 0:  # dropouts are unknown, not free; the plate's pixels stay free
+            carve = self._plate_as_free_space(dropouts_filled(frame, self.config.noise.dropout_fill_px))
+        else:
+            carve = self._plate_as_free_space(frame, plate)
+        self.voxel_map.integrate(carve, dense)  # atomic: raises before changing anything
         timings["integrate"] = time.perf_counter() - t0
 
         merged = np.concatenate([self.cloud, points]) if len(self.cloud) else points
@@ -153,18 +161,21 @@ class Planner:
             timings=timings,
         )
 
-    def _plate_as_free_space(self, frame: DepthFrame) -> DepthFrame:
+    def _plate_as_free_space(self, frame: DepthFrame, plate: NDArray[np.float64] | None = None) -> DepthFrame:
         """The frame as the voxel map should carve it: pixels that hit the plate count as "no return".
 
         The plate is known geometry, not object: a ray that ends on it crossed free space all the way
-        down, and everything under the plate is below B's floor. Without this, the voxels where such
+        down, and everything under the plate is below B's floor. plate: (N,) the band of each point of
+        ``frame.points_world`` (:func:`planner.noise.plate_heights`; None: computed here). Without this, the voxels where such
         rays end (the layer resting on the plate) become UNKNOWN, and those next to the object's base
         stay FRONTIER for ever: no view can ever clear them, and the planner keeps looking at them.
         """
         if not self.config.voxel.floor:
             return frame
+        if plate is None:
+            plate = plate_heights(frame, self.config.preprocess, self.config.noise)
         v, u = np.nonzero(frame.depth > 0)  # the order of frame.points_world
-        on_plate = frame.points_world[:, 2] < self.config.voxel.floor_height + self.config.preprocess.plate_clearance
+        on_plate = frame.points_world[:, 2] < self.config.voxel.floor_height + plate
         if not np.any(on_plate):
             return frame
         depth = frame.depth.copy()

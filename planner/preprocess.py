@@ -49,14 +49,21 @@ def preprocess(points_world: ArrayLike, bbox: BoundingBox | None, config: Prepro
     return preprocess_frame(points_world, bbox, config).points
 
 
-def preprocess_frame(points_world: ArrayLike, bbox: BoundingBox | None, config: PreprocessConfig) -> Preprocessed:
+def preprocess_frame(
+    points_world: ArrayLike,
+    bbox: BoundingBox | None,
+    config: PreprocessConfig,
+    plate_heights: ArrayLike | None = None,
+) -> Preprocessed:
     """The points of one frame that belong to the object.
 
     points_world: (N, 3) float64, finite (else ValueError).
     bbox: B; points farther than ``config.crop_margin`` outside it are dropped.
     None (first frame): keep points within ``workspace_radius`` of the turntable
     axis and below ``workspace_height``.
-    Points below ``plate_clearance`` (the plate) are always dropped. What is left is
+    With ``support_min_points`` set, points in sparsely filled cells (:func:`supported`) go next.
+    Points below ``plate_clearance`` (the plate) are always dropped; ``plate_heights`` (N,), when given, is each
+    point's own band (``planner.noise.plate_heights``: it follows the sensor's noise). What is left is
     down-sampled to ``config.downsample`` cells (centroids) *before* the radius
     outlier removal (``outlier_radius``, ``outlier_min_neighbors``): the same cloud the
     accumulated one would keep, at a fraction of the neighbour-search cost. A cell's
@@ -68,8 +75,13 @@ def preprocess_frame(points_world: ArrayLike, bbox: BoundingBox | None, config: 
     else:
         r2 = p[:, 0] ** 2 + p[:, 1] ** 2
         keep = (r2 <= config.workspace_radius**2) & (p[:, 2] <= config.workspace_height)
-    keep &= p[:, 2] >= config.plate_clearance
+    if plate_heights is None:
+        keep &= p[:, 2] >= config.plate_clearance
+    else:
+        keep &= p[:, 2] >= checked_array("plate_heights", plate_heights, (len(p),))
     dense = p[keep]  # float64, a new (writable) array
+    if config.support_min_points > 0 and len(dense):
+        dense = dense[supported(dense, config.support_voxel, config.support_min_points)]
     if config.downsample > 0 and len(dense):
         points, cell = _downsample(dense, config.downsample)
     else:
@@ -78,6 +90,16 @@ def preprocess_frame(points_world: ArrayLike, bbox: BoundingBox | None, config: 
         kept = radius_inliers(points, config.outlier_radius, config.outlier_min_neighbors)
         points, dense = points[kept], dense[kept[cell]]
     return Preprocessed(np.array(points, dtype=np.float64), dense)
+
+
+def supported(points: NDArray[np.float64], size: float, min_points: int) -> NDArray[np.bool_]:
+    """(N,) bool: True where the lattice cell of edge ``size`` (``floor(p / size)``) holding each of ``points``
+    (N, 3) holds at least ``min_points`` of them."""
+    if len(points) == 0:
+        return np.zeros(0, dtype=bool)
+    keys = np.floor(points / size).astype(np.int64)
+    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    return counts[inverse.ravel()] >= min_points
 
 
 def remove_radius_outliers(points: ArrayLike, radius: float, min_neighbors: int) -> NDArray[np.float64]:

@@ -129,7 +129,7 @@ def test_the_check_counts_type_checking_imports(tmp_path: Path) -> None:
     assert imports_of("workbench.b", known["workbench.b"], known) == {"workbench.a"}
 
 
-PUBLIC_PACKAGES = ("workbench", "workbench.evaluation", "workbench.journal")
+PUBLIC_PACKAGES = ("workbench", "workbench.evaluation", "workbench.journal", "workbench.surface")
 """The workbench packages whose ``__all__`` is an API for app/, nbv/ and benchmarks/."""
 
 

@@ -39,7 +39,9 @@ class ArmMove:
 
     target: plate angle, joint target q (n,), ``T_base_camera``. trajectory: the arm's joint trajectory (it runs
     after the plate has turned). turn_seconds: the plate's turn. path_method: 'straight' or 'rrt_connect'.
-    planning_seconds: time spent choosing the target and planning the path.
+    planning_seconds: time spent choosing the target and planning the path. retract: when the turn would sweep
+    the object's box into the standing arm, the trajectory to the retracted (home) configuration that runs
+    before the turn (the main trajectory then starts there); None otherwise.
     """
 
     target: ArmTarget
@@ -47,11 +49,13 @@ class ArmMove:
     turn_seconds: float
     path_method: str
     planning_seconds: float
+    retract: JointTrajectory | None = None
 
     @property
     def duration(self) -> float:
-        """Seconds of the whole move: the plate's turn, then the arm's trajectory."""
-        return self.turn_seconds + self.trajectory.duration
+        """Seconds of the whole move: the retract (if any), the plate's turn, then the arm's trajectory."""
+        before = self.retract.duration if self.retract is not None else 0.0
+        return before + self.turn_seconds + self.trajectory.duration
 
 
 class ArmKinematics:
@@ -69,6 +73,7 @@ class ArmKinematics:
         home = np.radians(config.home_deg) if len(config.home_deg) == self.model.nq else np.zeros(self.model.nq)
         self.home: NDArray[np.float64] = np.clip(home, self.model.lower, self.model.upper)
         self.reach = ArmReach(self.model, self.world, self.home)
+        self._turn_hits: dict[tuple[bytes, float], str | None] = {}
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -81,10 +86,48 @@ class ArmKinematics:
     def set_object_box(self, lower_table: NDArray[np.float64] | None, upper_table: NDArray[np.float64] | None) -> None:
         """The object's box (table frame, (3,) corners) the arm must keep clear of; None = no object model yet."""
         self.world.set_object_box(lower_table, upper_table)
+        self._turn_hits.clear()
+
+    def turn_collision(self, q: NDArray[np.float64], angle: float, turn: float) -> str | None:
+        """The first collision of the arm standing at (n,) ``q`` while the plate turns from ``angle`` by ``turn``
+        radians (the object's box turning with it), or None. Checked on a fixed grid of plate angles
+        (``TURN_CHECKS_PER_RADIAN``) plus the end, cached per configuration: the planner's reachability of 400
+        views and the move ask the same question with the same answer."""
+        q = np.asarray(q, dtype=np.float64)
+        step = 1.0 / TURN_CHECKS_PER_RADIAN
+        n = math.floor(abs(turn) / step)
+        offsets = [math.copysign(k * step, turn) for k in range(n + 1)] + [turn]
+        for offset in offsets:
+            key = (q.tobytes(), round(angle + offset, 9))
+            if key not in self._turn_hits:
+                if len(self._turn_hits) >= 100_000:
+                    self._turn_hits.clear()
+                self._turn_hits[key] = self.world.collision(q, angle + offset)
+            hit = self._turn_hits[key]
+            if hit is not None:
+                return hit
+        return None
+
+    def turn_blocked(self, q: NDArray[np.float64], angle: float, target_angle: float) -> str | None:
+        """Why the plate cannot turn from ``angle`` to ``target_angle`` even with the arm retracted to ``home``
+        first (``turn:<collision>``), or None (the turn is clear from ``q``, or from home)."""
+        turn = wrap(target_angle - angle)
+        if self.turn_collision(q, angle, turn) is None:
+            return None
+        hit = self.turn_collision(self.home, angle, turn)
+        return None if hit is None else f"turn:{hit}"
 
     def reachability(self, T_table_camera: Pose, q: NDArray[np.float64], angle: float) -> tuple[bool, str | None]:
-        """(reachable, reason) of a view from the state (q, plate angle)."""
+        """(reachable, reason) of a view from the state (q, plate angle): a free IK target at some plate angle,
+        and a plate turn to it that does not sweep the object's box into the arm (standing, or retracted)."""
         target, reason = self.reach.reachability(T_table_camera, q, angle)
+        if target is None:
+            return False, reason
+        if self.turn_blocked(q, angle, target.angle) is None:
+            return True, None
+        target, reason = self.reach.best_target(  # another plate angle may turn clear
+            T_table_camera, q, angle, lambda a: self.turn_blocked(q, angle, a)
+        )
         return target is not None, reason
 
     def violations(self, q: NDArray[np.float64], angle: float) -> str | None:
@@ -110,19 +153,30 @@ class ArmKinematics:
         shortest move and its trajectory. UnreachableError(reason) when there is none."""
         t0 = time.perf_counter()
         q = np.asarray(q, dtype=np.float64)
-        target, reason = self.reach.best_target(T_table_camera, q, angle)
+        target, reason = self.reach.best_target(T_table_camera, q, angle, lambda a: self.turn_blocked(q, angle, a))
         if target is None:
             raise UnreachableError(f"unreachable: {reason}", reason=reason or "no_ik")
         target = self._refined(T_table_camera, target)
         turn = wrap(target.angle - angle)
-        for s in np.linspace(0.0, 1.0, max(2, math.ceil(abs(turn) * TURN_CHECKS_PER_RADIAN) + 1)):
-            hit = self.world.collision(q, angle + s * turn)
-            if hit is not None:
-                raise UnreachableError(f"unreachable: {hit} while the plate turns", reason=hit)
+        retract = None
+        start = q
+        hit = self.turn_collision(q, angle, turn)
+        if hit is not None:  # what a real cell does: retract the arm, turn, then go to the view
+            home_hit = self.turn_collision(self.home, angle, turn)
+            if home_hit is not None:
+                raise UnreachableError(
+                    f"unreachable: {hit} while the plate turns, and {home_hit} with the arm retracted",
+                    reason=f"turn:{home_hit}",
+                )
+            try:
+                back = plan_path(self.world, q, self.home, angle)
+            except NoPathError as exc:
+                raise UnreachableError(f"unreachable: retract before the turn: {exc}", reason="no_path") from None
+            retract, start = time_path(self.model, back.waypoints), self.home
         try:
-            path = plan_path(self.world, q, target.q, target.angle)
+            path = plan_path(self.world, start, target.q, target.angle)
         except NoPathError as exc:
             raise UnreachableError(f"unreachable: {exc}", reason="no_path") from None
         trajectory = time_path(self.model, path.waypoints)
         turn_seconds = abs(turn) / math.radians(self.config.turntable_speed_deg)
-        return ArmMove(target, trajectory, turn_seconds, path.method, time.perf_counter() - t0)
+        return ArmMove(target, trajectory, turn_seconds, path.method, time.perf_counter() - t0, retract)

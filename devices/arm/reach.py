@@ -19,7 +19,7 @@ change).
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,7 +68,15 @@ class ArmTarget:
 
 
 def _severity(reason: str) -> int:
-    return 2 if reason.startswith("collision") else 1 if reason == "joint_limit" else 0
+    return (
+        3
+        if reason.startswith("turn:")
+        else 2
+        if reason.startswith("collision")
+        else 1
+        if reason == "joint_limit"
+        else 0
+    )
 
 
 class ArmReach:
@@ -219,13 +227,22 @@ class ArmReach:
         return None, worst
 
     def best_target(
-        self, T_table_camera: Pose, q_current: NDArray[np.float64], angle_current: float
+        self,
+        T_table_camera: Pose,
+        q_current: NDArray[np.float64],
+        angle_current: float,
+        turn_check: Callable[[float], str | None] | None = None,
     ) -> tuple[ArmTarget | None, str | None]:
-        """Among every plate angle and IK branch, the free target with the shortest estimated move."""
+        """Among every plate angle and IK branch, the free target with the shortest estimated move.
+        turn_check: plate angle -> why the plate cannot turn there (None: it can); angles it refuses are skipped."""
         best: ArmTarget | None = None
         worst = "no_ik"
         for angle in self.plate_angles(T_table_camera, angle_current):
             target, reason = self._try(T_table_camera, angle, q_current, angle_current, first=False)
+            if target is not None and turn_check is not None:
+                blocked = turn_check(target.angle)
+                if blocked is not None:
+                    target, reason = None, blocked
             if target is None:
                 assert reason is not None
                 if _severity(reason) > _severity(worst):

@@ -117,7 +117,7 @@ def test_rays_ending_on_the_plate_carve_free_space(monkeypatch: pytest.MonkeyPat
         return int(np.count_nonzero(p.voxel_map.centers(VoxelClass.FRONTIER)[:, 2] < 0.01))
 
     ours = bottom_frontier(planner)
-    monkeypatch.setattr(Planner, "_plate_as_free_space", lambda self, f: f)
+    monkeypatch.setattr(Planner, "_plate_as_free_space", lambda self, f, plate=None: f)
     literal = bottom_frontier(Planner(cfg))
     assert literal >= 20  # plate hits taken literally: a ring of frontier on the plate that no view clears
     assert ours <= literal // 4

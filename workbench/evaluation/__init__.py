@@ -1,5 +1,6 @@
 """How good a scan is, measured against a ground truth, and the headless scan the bench and ``nbv scan`` run.
 
+- accuracy.py: GroundTruth, Accuracy, accuracy: precision, recall and F at 2 and 5 mm, distances, chamfer;
 - coverage.py: ground-truth coverage (the fraction of surface samples a cloud point is near);
 - curves.py: coverage against the ceiling per view, its area, views-to-X, means and paired comparisons;
 - ceiling.py: the reachable-coverage ceiling by visibility (one occlusion ray per sample and view) and by
@@ -12,6 +13,7 @@
 - executors.py: running many of them, in local processes (forkserver) or on a Dask cluster.
 """
 
+from workbench.evaluation.accuracy import ACCURACY_COLUMNS, TAUS_MM, Accuracy, GroundTruth, accuracy, fscore
 from workbench.evaluation.ceiling import DEFAULT_CEILING, CeilingConfig
 from workbench.evaluation.coverage import coverage
 from workbench.evaluation.curves import (
@@ -28,16 +30,29 @@ from workbench.evaluation.curves import (
 from workbench.evaluation.executors import execute, one_line, run_dask, run_local
 from workbench.evaluation.object_ceiling import Ceiling, cached_ceiling, ceiling_mask, object_ceiling, reference_mask
 from workbench.evaluation.runs import MeshPayload, RunOutcome, RunTask
-from workbench.evaluation.scan import PLAN_STAGES, STAGES, IterationRecord, ScanResult, make_record, run_scan
+from workbench.evaluation.scan import (
+    PLAN_STAGES,
+    STAGES,
+    IterationRecord,
+    ScanResult,
+    final_accuracy,
+    icp_rejections,
+    make_record,
+    run_scan,
+)
 from workbench.evaluation.simulate import SimScan, simulate
 
 __all__ = [
+    "ACCURACY_COLUMNS",
     "DEFAULT_CEILING",
     "PLAN_STAGES",
     "STAGES",
+    "TAUS_MM",
     "THRESHOLDS",
+    "Accuracy",
     "Ceiling",
     "CeilingConfig",
+    "GroundTruth",
     "IterationRecord",
     "MeshPayload",
     "Paired",
@@ -46,11 +61,15 @@ __all__ = [
     "RunTask",
     "ScanResult",
     "SimScan",
+    "accuracy",
     "area_under_curve",
     "cached_ceiling",
     "ceiling_mask",
     "coverage",
     "execute",
+    "final_accuracy",
+    "fscore",
+    "icp_rejections",
     "make_record",
     "mean_std",
     "object_ceiling",

@@ -66,7 +66,9 @@ def execute(task: RunTask, mesh: MeshPayload | None = None) -> RunOutcome:
 
 
 def _execute(task: RunTask, mesh: MeshPayload | None, t0: float) -> RunOutcome:
-    from workbench.evaluation import simulate
+    from workbench.evaluation.accuracy import ACCURACY_COLUMNS
+    from workbench.evaluation.scan import icp_rejections
+    from workbench.evaluation.simulate import simulate
 
     scan = simulate(
         task.model if mesh is None else task.label,
@@ -81,8 +83,12 @@ def _execute(task: RunTask, mesh: MeshPayload | None, t0: float) -> RunOutcome:
         reachable=False,
         arm=task.arm,
         mesh=None if mesh is None else mesh.to_trimesh(),
+        sensor=task.sensor,
+        calibration=task.calibration,
     )
     outcome = RunOutcome(task.label, task.planner, task.seed, task.yaw_deg, terminated=scan.result.terminated)
+    outcome.refused_moves = scan.result.refused_moves
+    outcome.icp_rejected = icp_rejections(scan.result.records)
     for r in scan.result.records:
         outcome.rows.append(
             {
@@ -97,6 +103,7 @@ def _execute(task: RunTask, mesh: MeshPayload | None, t0: float) -> RunOutcome:
                 "eval_seconds": r.timings.get("score", 0.0),
                 "fit_seconds": r.timings.get("cluster", 0.0) + r.timings.get("ellipsoids", 0.0),
                 "robot_seconds": r.robot_seconds,
+                **{k: None if r.accuracy is None else r.accuracy[k] for k in ACCURACY_COLUMNS},
             }
         )
         outcome.poses.append(r.pose.to_dict())

@@ -69,6 +69,10 @@ class RunTask:
     """BLAS/OpenMP threads of the worker (None: library default)."""
     arm: str = "urdf"
     """The cell's arm (``--arm``): 'urdf' (the UR5) or 'reach_sphere'."""
+    sensor: str = "ideal"
+    """The depth sensor's model (``--sensor``)."""
+    calibration: str = "none"
+    """The cell's calibration error (``--calibration``)."""
 
 
 @dataclass
@@ -86,6 +90,8 @@ class RunOutcome:
     terminated: str | None = None
     seconds: float = 0.0
     error: str | None = None
+    refused_moves: list[dict[str, Any]] = field(default_factory=list)
+    icp_rejected: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def key(self) -> tuple[str, int, float]:
@@ -107,5 +113,7 @@ class RunOutcome:
             "terminated": self.terminated,
             "seconds": self.seconds,
             "error": self.error,
+            "refused_moves": self.refused_moves,
+            "icp_rejected": self.icp_rejected,
             "poses": self.poses,
         }

@@ -14,8 +14,9 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from planner import Planner, PlanResult, Pose
+from planner import DepthFrame, Planner, PlanResult, Pose
 from planner.planner import IntegrationReport
+from workbench.evaluation.accuracy import ACCURACY_COLUMNS, GroundTruth, accuracy
 from workbench.evaluation.coverage import coverage
 from workbench.planning import plan_in
 from workbench.session.summaries import voxel_counts
@@ -48,6 +49,11 @@ class IterationRecord:
     move duration (None when the cell reports no motion)."""
     capture_seconds: float = 0.0
     """Wall time of the capture of this view."""
+    refused_moves: list[dict[str, Any]] = field(default_factory=list)
+    """Views the cell refused before it reached this one (``candidate`` index, ``reason``, ``message``)."""
+    accuracy: dict[str, Any] | None = None
+    """The cloud's precision / recall / F at 2 and 5 mm, distances and chamfer after this view
+    (``workbench.evaluation.Accuracy.to_json``; None without a ground truth)."""
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -66,6 +72,8 @@ class IterationRecord:
             "bic": {k: [[t, b] for t, b in v] for k, v in self.bic.items()},
             "move": self.move,
             "capture_seconds": self.capture_seconds,
+            "refused_moves": self.refused_moves,
+            "accuracy": self.accuracy,
         }
 
     @property
@@ -119,6 +127,8 @@ class ScanResult:
     plans: list[PlanResult]
     terminated: str | None
     seconds: float
+    refused_moves: list[dict[str, Any]] = field(default_factory=list)
+    """Every move the cell refused, with ``after_view`` (the views taken when it was asked) and the reason."""
 
     @property
     def robot_seconds(self) -> float:
@@ -126,27 +136,34 @@ class ScanResult:
         return float(sum(r.robot_seconds for r in self.records))
 
 
-MAX_MOVE_ATTEMPTS = 5
-"""A chosen view whose motion cannot be planned (``no_path``) gives way to the next best eligible view,
-at most this many times per iteration."""
-
-
-def _move(cell: Any, pose: Pose, plan: PlanResult | None) -> tuple[Pose, Any]:
-    """Move to ``pose``; if the cell refuses it (UnreachableError: e.g. no collision-free path), try the next
-    best eligible candidates of ``plan``. Returns (the pose reached, the cell's Motion or None)."""
+def _move(
+    cell: Any, pose: Pose, plan: PlanResult | None, skip: set[int]
+) -> tuple[int | None, Pose | None, Any, list[dict[str, Any]]]:
+    """Move to ``pose`` (``plan``'s best view, or the first view without a plan); while the cell refuses
+    (UnreachableError: e.g. no collision-free path), try the next best eligible candidate of ``plan``, every one
+    in turn, leaving out the candidates in ``skip`` (tried already). Returns (the candidate index reached or
+    None, the pose reached or None when every eligible view was refused, the cell's Motion or None, the
+    refusals: ``candidate`` index, ``reason``, ``message``). Without a plan (the first view) a refusal is raised:
+    there is nothing else to try."""
     from devices.protocols import UnreachableError
 
-    tries = [pose]
-    if plan is not None:
-        ranked = sorted((s for s in plan.scores if s.eligible and s.index != plan.best_index), key=lambda s: -s.score)
-        tries += [plan.candidates[s.index].T_world_camera for s in ranked[: MAX_MOVE_ATTEMPTS - 1]]
-    for i, target in enumerate(tries):
+    tries: list[tuple[int | None, Pose]] = []
+    if plan is None:
+        tries.append((None, pose))
+    else:
+        ranked = sorted((s for s in plan.scores if s.eligible and s.index not in skip), key=lambda s: -s.score)
+        best = [s for s in ranked if s.index == plan.best_index]
+        ranked = best + [s for s in ranked if s.index != plan.best_index]
+        tries += [(s.index, plan.candidates[s.index].T_world_camera) for s in ranked]
+    refused: list[dict[str, Any]] = []
+    for index, target in tries:
         try:
-            return target, cell.move_to(target)
-        except UnreachableError:
-            if i == len(tries) - 1:
+            return index, target, cell.move_to(target), refused
+        except UnreachableError as exc:
+            if plan is None:
                 raise
-    raise AssertionError("unreachable")  # pragma: no cover
+            refused.append({"candidate": index, "reason": getattr(exc, "reason", None), "message": str(exc)})
+    return None, None, None, refused
 
 
 def run_scan(
@@ -156,11 +173,21 @@ def run_scan(
     on_iteration: Callable[[IterationRecord, PlanResult], None] | None = None,
     keep_plans: bool = False,
     first_pose: Pose | None = None,
+    on_frame: Callable[[DepthFrame], None] | None = None,
+    truth: GroundTruth | None = None,
 ) -> ScanResult:
     """Run Algorithm 1 until the planner's termination rule or no eligible view is left.
 
+    A view the cell refuses never ends the scan: the next best eligible view is taken and the refusal recorded
+    (``IterationRecord.refused_moves``, ``ScanResult.refused_moves``); so is a view whose frame the planner
+    cannot use (reason ``empty_frame``: no return, or nothing left on the object, e.g. beyond a short-range
+    sensor's reach). Only "every eligible view refused / none left" ends it (``no_eligible_view``); an unusable
+    first frame is raised (there is no plan to go on from).
+
     A plan is made after every frame (also the last), so every iteration has
-    a plan time. ``surface_samples`` (M, 3) enables coverage per iteration.
+    a plan time. ``surface_samples`` (M, 3) enables coverage per iteration, ``truth`` the accuracy
+    (precision, recall, F, chamfer: ``IterationRecord.accuracy``). ``on_frame`` hears each integrated frame
+    with its registered pose (e.g. a surface integrator), before the plan.
     """
     t_start = time.perf_counter()
     pose = first_pose if first_pose is not None else cell.initial_pose()
@@ -168,16 +195,41 @@ def run_scan(
     plans: list[PlanResult] = []
     terminated: str | None = None
     plan: PlanResult | None = None
+    refusals: list[dict[str, Any]] = []
+    tried: set[int] = set()  # candidates of the current plan refused or unusable
+    pending: list[dict[str, Any]] = []  # the refusals since the last view taken
     while True:
-        pose, motion = _move(cell, pose, plan)
+        index, reached, motion, refused = _move(cell, pose, plan, tried)
+        refusals += [{"after_view": len(records), **r} for r in refused]
+        pending += refused
+        tried |= {r["candidate"] for r in refused if r["candidate"] is not None}
+        if reached is None:
+            terminated = "no_eligible_view"  # every eligible view was refused: recorded in refused_moves
+            break
+        pose = reached
         t0 = time.perf_counter()
         frame = cell.capture()
         capture_seconds = time.perf_counter() - t0
-        report = planner.integrate(frame)
+        try:
+            report = planner.integrate(frame)
+        except ValueError as exc:  # an unusable frame (state unchanged): the next eligible view of the same plan
+            if plan is None or index is None:
+                raise
+            empty = {"candidate": index, "reason": "empty_frame", "message": str(exc)}
+            refusals.append({"after_view": len(records), **empty})
+            pending.append(empty)
+            tried.add(index)
+            continue
+        refused, pending, tried = pending, [], set()
+        if on_frame is not None:
+            on_frame(frame.with_pose(report.T_world_camera))
         plan = plan_in(cell, planner)
         cov = coverage(surface_samples, planner.cloud) if surface_samples is not None else None
         record = make_record(report, plan, voxel_counts(planner), cov)
         record.capture_seconds = capture_seconds
+        record.refused_moves = refused
+        if truth is not None:
+            record.accuracy = accuracy(truth, planner.cloud).to_json()
         to_json = getattr(motion, "to_json", None)
         record.move = cast(dict[str, Any], to_json()) if callable(to_json) else None
         records.append(record)
@@ -192,4 +244,19 @@ def run_scan(
             terminated = "no_eligible_view"
             break
         pose = plan.best.T_world_camera
-    return ScanResult(records, plans, terminated, time.perf_counter() - t_start)
+    return ScanResult(records, plans, terminated, time.perf_counter() - t_start, refusals)
+
+
+def final_accuracy(records: list[IterationRecord]) -> dict[str, Any]:
+    """The last view's :data:`ACCURACY_COLUMNS` (None each without a ground truth)."""
+    acc = records[-1].accuracy if records else None
+    return {k: None if acc is None else acc[k] for k in ACCURACY_COLUMNS}
+
+
+def icp_rejections(records: list[IterationRecord]) -> list[dict[str, Any]]:
+    """The views whose ICP result was rejected, and why (``view``, ``reason``)."""
+    return [
+        {"view": r.index, "reason": r.registration.get("reason")}
+        for r in records
+        if r.registration is not None and not r.registration.get("accepted", True)
+    ]

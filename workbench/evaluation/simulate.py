@@ -12,7 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from planner import Planner, PlannerConfig, PlanResult
+from planner import DepthFrame, Planner, PlannerConfig, PlanResult
+from workbench.evaluation.accuracy import GroundTruth
 from workbench.evaluation.scan import IterationRecord, ScanResult, run_scan
 
 
@@ -27,6 +28,8 @@ class SimScan:
     reachable_coverage: float | None
     surface_samples: np.ndarray
     cell: Any
+    mesh: Any = None
+    """The placed (and turned) ground-truth mesh in the table frame."""
     ceiling_seconds: float = 0.0
     """How long the reachable-coverage ceiling took (0 when not computed)."""
 
@@ -48,6 +51,9 @@ def simulate(
     on_iteration: Callable[[IterationRecord, PlanResult], None] | None = None,
     mesh: Any = None,
     arm: str = "urdf",
+    on_frame: Callable[[DepthFrame], None] | None = None,
+    sensor: str = "ideal",
+    calibration: str = "none",
 ) -> SimScan:
     """Load ``model``, build the simulated cell, run Algorithm 1, measure coverage.
 
@@ -58,11 +64,16 @@ def simulate(
     and placement (:func:`workbench.evaluation.object_ceiling.object_ceiling`, independent of the run).
     ``on_start``: told the model's display name before the scan; ``on_iteration``: called after every
     iteration with its record and plan. ``arm``: 'urdf' (the UR5 with IK, collision checks and joint trajectories) or 'reach_sphere'
-    (``CellConfig.kinematics``).
+    (``CellConfig.kinematics``). ``on_frame``: hears each frame with its registered pose (``run_scan``).
+    ``sensor``, ``calibration``: the camera's sensor model and the cell's calibration error by name
+    (``CameraConfig.sensor`` / ``.calibration``); the planner's noise settings follow them
+    (``devices.planner_noise.planner_config_for``). Accuracy per view against the mesh is in
+    ``IterationRecord.accuracy``.
     """
     from devices.builtins import resolve_model
     from devices.config import CameraConfig, CellConfig
     from devices.mesh import sample_surface, turned_about_plate_axis
+    from devices.planner_noise import planner_config_for
     from devices.sim import make_sim_cell
     from workbench.evaluation.object_ceiling import object_ceiling
 
@@ -78,7 +89,10 @@ def simulate(
         name = model
     if yaw_deg % 360.0 != 0.0:
         mesh = turned_about_plate_axis(mesh, yaw_deg)
-    camera = CameraConfig(depth_noise_std=depth_noise, pose_noise_translation=pose_noise)
+    camera = CameraConfig(
+        depth_noise_std=depth_noise, pose_noise_translation=pose_noise, sensor=sensor, calibration=calibration
+    )
+    config = planner_config_for(config, camera)
     if arm not in ("urdf", "reach_sphere"):
         raise ValueError(f"--arm: 'urdf' or 'reach_sphere', got {arm!r}")
     cell = make_sim_cell(mesh, camera, CellConfig(kinematics=arm), seed=seed)  # type: ignore[arg-type]
@@ -87,10 +101,13 @@ def simulate(
 
     if on_start is not None:
         on_start(name)
-    result = run_scan(planner, cell, samples, on_iteration=on_iteration, keep_plans=keep_plans)
+    truth = GroundTruth.of(mesh, samples)
+    result = run_scan(
+        planner, cell, samples, on_iteration=on_iteration, keep_plans=keep_plans, on_frame=on_frame, truth=truth
+    )
     ceiling, ceiling_seconds = None, 0.0
     if reachable:
         t0 = time.perf_counter()
         ceiling = object_ceiling(mesh, cell, CameraConfig(), config).coverage
         ceiling_seconds = time.perf_counter() - t0
-    return SimScan(name, config, result, planner, ceiling, samples, cell, ceiling_seconds)
+    return SimScan(name, config, result, planner, ceiling, samples, cell, mesh, ceiling_seconds)

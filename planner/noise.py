@@ -1,0 +1,126 @@
+"""What the sensor's depth noise means for the planner's thresholds (pure numpy).
+
+A perfect sensor needs none of this (``NoiseConfig`` at its defaults leaves every threshold as the paper's). A
+noisy one scatters the plate's points above its top: a fixed 2 mm band keeps a quarter of a 2 mm-noise frame as
+"object", and B grows to the plate's extent. The band here follows the noise at each point's range, projected on
+the vertical; ICP's rmse gate follows the noise at the frame's median range.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.config import NoiseConfig, PreprocessConfig, RegistrationConfig
+from planner.types import DepthFrame
+
+
+def depth_std(depth: NDArray[np.floating], noise: NoiseConfig) -> NDArray[np.float64]:
+    """(N,) std of the depth error at planar depths ``depth`` (N,), metres."""
+    z = np.asarray(depth, dtype=np.float64)
+    return np.sqrt(noise.depth_std**2 + (noise.depth_z2 * z * z) ** 2)
+
+
+MAX_PLATE_TILT = math.radians(3.0)
+"""A fitted plate plane steeper than this (or offset by more than the fit window) is not believed: z = 0 is used."""
+MIN_PLATE_POINTS = 200
+"""Fewer plate candidates than this: no fit, z = 0."""
+
+
+def fit_plate(points_world: NDArray[np.float64], window: float, workspace_radius: float) -> NDArray[np.float64]:
+    """(3,) (a, b, c) of the plate plane ``z = a x + b y + c`` seen in one frame: a least-squares fit to the
+    points within ``window`` of z = 0 and ``workspace_radius`` of the axis, refitted three times to those within
+    3 robust stds (1.4826 MAD, at least 0.5 mm) of the plane (the object's foot and the plate's rim drop out).
+    (0, 0, 0) when there are too few points or the plane is implausible."""
+    p = points_world
+    near = (np.abs(p[:, 2]) <= window) & (p[:, 0] ** 2 + p[:, 1] ** 2 <= workspace_radius**2)
+    q = p[near]
+    zero = np.zeros(3)
+    if len(q) < MIN_PLATE_POINTS:
+        return zero
+    coef = zero
+    keep = np.ones(len(q), dtype=bool)
+    A = np.column_stack([q[:, 0], q[:, 1], np.ones(len(q))])
+    for _ in range(4):
+        if np.count_nonzero(keep) < MIN_PLATE_POINTS:
+            return zero
+        coef, *_ = np.linalg.lstsq(A[keep], q[keep, 2], rcond=None)
+        residual = q[:, 2] - A @ coef
+        scale = max(1.4826 * float(np.median(np.abs(residual[keep]))), 0.0005)
+        keep = np.abs(residual) <= 3.0 * scale
+    if math.hypot(coef[0], coef[1]) > math.tan(MAX_PLATE_TILT) or abs(coef[2]) > window:
+        return zero
+    return np.asarray(coef, dtype=np.float64)
+
+
+def plate_heights(frame: DepthFrame, preprocess: PreprocessConfig, noise: NoiseConfig) -> NDArray[np.float64]:
+    """(N,) per point of ``frame.points_world``: below this height above z = 0 a point is plate.
+
+    The plate's surface (z = 0, or the frame's fitted plane with ``noise.fit_plate``) plus
+    ``max(plate_clearance, plate_sigmas * sigma_z)``, where sigma_z is the depth std at the point's depth times
+    the vertical component of its ray (a ray along the vertical moves the point up and down by its whole error,
+    a grazing one hardly at all)."""
+    n = int(np.count_nonzero(frame.valid))
+    if noise.exact:
+        return np.full(n, preprocess.plate_clearance)
+    depth = frame.depth[frame.valid].astype(np.float64)
+    points = frame.points_world
+    vertical = np.abs(points[:, 2] - frame.T_world_camera.translation[2]) / np.maximum(depth, 1e-9)
+    band = np.maximum(preprocess.plate_clearance, noise.plate_sigmas * depth_std(depth, noise) * vertical)
+    if not noise.fit_plate:
+        return band
+    a, b, c = fit_plate(points, noise.plate_fit_window, preprocess.workspace_radius)
+    return band + a * points[:, 0] + b * points[:, 1] + c
+
+
+def without_flying_pixels(frame: DepthFrame, jump: float) -> DepthFrame:
+    """``frame`` with the pixels at depth discontinuities set to "no return": a pixel whose 4-neighbour (with a
+    return) differs by more than ``jump`` times its depth, on both sides of the edge. ``jump`` 0: unchanged."""
+    if jump <= 0:
+        return frame
+    d = frame.depth
+    edge = np.zeros(d.shape, dtype=bool)
+    for a, b, sa, sb in (
+        (d[:-1], d[1:], (slice(None, -1),), (slice(1, None),)),
+        (d[:, :-1], d[:, 1:], (slice(None), slice(None, -1)), (slice(None), slice(1, None))),
+    ):
+        jumps = (a > 0) & (b > 0) & (np.abs(a - b) > jump * np.minimum(a, b))
+        edge[sa] |= jumps
+        edge[sb] |= jumps
+    if not np.any(edge):
+        return frame
+    return DepthFrame(np.where(edge, np.float32(0.0), d).astype(np.float32), frame.T_world_camera, frame.intrinsics)
+
+
+def dropouts_filled(frame: DepthFrame, radius_px: int) -> DepthFrame:
+    """The frame as the voxel map should carve it when a missing depth may be a dropout: every pixel without a
+    return within ``radius_px`` (a square window) of one with a return takes the nearest (smallest) depth of that
+    window, so its ray is free only up to there and unknown beyond (no point is added for it). ``radius_px`` 0:
+    unchanged."""
+    if radius_px <= 0:
+        return frame
+    from scipy.ndimage import minimum_filter
+
+    d = frame.depth
+    hole = d == 0
+    if not np.any(hole):
+        return frame
+    near = minimum_filter(np.where(hole, np.float32(np.inf), d), size=2 * radius_px + 1, mode="constant", cval=np.inf)
+    filled = np.where(hole & np.isfinite(near), near, d).astype(np.float32)
+    return DepthFrame(filled, frame.T_world_camera, frame.intrinsics)
+
+
+def registration_for(frame: DepthFrame, config: RegistrationConfig, noise: NoiseConfig) -> RegistrationConfig:
+    """``config`` with its rmse gate raised to ``icp_sigmas * sqrt(2) * sigma(median depth)`` when that is larger
+    (two noisy clouds: the frame's and the accumulated one's), and the correspondence distance kept above three
+    times the gate. A perfect sensor gets ``config`` unchanged."""
+    if noise.exact or not np.any(frame.valid):
+        return config
+    sigma = float(depth_std(np.array([np.median(frame.depth[frame.valid])]), noise)[0])
+    gate = noise.icp_sigmas * math.sqrt(2.0) * sigma
+    if gate <= config.max_rmse:
+        return config
+    return dataclasses.replace(config, max_rmse=gate, max_correspondence=max(config.max_correspondence, 3.0 * gate))

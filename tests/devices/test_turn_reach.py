@@ -1,0 +1,103 @@
+"""The plate's turn is part of reachability: the UR5 cell retracts the arm before a turn that would sweep the
+object's box into it, and never calls a view reachable that the move then refuses for the turn."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from devices.arm.reach import wrap
+from devices.builtins import make_builtin
+from devices.cell import Cell
+from devices.config import CameraConfig, CellConfig
+from devices.protocols import UnreachableError
+from devices.sim import make_sim_cell
+from planner.types import BoundingBox, Pose
+
+TARGET = np.array([0.0, 0.0, 0.05])
+
+
+def view(azimuth_deg: float, elevation_deg: float, distance: float) -> Pose:
+    a, e = math.radians(azimuth_deg), math.radians(elevation_deg)
+    eye = TARGET + distance * np.array([math.cos(e) * math.cos(a), math.cos(e) * math.sin(a), math.sin(e)])
+    return Pose.look_at(eye, TARGET)
+
+
+@pytest.fixture(scope="module")
+def close_cell() -> Cell:
+    """The arm low and close to the plate on the -x side; then a box that, turned half a turn, meets it."""
+    cell = make_sim_cell(make_builtin("l-block"), CameraConfig(), CellConfig(), seed=0)
+    cell.move_to(view(180.0, 10.0, 0.3))
+    cell.set_object_box(BoundingBox(np.array([-0.1, -0.1, 0.0]), np.array([0.3, 0.1, 0.2])))
+    return cell
+
+
+def test_a_sweeping_turn_retracts_the_arm_first(close_cell: Cell) -> None:
+    k = close_cell.kinematics
+    assert k is not None
+    q, angle = close_cell.arm.joint_positions(), close_cell.angle
+    assert k.turn_collision(q, angle, math.pi) is not None  # standing still, the arm would be hit
+    assert k.turn_collision(k.home, angle, math.pi) is None  # retracted, it is clear
+    retracted = 0
+    for az in range(0, 360, 30):
+        for el in (20.0, 40.0, 60.0):
+            pose = view(float(az), el, 0.5)
+            ok, _ = close_cell.reachability(pose)
+            try:
+                motion = close_cell.plan_motion(pose)
+            except UnreachableError as exc:
+                assert not ok or "plate turns" not in str(exc)
+                continue
+            standing_hit = k.turn_collision(q, angle, wrap(motion.angle - angle))
+            assert (standing_hit is not None) == (motion.retract is not None), (az, el)
+            if motion.retract is not None:
+                retracted += 1
+                assert np.allclose(motion.retract.positions[0], q, atol=1e-3)
+                assert np.allclose(motion.retract.positions[-1], k.home, atol=1e-6)
+                assert motion.to_json()["retracted"] is True
+    assert retracted >= 1
+
+
+def test_reachability_and_the_move_agree_on_turns() -> None:
+    """The issue's box (B grown to the plate by noise): every view reachability accepts is planned without a
+    turn refusal; every view it refuses for the turn, the move refuses too."""
+    cell = make_sim_cell(make_builtin("l-block"), CameraConfig(), CellConfig(), seed=0)
+    cell.move_to(view(180.0, 10.0, 0.3))
+    cell.set_object_box(BoundingBox(np.array([-0.19, -0.2, 0.0]), np.array([0.76, 0.22, 0.22])))
+    checked = 0
+    for az in range(0, 360, 45):
+        for el in (15.0, 45.0):
+            pose = view(float(az), el, 0.45)
+            ok, why = cell.reachability(pose)
+            try:
+                cell.plan_motion(pose)
+                refusal = None
+            except UnreachableError as exc:
+                refusal = str(exc)
+            if ok:
+                assert refusal is None or "plate turns" not in refusal, (az, el, refusal)
+                checked += 1
+            elif why is not None and why.startswith("turn:"):
+                assert refusal is not None and "plate turns" in refusal
+    assert checked > 0
+
+
+def test_a_retracted_move_ends_at_the_view(close_cell: Cell) -> None:
+    poses = [view(float(az), el, 0.5) for az in range(0, 360, 30) for el in (20.0, 40.0, 60.0)]
+    for pose in poses:
+        try:
+            planned = close_cell.plan_motion(pose)
+        except UnreachableError:
+            continue
+        if planned.retract is not None:
+            break
+    else:
+        pytest.fail("no view needs a retract")
+    motion = close_cell.move_to(pose)
+    assert motion.retract is not None
+    assert np.allclose(close_cell.pose.translation, pose.translation, atol=1e-4)
+    assert close_cell.kinematics is not None
+    assert close_cell.kinematics.violations(close_cell.arm.joint_positions(), close_cell.angle) is None
+    assert motion.duration > motion.retract.duration > 0

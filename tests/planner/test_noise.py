@@ -1,0 +1,78 @@
+"""planner.noise: the plate band and the ICP gate follow the expected depth noise; a perfect sensor keeps the
+paper's fixed thresholds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from planner.config import NoiseConfig, PreprocessConfig, RegistrationConfig
+from planner.noise import depth_std, dropouts_filled, plate_heights, registration_for, without_flying_pixels
+from planner.types import DepthFrame, Intrinsics, Pose
+
+K = Intrinsics(64, 48, 60.0, 60.0, 31.5, 23.5)
+DOWN = Pose(np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]]), np.array([0.0, 0.0, 0.5]))
+
+
+def plane_frame(depth: float = 0.5) -> DepthFrame:
+    return DepthFrame(np.full((K.height, K.width), depth, dtype=np.float32), DOWN, K)
+
+
+def test_perfect_sensor_keeps_the_fixed_band_and_gate() -> None:
+    frame = plane_frame()
+    assert np.all(plate_heights(frame, PreprocessConfig(), NoiseConfig()) == PreprocessConfig().plate_clearance)
+    config = RegistrationConfig()
+    assert registration_for(frame, config, NoiseConfig()) is config
+
+
+def test_band_follows_the_noise_at_the_range() -> None:
+    noise = NoiseConfig(depth_z2=0.004)  # 1 mm at 0.5 m
+    heights = plate_heights(plane_frame(), PreprocessConfig(), noise)
+    # looking straight down: the whole depth error is vertical; the centre pixel's ray is vertical
+    assert heights.max() == pytest.approx(3.5 * 0.001, rel=1e-3)
+    assert np.all(heights >= PreprocessConfig().plate_clearance)
+    assert float(depth_std(np.array([0.25]), noise)[0]) == pytest.approx(0.00025)
+
+
+def test_icp_gate_rises_with_the_noise() -> None:
+    noise = NoiseConfig(depth_std=0.002)
+    gates = registration_for(plane_frame(), RegistrationConfig(), noise)
+    assert gates.max_rmse == pytest.approx(3.0 * np.sqrt(2) * 0.002)
+    assert gates.max_correspondence >= 3 * gates.max_rmse
+    quiet = registration_for(plane_frame(), RegistrationConfig(), NoiseConfig(depth_std=0.0001))
+    assert quiet.max_rmse == RegistrationConfig().max_rmse  # never below the paper's gate
+
+
+def test_bad_noise_config() -> None:
+    with pytest.raises(ValueError, match=r"noise\.depth_std: must be >= 0"):
+        NoiseConfig(depth_std=-1.0)
+
+
+def step_frame() -> DepthFrame:
+    """Left half at 0.4 m, right half at 0.5 m; a 3 x 3 hole in the left half."""
+    depth = np.full((K.height, K.width), 0.5, dtype=np.float32)
+    depth[:, : K.width // 2] = 0.4
+    depth[10:13, 10:13] = 0.0
+    return DepthFrame(depth, DOWN, K)
+
+
+def test_flying_pixel_filter_drops_both_sides_of_a_depth_edge_only() -> None:
+    frame = step_frame()
+    out = without_flying_pixels(frame, 0.01)
+    dropped = (frame.depth > 0) & (out.depth == 0)
+    cols = np.unique(np.nonzero(dropped)[1])
+    assert cols.tolist() == [K.width // 2 - 1, K.width // 2]
+    assert without_flying_pixels(frame, 0.0) is frame
+
+
+def test_dropouts_carve_to_the_nearest_depth_around_them() -> None:
+    frame = step_frame()
+    filled = dropouts_filled(frame, 4)
+    assert np.all(filled.depth[10:13, 10:13] == np.float32(0.4))  # the hole is a surface of unknown beyond
+    depth = np.zeros((K.height, K.width), dtype=np.float32)
+    depth[0, 0] = 0.3
+    void = DepthFrame(depth, DOWN, K)
+    far = dropouts_filled(void, 4)
+    assert far.depth[20, 40] == 0  # far from every return: still free space
+    assert far.depth[3, 3] == np.float32(0.3)
+    assert dropouts_filled(frame, 0) is frame

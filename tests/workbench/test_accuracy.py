@@ -1,0 +1,54 @@
+"""workbench.evaluation.accuracy on objects with known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from workbench.evaluation import GroundTruth, accuracy, fscore
+
+
+@pytest.fixture(scope="module")
+def cube() -> tuple[trimesh.Trimesh, GroundTruth]:
+    mesh = trimesh.creation.box(extents=(0.1, 0.1, 0.1))
+    samples, _ = trimesh.sample.sample_surface_even(mesh, 20_000, seed=0)
+    return mesh, GroundTruth.of(mesh, np.asarray(samples))
+
+
+def test_a_perfect_dense_cloud_scores_one(cube: tuple[trimesh.Trimesh, GroundTruth]) -> None:
+    mesh, truth = cube
+    cloud, _ = trimesh.sample.sample_surface_even(mesh, 40_000, seed=1)
+    acc = accuracy(truth, cloud)
+    assert acc.precision_2mm == pytest.approx(1.0) and acc.precision_5mm == pytest.approx(1.0)
+    assert acc.recall_5mm > 0.999 and acc.fscore_5mm > 0.999
+    assert acc.mean_mm < 1e-3 and acc.chamfer_mm < 1.0
+
+
+def test_an_offset_cloud_has_known_distances(cube: tuple[trimesh.Trimesh, GroundTruth]) -> None:
+    """Points 3 mm off the top face: precision 0 at 2 mm, 1 at 5 mm; mean distance 3 mm; recall = the top's share."""
+    _, truth = cube
+    xs, ys = np.meshgrid(np.linspace(-0.045, 0.045, 60), np.linspace(-0.045, 0.045, 60))
+    cloud = np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, 0.05 + 0.003)])
+    acc = accuracy(truth, cloud)
+    assert acc.precision_2mm == 0.0 and acc.precision_5mm == 1.0
+    assert acc.mean_mm == pytest.approx(3.0, abs=1e-3) and acc.p90_mm == pytest.approx(3.0, abs=1e-3)
+    assert acc.recall_5mm == pytest.approx(1 / 6, abs=0.02)  # the top face of six (and its rim)
+    assert acc.fscore_5mm == pytest.approx(fscore(1.0, acc.recall_5mm))
+
+
+def test_outliers_lower_precision_not_recall(cube: tuple[trimesh.Trimesh, GroundTruth]) -> None:
+    mesh, truth = cube
+    cloud, _ = trimesh.sample.sample_surface_even(mesh, 20_000, seed=2)
+    noisy = np.concatenate([cloud, np.random.default_rng(0).uniform(0.2, 0.3, (5_000, 3))])
+    a, b = accuracy(truth, cloud), accuracy(truth, noisy)
+    assert b.recall_5mm == a.recall_5mm
+    assert b.precision_5mm == pytest.approx(len(cloud) / len(noisy), abs=1e-3)
+
+
+def test_empty_cloud_and_bad_input(cube: tuple[trimesh.Trimesh, GroundTruth]) -> None:
+    _, truth = cube
+    empty = accuracy(truth, np.zeros((0, 3)))
+    assert empty.fscore_5mm == 0.0 and empty.to_json()["chamfer_mm"] is None
+    with pytest.raises(ValueError, match="cloud: expected shape"):
+        accuracy(truth, np.zeros((4, 2)))

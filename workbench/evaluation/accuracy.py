@@ -1,0 +1,133 @@
+"""Accuracy of a scanned cloud against the ground-truth surface (simulation only), the Tanks and Temples way.
+
+- precision at tau: the share of the cloud within tau of the true surface (exact point-to-triangle distance,
+  open3d's ``RaycastingScene.compute_distance``);
+- recall at tau: the share of points sampled uniformly on the true surface with a cloud point within tau
+  (a KD-tree; recall at 5 mm is the project's coverage);
+- F-score: their harmonic mean; mean and 90th-percentile cloud-to-surface distance; chamfer distance, the mean
+  of the two directions' mean distances.
+
+Coverage alone cannot tell a good scan from a bad one: a noisy, misregistered cloud spreads over more of the
+surface and scores a higher recall; its precision falls.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import KDTree
+
+TAUS_MM = (2, 5)
+"""The distances at which precision, recall and F are reported, millimetres."""
+ACCURACY_COLUMNS = (
+    "precision_5mm",
+    "recall_5mm",
+    "fscore_5mm",
+    "precision_2mm",
+    "recall_2mm",
+    "fscore_2mm",
+    "chamfer_mm",
+)
+"""The figures nbv scan's metrics.json and nbv bench's results.csv carry (fields of :class:`Accuracy`)."""
+
+
+@dataclass(frozen=True)
+class Accuracy:
+    """One cloud's scores (fractions in [0, 1], distances in millimetres; 0 / nan for an empty cloud)."""
+
+    precision_2mm: float
+    recall_2mm: float
+    fscore_2mm: float
+    precision_5mm: float
+    recall_5mm: float
+    fscore_5mm: float
+    mean_mm: float
+    """Mean cloud-to-surface distance."""
+    p90_mm: float
+    """90th percentile of the cloud-to-surface distance."""
+    chamfer_mm: float
+    """(mean cloud-to-surface + mean surface-samples-to-cloud) / 2."""
+    points: int
+
+    def to_json(self) -> dict[str, Any]:
+        return {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in asdict(self).items()}
+
+
+def fscore(precision: float, recall: float) -> float:
+    """Harmonic mean of ``precision`` and ``recall`` (0 when both are 0)."""
+    return 0.0 if precision + recall == 0 else 2.0 * precision * recall / (precision + recall)
+
+
+class GroundTruth:
+    """The true surface: a triangle mesh (table frame) and points sampled uniformly on it.
+
+    vertices: (V, 3) float64. faces: (F, 3) int. samples: (M, 3) float64, M >= 1 (``devices.mesh.sample_surface``).
+    """
+
+    def __init__(self, vertices: ArrayLike, faces: ArrayLike, samples: ArrayLike) -> None:
+        import open3d as o3d
+
+        self._vertices = np.ascontiguousarray(vertices, dtype=np.float32)
+        self._faces = np.ascontiguousarray(faces, dtype=np.uint32)
+        if self._vertices.ndim != 2 or self._vertices.shape[1] != 3 or len(self._faces) == 0:
+            raise ValueError("ground truth: need (V, 3) vertices and at least one face")
+        self.samples = _points("samples", samples)
+        if len(self.samples) == 0:
+            raise ValueError("samples: need at least one sample")
+        self._scene = o3d.t.geometry.RaycastingScene()
+        self._scene.add_triangles(o3d.core.Tensor.from_numpy(self._vertices), o3d.core.Tensor.from_numpy(self._faces))
+
+    @staticmethod
+    def of(mesh: Any, samples: ArrayLike) -> GroundTruth:
+        """From a trimesh mesh and its surface samples."""
+        return GroundTruth(np.asarray(mesh.vertices), np.asarray(mesh.faces), samples)
+
+    def distance(self, points: ArrayLike) -> NDArray[np.float64]:
+        """(N,) distance of each of ``points`` (N, 3) to the nearest point of the surface, metres."""
+        import open3d as o3d
+
+        p = _points("points", points)
+        if len(p) == 0:
+            return np.zeros(0)
+        query = o3d.core.Tensor.from_numpy(np.ascontiguousarray(p, dtype=np.float32))
+        return self._scene.compute_distance(query).numpy().astype(np.float64)
+
+
+def accuracy(truth: GroundTruth, cloud: ArrayLike) -> Accuracy:
+    """Precision, recall and F at 2 and 5 mm, distance statistics and chamfer of ``cloud`` (N, 3) against
+    ``truth``. An empty cloud scores 0 (distances nan)."""
+    p = _points("cloud", cloud)
+    if len(p) == 0:
+        nan = float("nan")
+        return Accuracy(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, nan, nan, nan, 0)
+    to_surface = truth.distance(p)
+    to_cloud, _ = KDTree(p).query(truth.samples, k=1)
+    scores: dict[str, float] = {}
+    for tau_mm in TAUS_MM:
+        tau = tau_mm / 1000.0
+        precision = float(np.mean(to_surface <= tau))
+        recall = float(np.mean(to_cloud <= tau))
+        scores[f"precision_{tau_mm}mm"] = precision
+        scores[f"recall_{tau_mm}mm"] = recall
+        scores[f"fscore_{tau_mm}mm"] = fscore(precision, recall)
+    return Accuracy(
+        **scores,
+        mean_mm=float(to_surface.mean() * 1000),
+        p90_mm=float(np.percentile(to_surface, 90) * 1000),
+        chamfer_mm=float((to_surface.mean() + to_cloud.mean()) / 2 * 1000),
+        points=len(p),
+    )
+
+
+def _points(name: str, value: ArrayLike) -> NDArray[np.float64]:
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim == 1 and arr.size == 0:
+        arr = arr.reshape(0, 3)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise ValueError(f"{name}: expected shape (N, 3), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: {int(np.count_nonzero(~np.isfinite(arr)))} non-finite value(s)")
+    return arr
