@@ -17,7 +17,7 @@ from devices.calibration.fit import check_captures, estimate
 from devices.calibration.poses import CalibrationPose, calibration_poses
 from devices.calibration.result import CalibrationError, CalibrationResult, Capture, axis_error, pose_error
 from devices.calibration.routine import Calibration
-from devices.calibration.sim import SimTruth, calibration_sim_cell, compare, sim_truth
+from devices.calibration.sim import SimTruth, calibrate_sim, calibration_sim_cell, compare, sim_truth
 from devices.calibration.spheres import SphereFit, find_spheres, fit_sphere
 from devices.calibration.target import DEFAULT_TARGET, SphereTarget
 
@@ -32,6 +32,7 @@ __all__ = [
     "SphereFit",
     "SphereTarget",
     "axis_error",
+    "calibrate_sim",
     "calibrated_cell_text",
     "calibration_poses",
     "calibration_sim_cell",

@@ -152,7 +152,7 @@ def estimate(
         return np.concatenate([r, prior * dtheta]) if free_angles else r
 
     x0 = np.concatenate([np.zeros(10), P0.ravel(), np.zeros(n_angle)])
-    solution = least_squares(residual, x0, method="trf", x_scale="jac")
+    solution = least_squares(residual, x0, method="trf", x_scale="jac", ftol=1e-12, xtol=1e-12, gtol=1e-12)
     if not solution.success:
         raise CalibrationError(f"calibration: the least-squares fit did not converge ({solution.message})")
     X, A, P, _ = unpack(solution.x)

@@ -87,14 +87,22 @@ class Calibration:
         rms = np.array([f.rms if f is not None else np.nan for f in fits], dtype=np.float64)
         return Capture(T_base_flange, angle, centres, rms, label)
 
-    def run(self, progress: Callable[[int, CalibrationPose, Capture | None], None] | None = None) -> CalibrationResult:
+    def run(
+        self,
+        progress: Callable[[int, CalibrationPose, Capture | None], None] | None = None,
+        angle_sigma_deg: float = 0.1,
+    ) -> CalibrationResult:
         """Every pose in turn (:meth:`capture`), then :meth:`estimate`. progress(index, pose, capture or None)."""
         for i, pose in enumerate(self.poses):
             capture = self.capture(i)
             if progress is not None:
                 progress(i, pose, capture)
-        return self.estimate()
+        return self.estimate(angle_sigma_deg)
 
     def estimate(self, angle_sigma_deg: float = 0.1) -> CalibrationResult:
-        """:func:`devices.calibration.fit.estimate` of the captures so far."""
+        """:func:`devices.calibration.fit.estimate` of the captures so far (CalibrationError naming the skipped
+        poses when there is none)."""
+        if not self.captures:
+            why = "; ".join(f"{label}: {reason}" for label, reason in self.skipped[:3])
+            raise CalibrationError(f"calibration: no captures ({len(self.skipped)} poses skipped{': ' if why else ''}{why})")
         return estimate(self.captures, self.target, angle_sigma_deg)

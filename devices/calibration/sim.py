@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from devices.calibration.result import CalibrationResult, axis_error, pose_error
+from devices.calibration.poses import CalibrationPose
+from devices.calibration.result import CalibrationResult, Capture, axis_error, pose_error
 from devices.calibration.target import DEFAULT_TARGET, SphereTarget
 from devices.cell import Cell
 from devices.config import CameraConfig, CellConfig
@@ -74,3 +76,34 @@ def compare(result: CalibrationResult, truth: SimTruth, nominal: Pose) -> dict[s
             "axis_deg": axis_before_deg,
         },
     }
+
+
+def calibrate_sim(
+    sensor: str = "realsense-d435",
+    calibration: str = "poor",
+    seed: int = 0,
+    angle_sigma_deg: float = 0.1,
+    progress: Callable[[int, CalibrationPose, Capture | None], None] | None = None,
+) -> dict[str, Any]:
+    """Run the whole routine on a simulated cell and compare with its truth: :func:`compare`'s dict plus the
+    seed, sensor, calibration, the drawn errors, captures, skipped poses and seconds. progress: as in
+    :meth:`Calibration.run`."""
+    import time
+
+    from devices.calibration.routine import Calibration
+
+    t0 = time.perf_counter()
+    cell = calibration_sim_cell(sensor, calibration, seed)
+    routine = Calibration(cell)
+    result = routine.run(progress, angle_sigma_deg)
+    out = {
+        "seed": seed,
+        "sensor": sensor,
+        "calibration": calibration,
+        "drawn": cell.errors.summary() if cell.errors is not None else None,
+        "captures": len(routine.captures),
+        "skipped": [{"label": label, "reason": reason} for label, reason in routine.skipped],
+    }
+    out.update(compare(result, sim_truth(cell), routine.T_flange_camera_nominal))
+    out["seconds"] = time.perf_counter() - t0
+    return out
