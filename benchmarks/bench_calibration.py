@@ -20,7 +20,7 @@ KEYS = ("hand_eye_error_mm", "hand_eye_error_deg", "axis_error_mm", "axis_error_
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--calibration", default="poor")
     parser.add_argument("--sensor", default="realsense-d435")
@@ -48,7 +48,9 @@ def main() -> None:
         values = [float(row[key]) for row in rows]
         print(f"  {key:20s} {statistics.median(values):8.3f} / {max(values):8.3f}")
     ok = all(
-        row["hand_eye_error_mm"] <= 1 and row["hand_eye_error_deg"] <= 0.2 and row["axis_error_mm"] <= 1
+        row["hand_eye_error_mm"] <= 1
+        and row["hand_eye_error_deg"] <= 0.2
+        and row["axis_error_mm"] <= 1
         and row["axis_error_deg"] <= 0.2
         for row in rows
     )

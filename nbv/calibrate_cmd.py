@@ -57,13 +57,17 @@ def _print_result(result: Any) -> None:
         print(f"    {label:24s} {r:6.3f}")
     data = result.to_json()
     t, rpy = data["hand_eye_translation"], data["hand_eye_rotation_deg"]
-    print(f"hand-eye T_flange_camera: translation [{', '.join(f'{v:.5f}' for v in t)}] m, "
-          f"rotation_deg [{', '.join(f'{v:.4f}' for v in rpy)}]  "
-          f"(+-{result.hand_eye_std_mm:.3f} mm, +-{result.hand_eye_std_deg:.4f} deg)")
+    print(
+        f"hand-eye T_flange_camera: translation [{', '.join(f'{v:.5f}' for v in t)}] m, "
+        f"rotation_deg [{', '.join(f'{v:.4f}' for v in rpy)}]  "
+        f"(+-{result.hand_eye_std_mm:.3f} mm, +-{result.hand_eye_std_deg:.4f} deg)"
+    )
     p, d = data["axis_point"], data["axis_direction"]
-    print(f"turntable axis: through [{p[0] * 1000:.3f}, {p[1] * 1000:.3f}] mm at the plate top, direction "
-          f"[{', '.join(f'{v:.5f}' for v in d)}], tilt {result.axis_tilt_deg:.3f} deg  "
-          f"(+-{result.axis_std_mm:.3f} mm, +-{result.axis_std_deg:.4f} deg)")
+    print(
+        f"turntable axis: through [{p[0] * 1000:.3f}, {p[1] * 1000:.3f}] mm at the plate top, direction "
+        f"[{', '.join(f'{v:.5f}' for v in d)}], tilt {result.axis_tilt_deg:.3f} deg  "
+        f"(+-{result.axis_std_mm:.3f} mm, +-{result.axis_std_deg:.4f} deg)"
+    )
     print(f"rms {result.rms_mm:.3f} mm over {len(result.labels)} captures")
 
 
@@ -80,8 +84,14 @@ def _dry_run(routine: Any) -> int:
             continue
         capture = routine.capture(i)
         seen = 0 if capture is None else int(capture.seen.sum())
-        print(_pose_line(i, pose.label, f"plate {math.degrees(motion.angle):7.1f} deg, move {motion.duration:5.1f} s, "
-                                        f"{seen} of {routine.target.count} spheres in view"))
+        print(
+            _pose_line(
+                i,
+                pose.label,
+                f"plate {math.degrees(motion.angle):7.1f} deg, move {motion.duration:5.1f} s, "
+                f"{seen} of {routine.target.count} spheres in view",
+            )
+        )
     reachable = len(routine.poses) - len(routine.skipped)
     print(f"dry run: {reachable} of {len(routine.poses)} poses reachable; nothing was moved")
     return 0
@@ -125,8 +135,10 @@ def _run_cell(args: argparse.Namespace, Calibration: Any) -> int:
         return _dry_run(Calibration(rehearsal))
     with open_rig(cellfile) as rig:
         routine = Calibration(hardware_cell(rig, CellConfig()))
-        print(f"{len(routine.poses)} poses (the target: {DEFAULT_TARGET.count} spheres of "
-              f"{DEFAULT_TARGET.radius * 2000:.0f} mm on the plate):")
+        print(
+            f"{len(routine.poses)} poses (the target: {DEFAULT_TARGET.count} spheres of "
+            f"{DEFAULT_TARGET.radius * 2000:.0f} mm on the plate):"
+        )
         for i, pose in enumerate(routine.poses):
             print(_pose_line(i, pose.label, f"plate {math.degrees(pose.plate_angle):7.1f} deg"))
         if not args.yes:

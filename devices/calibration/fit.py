@@ -85,8 +85,7 @@ def target_pose(centres_camera: NDArray[np.float64], centres_target: NDArray[np.
     """``T_camera_target`` from (K, 3) fitted centres (NaN rows skipped) and the built ones (K, 3)."""
     seen = np.all(np.isfinite(centres_camera), axis=1)
     a, b = centres_camera[seen], centres_target[seen]
-    rotation, _ = Rotation.align_vectors(a - a.mean(axis=0), b - b.mean(axis=0))
-    R = rotation.as_matrix()
+    R = Rotation.align_vectors(a - a.mean(axis=0), b - b.mean(axis=0))[0].as_matrix()
     return Pose(R, a.mean(axis=0) - R @ b.mean(axis=0))
 
 
@@ -108,9 +107,7 @@ def initial_hand_eye(captures: Sequence[Capture], target: SphereTarget) -> Pose:
     return Pose(u @ vt, np.asarray(t, dtype=np.float64).reshape(3))
 
 
-def estimate(
-    captures: Sequence[Capture], target: SphereTarget, angle_sigma_deg: float = 0.1
-) -> CalibrationResult:
+def estimate(captures: Sequence[Capture], target: SphereTarget, angle_sigma_deg: float = 0.1) -> CalibrationResult:
     """The hand-eye transform and the turntable axis from ``captures`` of ``target`` (see the module docstring).
     angle_sigma_deg: the plate angle's expected error per move (0: angles taken as exact). CalibrationError when
     the captures cannot give an estimate or the solver fails."""
@@ -161,9 +158,7 @@ def estimate(
     s2 = float(solution.fun @ solution.fun) / dof
     J = solution.jac
     cov = np.linalg.pinv(J.T @ J) * s2
-    per_capture = np.array(
-        [math.sqrt(float(np.mean(data.reshape(-1, 3)[ci == i] ** 2)) * 3) * 1000 for i in range(C)]
-    )
+    per_capture = np.array([math.sqrt(float(np.mean(data.reshape(-1, 3)[ci == i] ** 2)) * 3) * 1000 for i in range(C)])
     return CalibrationResult(
         T_flange_camera=X,
         axis_point_base=A.translation.copy(),

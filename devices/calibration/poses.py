@@ -79,7 +79,9 @@ def calibration_poses(
         middle_base = R_table_base.T @ middle
         for offset, elevation, roll in views:
             a, e = arm_azimuth + math.radians(offset), math.radians(elevation)
-            eye_base = middle_base + distance * np.array([math.cos(e) * math.cos(a), math.cos(e) * math.sin(a), math.sin(e)])
+            eye_base = middle_base + distance * np.array(
+                [math.cos(e) * math.cos(a), math.cos(e) * math.sin(a), math.sin(e)]
+            )
             T_base_camera = Pose.look_at(eye_base, middle_base)
             cr, sr = math.cos(math.radians(roll)), math.sin(math.radians(roll))
             rolled = T_base_camera.rotation @ np.array([[cr, -sr, 0.0], [sr, cr, 0.0], [0.0, 0.0, 1.0]])

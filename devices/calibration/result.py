@@ -91,7 +91,10 @@ def pose_error(T_estimate: Pose, T_true: Pose) -> tuple[float, float]:
 
 
 def axis_error(
-    point: NDArray[np.float64], direction: NDArray[np.float64], point_true: NDArray[np.float64], direction_true: NDArray[np.float64]
+    point: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    point_true: NDArray[np.float64],
+    direction_true: NDArray[np.float64],
 ) -> tuple[float, float]:
     """(mm between the two axes' crossings of the plate top z = 0, degrees between their directions)."""
     d, dt = direction / np.linalg.norm(direction), direction_true / np.linalg.norm(direction_true)

@@ -104,5 +104,7 @@ class Calibration:
         poses when there is none)."""
         if not self.captures:
             why = "; ".join(f"{label}: {reason}" for label, reason in self.skipped[:3])
-            raise CalibrationError(f"calibration: no captures ({len(self.skipped)} poses skipped{': ' if why else ''}{why})")
+            raise CalibrationError(
+                f"calibration: no captures ({len(self.skipped)} poses skipped{': ' if why else ''}{why})"
+            )
         return estimate(self.captures, self.target, angle_sigma_deg)

@@ -45,12 +45,11 @@ def fit_sphere(
         centroid = p.mean(axis=0)
         spread = float(np.sqrt(((p - centroid) ** 2).sum(axis=1).mean()))
         r0 = radius if radius is not None else spread * 1.3
-        start = centroid + r0 * 0.6 * centroid / max(float(np.linalg.norm(centroid)), 1e-9)
-        if radius is None:
-            start = np.append(start, r0)
-    elif radius is None:
-        start = np.append(np.asarray(start, dtype=np.float64), float(np.linalg.norm(p - start, axis=1).mean()))
-    x = np.asarray(start, dtype=np.float64)
+        c0 = centroid + r0 * 0.6 * centroid / max(float(np.linalg.norm(centroid)), 1e-9)
+    else:
+        c0 = np.asarray(start, dtype=np.float64)
+        r0 = radius if radius is not None else float(np.linalg.norm(p - c0, axis=1).mean())
+    x = c0 if radius is not None else np.append(c0, r0)
     for keep in (np.ones(len(p), dtype=bool), None):
         if keep is None:
             r = radius if radius is not None else float(x[3])

@@ -36,9 +36,7 @@ class SphereTarget:
         gaps = np.linalg.norm(c[:, None] - c[None], axis=2) + np.eye(len(c)) * 1e9
         require(float(gaps.min()) > 2 * self.radius + 0.02, "target.centres_table: spheres closer than 2 cm apart")
         require(bool(np.all(c[:, 2] - self.radius > 0)), "target.centres_table: a sphere reaches below the plate top")
-        require(
-            np.linalg.matrix_rank(c[1:] - c[0], tol=1e-3) >= 2, "target.centres_table: the centres lie on one line"
-        )
+        require(np.linalg.matrix_rank(c[1:] - c[0], tol=1e-3) >= 2, "target.centres_table: the centres lie on one line")
         require(finite(self.post_radius) and 0 <= self.post_radius < self.radius, "target.post_radius: in [0, radius)")
         object.__setattr__(self, "centres_table", c)
 
@@ -67,7 +65,9 @@ class SphereTarget:
             if self.post_radius > 0 and height > 1e-4:
                 post = trimesh.creation.cylinder(radius=self.post_radius, height=height, sections=24)
                 parts.append(post.apply_translation((c[0], c[1], 0.5 * height)))
-        return trimesh.util.concatenate(parts)
+        mesh = trimesh.util.concatenate(parts)
+        assert isinstance(mesh, trimesh.Trimesh)
+        return mesh
 
 
 DEFAULT_TARGET = SphereTarget(

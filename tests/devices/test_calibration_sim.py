@@ -51,7 +51,7 @@ def test_poor_calibration_seed_0_is_recovered_within_the_bounds(routine: Calibra
 def test_a_frame_without_the_target_is_skipped_with_its_reason(routine: Calibration) -> None:
     capture = routine.measure(np.zeros((0, 3)), "empty")
     assert not capture.seen.any()
-    far = np.random.default_rng(0).uniform(-1, 1, (5000, 3)) + [0, 0, 3]
+    far = np.random.default_rng(0).uniform(-1, 1, (5000, 3)) + np.array([0.0, 0.0, 3.0])
     assert not routine.measure(far, "far").seen.any()
 
 
