@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 from workbench.errors import (
+    AtCapacity,
     Conflict,
     DeviceFault,
+    Gone,
     Invalid,
     NotFound,
     StorageFault,
@@ -21,6 +23,8 @@ STATUS: dict[type[WorkbenchError], int] = {
     Invalid: 422,
     StorageFault: 503,
     DeviceFault: 503,
+    AtCapacity: 503,
+    Gone: 410,
 }
 """The status of each error type (the most derived type listed wins)."""
 

@@ -14,6 +14,7 @@ a non-finite depth, a bad pose or a shape that does not match the intrinsics is 
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import io
 import os
@@ -44,12 +45,17 @@ def write_durably(path: Path, data: bytes, *, fsync: bool = True) -> None:
     """Write ``data`` to ``path`` atomically: a reader (or a restart after kill -9) sees all of it or nothing."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.part")
-    with open(tmp, "wb") as fh:
-        fh.write(data)
-        fh.flush()
-        if fsync:
-            os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            if fsync:
+                os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:  # a full disk: no half-written temp file stays behind to fail every retry
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
     if fsync:
         fsync_dir(path.parent)
 

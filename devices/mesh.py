@@ -8,6 +8,7 @@ top (z = 0). Meshes need not be watertight (the Stanford bunny and buddha are no
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 from typing import Literal
 
@@ -60,6 +61,8 @@ def load_mesh(path: str | Path, up: UpAxis = "y", size: float = 0.2) -> trimesh.
         raise MeshError(f"{p}: unsupported file type {suffix or '(none)'!r} (supported: {kinds})")
     try:
         loaded = trimesh.load(str(p), file_type=suffix[1:], process=False)
+    except MemoryError:  # not the file's fault as such: the caller's memory limit says what it costs
+        raise
     except Exception as exc:  # trimesh raises many types for corrupt files
         raise MeshError(
             f"{p}: cannot read as {suffix[1:].upper()} ({_one_line(f'{type(exc).__name__}: {exc}')})"
@@ -82,12 +85,32 @@ def _as_mesh(loaded: object, p: Path) -> trimesh.Trimesh:
             raise MeshError(f"{p}: empty mesh (no faces)")
         loaded = meshes[0] if len(meshes) == 1 else trimesh.util.concatenate(meshes)
     if isinstance(loaded, trimesh.PointCloud):
+        if "tristrips" in _ply_elements(p):
+            raise MeshError(
+                f"{p}: its faces are triangle strips (PLY element 'tristrips'), which cannot be read; "
+                "save it with a 'face' element (triangles) instead"
+            )
         raise MeshError(f"{p}: contains a point cloud ({len(loaded.vertices)} points), not a triangle mesh")
     if not isinstance(loaded, trimesh.Trimesh):
         raise MeshError(f"{p}: contains a {type(loaded).__name__}, not a triangle mesh")
     if len(loaded.faces) == 0:
         raise MeshError(f"{p}: empty mesh (no faces)")
     return loaded
+
+
+def _ply_elements(p: Path) -> set[str]:
+    """The element names of a PLY file's header (empty for another format or an unreadable header)."""
+    names: set[str] = set()
+    if p.suffix.lower() != ".ply":
+        return names
+    with contextlib.suppress(OSError), p.open("rb") as fh:
+        for _ in range(1000):
+            words = fh.readline().split()
+            if not words or words[0] == b"end_header":
+                break
+            if words[0] == b"element" and len(words) > 1:
+                names.add(words[1].decode("latin-1"))
+    return names
 
 
 def place_on_plate(mesh: trimesh.Trimesh, up: UpAxis = "z", size: float = 0.2, name: str = "mesh") -> trimesh.Trimesh:
@@ -113,13 +136,45 @@ def place_on_plate(mesh: trimesh.Trimesh, up: UpAxis = "z", size: float = 0.2, n
         # +90 degrees about x: (x, y, z) -> (x, -z, y), so +y becomes +z.
         vertices = np.column_stack([vertices[:, 0], -vertices[:, 2], vertices[:, 1]])
     lower, upper = vertices.min(axis=0), vertices.max(axis=0)
-    extent = float(np.max(upper - lower))
+    with np.errstate(over="ignore"):
+        extent = float(np.max(upper - lower))
+    if not np.isfinite(extent):
+        raise MeshError(
+            f"{name}: its extent overflows (coordinates from {float(lower.min()):.3g} to {float(upper.max()):.3g})"
+        )
     if not extent > 0:
         raise MeshError(f"{name}: degenerate mesh (all vertices at one point)")
+    _check_scale(vertices, extent, name)
     scale = size / extent
     shift = -np.array([0.5 * (lower[0] + upper[0]), 0.5 * (lower[1] + upper[1]), lower[2]])
     placed = (vertices + shift) * scale
-    return trimesh.Trimesh(placed, faces, process=False)
+    mesh = trimesh.Trimesh(placed, faces, process=False)
+    if not float(mesh.area) > MIN_AREA_FRACTION * size * size:
+        raise MeshError(f"{name}: zero total surface area (every face is degenerate: its corners are in a line)")
+    return mesh
+
+
+MIN_AREA_FRACTION = 1e-9
+"""A placed mesh with less surface area than this times ``size**2`` has none (only zero-area faces)."""
+OUTLIER_RATIO = 1e4
+"""A vertex farther from the vertices' median than this many times their median distance to it is an outlier
+that makes the scale meaningless (the object proper would shrink to nothing)."""
+
+
+def _check_scale(vertices: NDArray[np.float64], extent: float, name: str) -> None:
+    """MeshError when a few far outlier vertices set the extent, not the object (a 1 cm object with one vertex
+    at 1e30). A thin object or a sheet is fine: the test is on distances from the median, not on proportions."""
+    centre = np.median(vertices, axis=0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        distance = np.linalg.norm((vertices - centre) / extent, axis=1) * extent
+    typical = float(np.median(distance))
+    far = distance > OUTLIER_RATIO * typical
+    if (typical > 0 and np.any(far)) or not np.all(np.isfinite(distance)):
+        k = int(np.count_nonzero(far | ~np.isfinite(distance)))
+        raise MeshError(
+            f"{name}: {k} far outlier vertex(es) up to {float(np.nanmax(distance)):.3g} from the object, whose "
+            f"vertices are typically {typical:.3g} from its centre: its scale would be meaningless"
+        )
 
 
 def sample_surface(mesh: trimesh.Trimesh, n: int = 10000, seed: int = 0) -> NDArray[np.float64]:

@@ -49,7 +49,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("scan", help="scan a mesh in the simulated cell (Algorithm 1, headless)")
     add_scan_options(p)
     p.add_argument("--planner", default="projection", help="view evaluator (default projection)")
-    p.add_argument("--out", type=Path, default=Path("out/scan"), help="output directory (metrics.json, cloud.ply)")
+    p.add_argument(
+        "--out", type=Path, default=Path("out/scan"), help="output directory (metrics.json, cloud.ply, surface.ply)"
+    )
     p.add_argument("--no-reachable", action="store_true", help="skip the reachable-coverage ceiling")
     p.set_defaults(func=cmd_scan)
 

@@ -7,6 +7,7 @@ import json
 import math
 import statistics
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -17,7 +18,7 @@ from rich.table import Table
 
 from nbv.options import planner_config_from_args
 from nbv.scan import STAGES, IterationRecord, ScanResult, run_scan
-from planner import Planner, PlannerConfig, PlanResult
+from planner import DepthFrame, Planner, PlannerConfig, PlanResult
 from workbench.evaluation import ACCURACY_COLUMNS
 
 
@@ -32,6 +33,8 @@ class SimScan:
     reachable_coverage: float | None
     surface_samples: np.ndarray
     cell: Any
+    mesh: Any = None
+    """The placed (and turned) ground-truth mesh in the table frame."""
 
 
 def simulate(
@@ -50,6 +53,7 @@ def simulate(
     console: Console | None = None,
     mesh: Any = None,
     arm: str = "urdf",
+    on_frame: Callable[[DepthFrame], None] | None = None,
     sensor: str = "ideal",
     calibration: str = "none",
 ) -> SimScan:
@@ -61,7 +65,8 @@ def simulate(
     applied again). ``reachable``: also compute the reachable-coverage ceiling of the object
     and placement (:func:`workbench.object_ceiling.object_ceiling`, independent of the run).
     ``arm``: 'urdf' (the UR5 with IK, collision checks and joint trajectories) or 'reach_sphere'
-    (``CellConfig.kinematics``). ``sensor``, ``calibration``: the camera's sensor model and the cell's
+    (``CellConfig.kinematics``). ``on_frame``: hears each frame with its registered pose (``run_scan``).
+    ``sensor``, ``calibration``: the camera's sensor model and the cell's
     calibration error by name (``CameraConfig.sensor`` / ``.calibration``); the planner's noise settings
     follow them (``devices.planner_noise.planner_config_for``). Accuracy per view against the mesh is in
     ``IterationRecord.accuracy``.
@@ -104,14 +109,16 @@ def simulate(
         console.print(f"[bold]{name}[/bold]: {config.termination.max_views} views, planner {planner_name}")
         console.print(_header(), highlight=False)
     truth = GroundTruth.of(mesh, samples)
-    result = run_scan(planner, cell, samples, on_iteration=show, keep_plans=keep_plans, truth=truth)
+    result = run_scan(
+        planner, cell, samples, on_iteration=show, keep_plans=keep_plans, on_frame=on_frame, truth=truth
+    )
     ceiling = None
     if reachable:
         t0 = time.perf_counter()
         ceiling = object_ceiling(mesh, cell, CameraConfig(), config).coverage
         if console is not None:
             console.print(f"reachable coverage {ceiling:.4f} ({time.perf_counter() - t0:.1f} s)")
-    return SimScan(name, config, result, planner, ceiling, samples, cell)
+    return SimScan(name, config, result, planner, ceiling, samples, cell, mesh)
 
 
 def _header() -> str:
@@ -226,11 +233,20 @@ def print_stage_table(console: Console, stages: dict[str, dict[str, float]]) -> 
     console.print(table)
 
 
+def _surface_summary(block: dict[str, Any]) -> str:
+    if "error" in block:
+        return f"; no surface ({block['error']})"
+    score = "" if block["fscore_5mm"] is None else f" F@5mm {block['fscore_5mm']:.4f}"
+    return f"; surface{score}, {block['triangles']} triangles, {block['seconds']:.1f} s"
+
+
 def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
     """The body of ``nbv scan`` / ``nbv profile``; returns the JSON written."""
     from devices.ply import write_ply
+    from workbench.surface import SurfaceIntegrator, export_bytes, surface_block
 
     config = planner_config_from_args(args)
+    integrator = SurfaceIntegrator()
     console = Console(highlight=False)
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
@@ -248,12 +264,16 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
         keep_plans=profile and args.fidelity,
         console=console,
         arm=args.arm,
+        on_frame=integrator.integrate,
         sensor=args.sensor,
         calibration=args.calibration,
     )
     doc = metrics_json(scan, args.planner)
+    surface, doc["surface"] = surface_block(integrator, scan.mesh)
     (out / "metrics.json").write_text(json.dumps(doc, indent=2))
     write_ply(out / "cloud.ply", scan.planner.cloud)
+    if surface is not None:
+        (out / "surface.ply").write_bytes(export_bytes(surface, "ply"))
     records = scan.result.records
     stages = stage_table(records)
     plan_s = [r.plan_seconds for r in records]
@@ -269,9 +289,11 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
             else ""
         )
         + (f" of reachable {scan.reachable_coverage:.4f}" if scan.reachable_coverage is not None else "")
+        + _surface_summary(doc["surface"])
         + f"; median plan {statistics.median(plan_s):.3f} s, max {max(plan_s):.3f} s;"
         + f" robot time {scan.result.robot_seconds:.1f} s;"
         + f" stopped: {scan.result.terminated}; wrote {out}/metrics.json, {out}/cloud.ply"
+        + ("" if surface is None else f", {out}/surface.ply")
     )
     if not profile:
         return doc

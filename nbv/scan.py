@@ -14,7 +14,7 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import NDArray
 
-from planner import Planner, PlanResult, Pose
+from planner import DepthFrame, Planner, PlanResult, Pose
 from planner.planner import IntegrationReport
 from workbench.evaluation import GroundTruth, accuracy
 from workbench.metrics import coverage
@@ -173,6 +173,7 @@ def run_scan(
     on_iteration: Callable[[IterationRecord, PlanResult], None] | None = None,
     keep_plans: bool = False,
     first_pose: Pose | None = None,
+    on_frame: Callable[[DepthFrame], None] | None = None,
     truth: GroundTruth | None = None,
 ) -> ScanResult:
     """Run Algorithm 1 until the planner's termination rule or no eligible view is left.
@@ -185,7 +186,8 @@ def run_scan(
 
     A plan is made after every frame (also the last), so every iteration has
     a plan time. ``surface_samples`` (M, 3) enables coverage per iteration, ``truth`` the accuracy
-    (precision, recall, F, chamfer: ``IterationRecord.accuracy``).
+    (precision, recall, F, chamfer: ``IterationRecord.accuracy``). ``on_frame`` hears each integrated frame
+    with its registered pose (e.g. a surface integrator), before the plan.
     """
     t_start = time.perf_counter()
     pose = first_pose if first_pose is not None else cell.initial_pose()
@@ -219,6 +221,8 @@ def run_scan(
             tried.add(index)
             continue
         refused, pending, tried = pending, [], set()
+        if on_frame is not None:
+            on_frame(frame.with_pose(report.T_world_camera))
         plan = plan_in(cell, planner)
         cov = coverage(surface_samples, planner.cloud) if surface_samples is not None else None
         record = make_record(report, plan, voxel_counts(planner), cov)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import re
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -97,24 +98,44 @@ def load_model(
     starts (checking the file, reading the mesh, checking the mesh); it may raise to cancel.
     """
     from devices.builtins import make_builtin
-    from devices.mesh import load_mesh
 
     info = find_model(settings, name)
     size = settings.devices.size
-    try:
-        if info.kind == "builtin":
+    if info.kind == "builtin":
+        try:
             return make_builtin(info.name, size)
-        assert info.path is not None
-        limits = settings.mesh_limits
-        stage("checking the file")
-        limits.check_file(info.path, f"model {name!r}")  # before trimesh spends memory on it
-        stage("reading the mesh")
-        mesh = load_mesh(info.path, up=settings.devices.up, size=size)
-        stage("checking the mesh")
-        limits.check_mesh(mesh.vertices, mesh.faces, f"model {name!r}")
-        return mesh
-    except ValueError as exc:
-        raise Invalid(f"model {name!r}: {exc}") from None
+        except ValueError as exc:
+            raise Invalid(f"model {name!r}: {exc}") from None
+    assert info.path is not None
+    stage("checking the file")
+    stage("reading the mesh")
+    creation = getattr(stage, "__self__", None)  # a create's stage: its Cancel kills the reader at once
+    mesh = read_mesh(settings, info.path, f"model {name!r}", getattr(creation, "cancelled", None))
+    stage("checking the mesh")
+    return mesh
+
+
+def read_mesh(
+    settings: WorkbenchSettings, path: Path, what: str, cancelled: threading.Event | None = None
+) -> trimesh.Trimesh:
+    """The placed mesh of a file, pre-scanned, read, admitted and checked in a child process under the settings'
+    memory and time limits (workbench/mesh_loader.py). TooLarge, Invalid (naming ``what``), Conflict."""
+    from workbench.mesh_loader import load_in_child
+
+    try:
+        return load_in_child(
+            path,
+            settings.mesh_limits,
+            up=settings.devices.up,
+            size=settings.devices.size,
+            what=what,
+            memory=settings.mesh_load_memory,
+            timeout=settings.mesh_load_timeout,
+            cancelled=cancelled,
+        )
+    except Invalid as exc:
+        detail = exc.detail if exc.detail.startswith(what) else f"{what}: {exc.detail}"
+        raise Invalid(detail.replace(str(path), "file")) from None
 
 
 _SAFE = re.compile(r"[^A-Za-z0-9_.-]+")
@@ -129,8 +150,6 @@ def save_upload(settings: WorkbenchSettings, filename: str, data: bytes) -> Mode
     polygon degree, triangles per vertex: workbench/limits.py); Invalid for an
     unsupported or unusable file (nothing is kept then).
     """
-    from devices.mesh import load_mesh
-
     if len(data) > settings.max_upload_bytes:
         raise TooLarge(f"upload: {len(data)} bytes is over the limit of {settings.max_upload_bytes} bytes")
     if not data:
@@ -145,16 +164,10 @@ def save_upload(settings: WorkbenchSettings, filename: str, data: bytes) -> Mode
     final = directory / f"{stem}-{digest}{suffix}"
     tmp = directory / f".{stem}-{digest}.part{suffix}"
     tmp.write_bytes(data)
-    what = f"upload {filename!r}"
     try:
-        settings.mesh_limits.check_file(tmp, what)  # a bomb is refused before trimesh loads it
-        mesh = load_mesh(tmp, up=settings.devices.up, size=settings.devices.size)
-        settings.mesh_limits.check_mesh(mesh.vertices, mesh.faces, what)
-    except TooLarge:
+        read_mesh(settings, tmp, f"upload {filename!r}")  # a bomb dies in the reader's process, not here
+    except BaseException:
         tmp.unlink(missing_ok=True)
         raise
-    except ValueError as exc:
-        tmp.unlink(missing_ok=True)
-        raise Invalid(f"{what}: {str(exc).replace(str(tmp), 'file')}") from None
     tmp.replace(final)
     return ModelInfo(UPLOAD_PREFIX + final.name, "upload", f"uploaded {filename}", final)

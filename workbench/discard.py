@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from workbench.engine import JobKilled
-from workbench.errors import Conflict, Invalid
+from workbench.errors import Conflict, Invalid, StorageFault
 from workbench.journal.discard import last_capture
 from workbench.journal.rebuild import REPLAY_STAGE
 from workbench.journal.store import read_journal
@@ -37,7 +37,11 @@ def discard_last_view(wb: Session) -> dict[str, Any]:
         if last is None:
             raise Conflict(f"session {wb.id}: no view to discard")
         before = wb.claim(frozenset(State) - BUSY - {State.INTERRUPTED}, State.CAPTURING, "discard")
-        journal.append("discard", capture_seq=last["seq"], iteration=last["iteration"])
+        try:
+            journal.append("discard", capture_seq=last["seq"], iteration=last["iteration"])
+        except OSError as exc:  # a full disk: nothing discarded, the session as it was
+            wb._state = before
+            raise StorageFault(f"session {wb.id}: cannot discard the last view: {exc.strerror or exc}") from None
     wb.notify(SessionEvent.STATE)
     wb.progress.begin("discard", [REPLAY_STAGE])
     try:
@@ -46,6 +50,8 @@ def discard_last_view(wb: Session) -> dict[str, Any]:
         with wb._lock:
             wb._state = before
         wb.notify(SessionEvent.STATE)
+        if wb.deleted:
+            raise wb.gone() from None
         raise Invalid(f"session {wb.id}: cannot rebuild without the last view: {exc}") from None
     finally:
         wb.progress.end()

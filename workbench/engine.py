@@ -54,9 +54,16 @@ def _mp_context() -> Any:
         if _context is None:
             ctx = multiprocessing.get_context("forkserver")
             # open3d is imported (no thread started by it) but no scene built: a worker builds its own after the fork
-            ctx.set_forkserver_preload(["workbench.worker", "devices.sim", "devices.arm.kinematics"])
+            ctx.set_forkserver_preload(
+                ["workbench.worker", "devices.sim", "devices.arm.kinematics", "workbench.mesh_loader"]
+            )
             _context = ctx
         return _context
+
+
+def mp_context() -> Any:
+    """The forkserver context of the worker processes (also the mesh reader's, workbench/mesh_loader.py)."""
+    return _mp_context()
 
 
 def warm_up() -> None:

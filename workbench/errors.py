@@ -42,3 +42,11 @@ class StorageFault(WorkbenchError):  # noqa: N818 - named for the domain, as the
 
 class DeviceFault(WorkbenchError):  # noqa: N818 - named for the domain, as the transport never sees them
     """A device failed while moving or capturing; the session is now in its error state."""
+
+
+class Gone(WorkbenchError):  # noqa: N818 - named for the domain, as the transport never sees them
+    """The session was deleted while this request ran (its job was killed with it): there is nothing to retry."""
+
+
+class AtCapacity(WorkbenchError):  # noqa: N818 - named for the domain, as the transport never sees them
+    """As many sessions are live as the server allows (``max_live_sessions``) and none of them is idle."""

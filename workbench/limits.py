@@ -19,6 +19,7 @@ import numpy as np
 
 from planner import PlannerConfig
 from workbench.errors import Invalid, TooLarge
+from workbench.mesh_prescan import gltf_counts, gltf_json, ply_counts
 
 MAX_GRID_CELLS_PER_AXIS = 300
 """``voxel.max_extent / voxel.resolution`` at most this: a grid of at most 300^3 = 27 M voxels."""
@@ -141,12 +142,27 @@ class MeshLimits:
             )
 
     def check_file(self, path: Path, what: str) -> None:
-        """Pre-scan an OBJ or OFF file as text (other formats: nothing to do here; :meth:`check_mesh` after loading)."""
+        """Pre-scan a file before it is loaded: OBJ / OFF as text, glTF / GLB by their JSON (instancing counted),
+        PLY by its header (workbench/mesh_prescan.py); STL is checked by :meth:`check_mesh` after loading.
+        ValueError for a file whose header cannot be true."""
         suffix = path.suffix.lower()
         if suffix == ".obj":
             self._scan_obj(path, what)
         elif suffix == ".off":
             self._scan_off(path, what)
+        elif suffix in (".glb", ".gltf"):
+            vertices, triangles, instances = gltf_counts(gltf_json(path))
+            if triangles > self.max_triangles:
+                raise TooLarge(
+                    f"{what}: its scene holds {triangles} triangles ({instances} mesh instances through its node "
+                    f"tree), over the limit of {self.max_triangles}"
+                )
+            self.check_counts(what, vertices, triangles)
+        elif suffix == ".ply":
+            vertices, faces, short = ply_counts(path)
+            if short is not None:
+                raise ValueError(f"truncated PLY: {short}")
+            self.check_counts(what, vertices, faces)
 
     def check_mesh(self, vertices: np.ndarray, faces: np.ndarray, what: str) -> None:
         """The limits on a loaded triangle mesh: ``vertices`` (V, 3), ``faces`` (F, 3)."""

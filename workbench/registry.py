@@ -8,6 +8,7 @@ import dataclasses
 import logging
 import secrets
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,15 +22,16 @@ from planner.evaluators import evaluator_names
 from workbench.ceilings import CeilingService
 from workbench.creations import Creation, Creations, resume_id
 from workbench.engine import Engine, JobKilled, offload_rendering, render_spec
-from workbench.errors import Conflict, Invalid, NotFound, StorageFault
+from workbench.errors import AtCapacity, Conflict, Invalid, NotFound, StorageFault
 from workbench.factory import SURFACE_SAMPLES, SessionParts, build_parts, session_devices
+from workbench.idle import IdleSweeper
 from workbench.journal.rebuild import REPLAY_STAGE, Rebuilt
 from workbench.journal.store import JournalBusyError, JournalWriter, in_use, list_journals, read_journal, sessions_dir
 from workbench.limits import check_config
 from workbench.record import SessionRecord
 from workbench.session import Session
 from workbench.settings import WorkbenchSettings
-from workbench.states import SessionEvent, State
+from workbench.states import BUSY, SessionEvent, State
 from workbench.summaries import session_status
 from workbench.trash import move_to_trash, prune
 
@@ -52,8 +54,17 @@ class DormantSession:
     planner: str = "projection"
     """The header's planner (journals without one: projection)."""
     damage: str | None = None
+    asleep: bool = False
+    """Put to sleep by this server (idle, or to make room): any request for it wakes it (resumes it)."""
 
     def status(self) -> dict[str, Any]:
+        if self.asleep:
+            return {"planner": self.planner} | session_status(
+                self.record,
+                state=State.INTERRUPTED,
+                source="journal",
+                error="asleep (idle; its memory was freed): the next request for it wakes it from its journal",
+            )
         if self.damage is not None:
             return {"planner": self.planner} | session_status(
                 self.record,
@@ -119,6 +130,9 @@ class SessionRegistry:
         self._resuming: set[str] = set()
         self._rebuilding: dict[str, DormantSession] = {}
         """Interrupted sessions being resumed now: still listed (as interrupted) until they are live."""
+        self._used: dict[str, float] = {}
+        """Live session id -> when a request last asked for it (time.monotonic): who sleeps first."""
+        self._waking: dict[str, threading.Lock] = {}
         self.on_create: list[Callable[[Session], None]] = []
         self.on_delete: list[Callable[[Session], None]] = []
         self.ceilings = CeilingService(settings.data_dir / "ceilings")
@@ -145,6 +159,11 @@ class SessionRegistry:
                     self._trash(directory)
             with contextlib.suppress(OSError):  # deleted in an earlier run: kept until this restart (issue 12)
                 prune(settings.data_dir, 0, settings.trash_max_age)
+        self._sweeper = (
+            IdleSweeper(self.sleep_idle, min(30.0, settings.idle_sleep / 4))
+            if settings.journal and settings.idle_sleep > 0
+            else None
+        )
 
     # ------------------------------------------------------------------ create
 
@@ -196,6 +215,7 @@ class SessionRegistry:
             raise Invalid(str(exc)) from None
         if progress_id is not None and progress_id.startswith(resume_id("")):
             raise Invalid(f"progress_id: {progress_id!r} starts with 'resume-', which resumes use")
+        self._make_room()
         with self.creations.run(progress_id) as creation:
             return self._create(
                 planner_config, model, seed, source, fault_config, faults is not None, planner, creation
@@ -246,6 +266,7 @@ class SessionRegistry:
             wb = self._session(session_id, parts, planner_config, devices, seed, journal, planner)
             with self._lock:
                 self._sessions[session_id] = wb
+                self._used[session_id] = time.monotonic()
         except BaseException:
             if wb is None:
                 _release(parts)
@@ -302,11 +323,17 @@ class SessionRegistry:
     # ------------------------------------------------------------------ find
 
     def get(self, session_id: str) -> Session:
-        """The live session; 409 for an interrupted one (resume it first), 404 for an unknown id."""
+        """The live session (a sleeping one is woken first); 409 for an interrupted one (resume it first), 404
+        for an unknown id."""
         with self._lock:
             wb = self._sessions.get(session_id)
+            if wb is not None:
+                self._used[session_id] = time.monotonic()
+            asleep = wb is None and session_id in self._dormant and self._dormant[session_id].asleep
             dormant = session_id in self._dormant
             rebuilding = session_id in self._rebuilding
+        if asleep:
+            return self.wake(session_id)
         if wb is None:
             if rebuilding:
                 raise Conflict(f"session {session_id!r} is being resumed; it is live in a moment")
@@ -321,7 +348,9 @@ class SessionRegistry:
     def status(self, session_id: str) -> dict[str, Any]:
         with self._lock:
             dormant = self._dormant.get(session_id) or self._rebuilding.get(session_id)
-        return dormant.status() if dormant is not None else self.get(session_id).status()
+        if dormant is not None and not dormant.asleep:
+            return dormant.status()
+        return self.get(session_id).status()  # a sleeping session wakes for the tab that opens it
 
     def list(self) -> list[Session]:
         with self._lock:
@@ -338,7 +367,12 @@ class SessionRegistry:
 
     def resume(self, session_id: str) -> tuple[Session, Rebuilt]:
         """Rebuild an interrupted session from its journal: same frames, same config, same seed -> same map
-        and same next plan. Fault injection is not re-armed. 404 unknown, 409 live or resuming, 422 damaged."""
+        and same next plan. Fault injection is not re-armed. 404 unknown, 409 live or resuming, 422 damaged,
+        503 (AtCapacity) when ``max_live_sessions`` are live and busy."""
+        with self._lock:
+            known = session_id in self._dormant
+        if known:
+            self._make_room()
         with self._lock:
             dormant = self._dormant.get(session_id)
             if dormant is None:
@@ -361,6 +395,7 @@ class SessionRegistry:
             raise
         with self._lock:  # live and no longer rebuilding in one step: never unknown in between
             self._sessions[session_id] = wb
+            self._used[session_id] = time.monotonic()
             self._resuming.discard(session_id)
             del self._rebuilding[session_id]
         for hook in list(self.on_create):
@@ -384,7 +419,8 @@ class SessionRegistry:
         except JournalBusyError as exc:
             _release(parts)
             raise Conflict(str(exc)) from None
-        wb = self._session(dormant.id, parts, config, devices, seed, None, str(header.get("planner", "projection")))
+        planner = str(header.get("planner", "projection"))
+        wb = self._session(dormant.id, parts, config, devices, seed, writer, planner)  # journaled from the start
         try:
             rebuilt = wb.replay(journal, progress)
         except (ValueError, KeyError, TypeError, JobKilled) as exc:
@@ -397,19 +433,95 @@ class SessionRegistry:
             journal.cut(rebuilt.kept)
             writer.cut_to(journal)
         wb.restore(rebuilt)
-        wb.journal = writer
-        writer.append(
-            "resume",
-            verified=not rebuilt.mismatches,
-            mismatches=rebuilt.mismatches,
-            interrupted=rebuilt.interrupted,
-            dropped=rebuilt.dropped,
-        )
+        try:
+            writer.append(
+                "resume",
+                verified=not rebuilt.mismatches,
+                mismatches=rebuilt.mismatches,
+                interrupted=rebuilt.interrupted,
+                dropped=rebuilt.dropped,
+            )
+        except OSError as exc:  # a full disk: it stays interrupted (nothing it did could be journaled)
+            wb.close()
+            raise StorageFault(f"session {dormant.id}: cannot resume: {exc.strerror or exc}") from None
         if rebuilt.dropped:
             log.warning("session %s resumed up to the damage; dropped: %s", dormant.id, "; ".join(rebuilt.dropped))
         if rebuilt.mismatches:
             log.warning("session %s resumed with differences: %s", dormant.id, "; ".join(rebuilt.mismatches))
         return wb, rebuilt
+
+    # ------------------------------------------------------------------ sleep and wake
+
+    def wake(self, session_id: str) -> Session:
+        """A sleeping session resumed from its journal (one waker at a time; the others wait for it)."""
+        with self._lock:
+            gate = self._waking.setdefault(session_id, threading.Lock())
+        with gate:
+            with self._lock:
+                wb = self._sessions.get(session_id)
+            if wb is not None:  # another request woke it meanwhile
+                return wb
+            try:
+                wb, _ = self.resume(session_id)
+            finally:
+                with self._lock:
+                    self._waking.pop(session_id, None)
+            log.info("session %s woke up", session_id)
+            return wb
+
+    def sleep(self, session_id: str) -> bool:
+        """Put a live, idle, journaled session to sleep: closed (its worker and memory freed), listed from its
+        journal, woken by the next request for it. False when it is busy, unjournaled or not live."""
+        with self._lock:
+            wb = self._sessions.get(session_id)
+        if wb is None or wb.journal is None:
+            return False
+        with wb._lock:  # fenced: an action that gets the object now is refused (state interrupted)
+            if wb.state in BUSY:
+                return False
+            wb._state = State.INTERRUPTED
+        directory = wb.journal.directory
+        wb.close()
+        try:
+            dormant = _dormant(directory)
+        except (ValueError, KeyError, TypeError) as exc:
+            dormant = _unreadable(directory, str(exc))
+        if dormant is None:
+            return False
+        dormant.asleep = True
+        with self._lock:
+            if self._sessions.get(session_id) is wb:
+                del self._sessions[session_id]
+                self._used.pop(session_id, None)
+                self._dormant[session_id] = dormant
+        log.info("session %s put to sleep", session_id)
+        return True
+
+    def sleep_idle(self) -> None:
+        """Put every session idle for longer than ``idle_sleep`` seconds to sleep (the sweeper's job)."""
+        limit = time.monotonic() - self.settings.idle_sleep
+        with self._lock:
+            idle = [sid for sid, used in self._used.items() if used < limit]
+        for sid in idle:
+            self.sleep(sid)
+
+    def _make_room(self) -> None:
+        """Below ``max_live_sessions`` for one more live session: the least recently used idle sessions sleep.
+        AtCapacity when every live session is busy (or cannot sleep)."""
+        limit = self.settings.max_live_sessions
+        if limit <= 0:
+            return
+        while True:
+            with self._lock:
+                live = len(self._sessions) + len(self._resuming)
+                order = sorted(self._sessions, key=lambda sid: self._used.get(sid, 0.0))
+            if live < limit:
+                return
+            if not any(self.sleep(sid) for sid in order):
+                raise AtCapacity(
+                    f"{live} sessions are live, the limit (server.max_live_sessions = {limit}), and none is idle "
+                    "enough to sleep; retry when one has finished, or delete one"
+                )
 
     # ------------------------------------------------------------------ delete and close
 
@@ -418,11 +530,13 @@ class SessionRegistry:
         and its folder moved to the trash (workbench/trash.py), which keeps it until its age or size limit."""
         with self._lock:
             wb = self._sessions.pop(session_id, None)
+            self._used.pop(session_id, None)
             dormant = self._dormant.pop(session_id, None) if wb is None else None
         if wb is None and dormant is None:
             raise NotFound(f"session {session_id!r}: unknown")
         directory = None
         if wb is not None:
+            wb.deleted = True  # a request this cuts off answers Gone (410), not "retry"
             if wb.journal is not None:
                 directory = wb.journal.directory
                 with contextlib.suppress(OSError):
@@ -441,8 +555,12 @@ class SessionRegistry:
             except ValueError:  # unreadable: nothing to mark, it goes to the trash as it is
                 writer = None
             if writer is not None:
-                writer.append("deleted")
-                writer.close()
+                try:  # a full disk: the folder still goes to the trash (a rename needs no space)
+                    writer.append("deleted")
+                except OSError as exc:
+                    log.warning("session %s: cannot mark the journal deleted: %s", session_id, exc)
+                finally:
+                    writer.close()
         if directory is not None:
             self._trash(directory)
 
@@ -456,6 +574,8 @@ class SessionRegistry:
 
     def close(self) -> None:
         """Kill every running job, stop every session's auto mode, close the journals (shutdown)."""
+        if self._sweeper is not None:
+            self._sweeper.close()
         sessions = self.list()
         for wb in sessions:  # first kill every worker: nothing waits on a long job below
             if wb.worker is not None:

@@ -42,7 +42,7 @@ from devices.protocols import UnreachableError
 from planner import Planner, PlannerConfig, Pose
 from workbench.auto import AutoRunner
 from workbench.engine import JobKilled, SessionWorker
-from workbench.errors import Conflict, DeviceFault, Invalid, NotFound, Unreachable
+from workbench.errors import Conflict, DeviceFault, Gone, Invalid, NotFound, Unreachable
 from workbench.factory import SessionParts
 from workbench.journal.rebuild import Rebuilt, rebuild
 from workbench.journal.store import Journal, JournalWriter, make_event
@@ -107,7 +107,7 @@ class Session:
         self.evaluator = evaluator
         """The planner's view evaluator (planner/evaluators.py EVALUATORS): "projection", a baseline, "random"."""
         self.planner = Planner(config, evaluator=evaluator)
-        self.journal = journal
+        self._journal = journal
         self.worker = worker
         """The worker process of the heavy steps (workbench/engine.py); None: they run in this process."""
         self.plan_budget = plan_budget
@@ -140,8 +140,16 @@ class Session:
         self.progress = Tracker(self._on_progress)
         """The long operation running now (a plan: its stages as the planner reports them)."""
         self._stop_plan = False  # Stop asked for the running plan
+        self.deleted = False
+        """Set by the registry's delete before it closes the session: a request it cut off answers Gone."""
 
     # ------------------------------------------------------------------ reading
+
+    @property
+    def journal(self) -> JournalWriter | None:
+        """The session's journal, given once at construction (the view step writes its frames to the same one;
+        nothing sets it later, so no part of a session can hold a stale journal)."""
+        return self._journal
 
     @property
     def state(self) -> State:
@@ -325,7 +333,13 @@ class Session:
             self._stop_plan = True
         return self.worker.cancel("stopped by the operator")
 
+    def gone(self) -> Gone:
+        """The error of a request cut off because this session was deleted meanwhile."""
+        return Gone(f"session {self.id} was deleted (DELETE /api/sessions/{self.id}) while this request ran")
+
     def _plan_killed(self, reason: str) -> NoReturn:
+        if self.deleted:
+            raise self.gone()
         message = f"stopped: {reason}"
         with self._lock:
             self._state = State.ERROR
@@ -541,14 +555,17 @@ class Session:
         fields = decision.to_json()
         self._emit("decision", decision=fields.pop("kind"), **fields)
 
-    def _emit(self, kind: str, **data: Any) -> None:
+    def _emit(self, kind: str, strict: bool = False, **data: Any) -> None:
         """Journal one event and take it into the record (caller holds the lock). A failing disk does not stop
-        the session; the problem is reported in its status."""
+        the session; the problem is reported in its status. ``strict``: a write that fails raises (OSError)
+        and the event is not taken (a view that is not journaled is not acknowledged)."""
         event = None
         if self.journal is not None:
             try:
                 event = self.journal.append(kind, **data)
             except (OSError, ValueError) as exc:
+                if strict:
+                    raise
                 self._journal_error = f"journal: cannot write ({exc}); this session may not resume completely"
                 log.error("session %s: %s", self.id, self._journal_error)
         if event is None:
@@ -577,27 +594,35 @@ class Session:
 
         try:
             outcome = self.step_runner.run(self.planner, decision.pose, moved)
+            self._publish(outcome, decision)
         except Exception as exc:
             self._step_failed(exc, FailedStep(decision, entry))
-        self._publish(outcome, decision)
         self.notify(SessionEvent.CAPTURED)
         return self.record.iterations[-1]
 
     def _publish(self, outcome: ViewOutcome, decision: Decision) -> None:
+        """Journal the view, then take it over. A view whose ``capture`` event cannot be written is not taken
+        (OSError, its frame removed again): the caller is never told of a view a restart would not bring back."""
         with self._lock:
-            self.planner = outcome.planner
             stored = outcome.stored
-            self._emit(
-                "capture",
-                **capture_fields(outcome.report, outcome.voxels, outcome.coverage),
-                frame=None if stored is None else stored[0],
-                frame_sha256=None if stored is None else stored[1],
-                requested_pose=decision.pose.to_dict(),
-                pose=outcome.frame.T_world_camera.to_dict(),
-                decision=str(decision.kind),
-                plan_id=decision.plan_id,
-                device_state=self.cell.device_state(),
-            )
+            try:
+                self._emit(
+                    "capture",
+                    **capture_fields(outcome.report, outcome.voxels, outcome.coverage),
+                    frame=None if stored is None else stored[0],
+                    frame_sha256=None if stored is None else stored[1],
+                    requested_pose=decision.pose.to_dict(),
+                    pose=outcome.frame.T_world_camera.to_dict(),
+                    decision=str(decision.kind),
+                    plan_id=decision.plan_id,
+                    device_state=self.cell.device_state(),
+                    strict=True,
+                )
+            except OSError:
+                if stored is not None:
+                    self.step_runner.discard_frame(stored[0])
+                raise
+            self.planner = outcome.planner
             self._terminated = self.planner.terminated
             self._occupied = outcome.occupied
             self._region = None
@@ -610,6 +635,8 @@ class Session:
 
     def _step_failed(self, exc: Exception, step: FailedStep) -> NoReturn:
         """Enter state error after a failed step (the map is untouched, the plan pending again); always raises."""
+        if self.deleted:
+            raise self.gone() from None
         message, error = failure_of(exc, self.id, step.entry is not None)
         with self._lock:
             self._state = State.ERROR

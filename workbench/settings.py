@@ -55,6 +55,18 @@ class WorkbenchSettings:
     the journal when its session works again)."""
     mesh_limits: MeshLimits = field(default_factory=MeshLimits)
     """What a model mesh may cost (triangles, vertices, polygon degree, triangles per vertex): workbench/limits.py."""
+    max_live_sessions: int = 16
+    """Sessions live in memory at once (each holds its map, its cell and a worker). A create or a wake past it
+    first puts the least recently used idle session to sleep (to its journal; the next request for it wakes
+    it); when every live session is busy it is refused (503). 0: no limit."""
+    idle_sleep: float = 1800.0
+    """A live session nobody asked anything for this many seconds is put to sleep (its memory freed, its
+    journal kept); the next request for it or a tab opening it resumes it transparently. 0: never."""
+    mesh_load_memory: int = 3_000_000_000
+    """Bytes of memory the child process that reads a mesh file may allocate (workbench/mesh_loader.py); a file
+    that needs more is refused (413) and the server's memory stays as it was."""
+    mesh_load_timeout: float = 60.0
+    """Seconds the child process that reads a mesh file may take; a slower file is refused (413). 0: no limit."""
     trash_max_bytes: int = 500 * 1024 * 1024
     """Deleted sessions wait in ``data_dir/sessions/.trash``; beyond this total size the oldest are removed."""
     trash_max_age: float = 7 * 24 * 3600.0
@@ -78,7 +90,15 @@ class WorkbenchSettings:
     def __post_init__(self) -> None:
         if not integer(self.max_upload_bytes) or self.max_upload_bytes < 1:
             raise ValueError(f"server.max_upload_bytes: must be a positive integer, got {self.max_upload_bytes!r}")
-        for name in ("capture_timeout", "move_timeout", "plan_budget", "capture_budget", "trash_max_age"):
+        for name in (
+            "capture_timeout",
+            "move_timeout",
+            "plan_budget",
+            "capture_budget",
+            "trash_max_age",
+            "mesh_load_timeout",
+            "idle_sleep",
+        ):
             value = getattr(self, name)
             if not finite(value):
                 raise ValueError(f"server.{name}: must be a number of seconds (0: no limit), got {value!r}")
@@ -88,7 +108,13 @@ class WorkbenchSettings:
             raise ValueError(f'server.cell: must be the path of a cell file or "", got {self.cell!r}')
         if not isinstance(self.dry_run, bool):
             raise ValueError(f"server.dry_run: expected true/false, got {self.dry_run!r}")
-        for name in ("max_running_jobs", "max_idle_workers", "trash_max_bytes"):
+        for name in (
+            "max_running_jobs",
+            "max_idle_workers",
+            "trash_max_bytes",
+            "mesh_load_memory",
+            "max_live_sessions",
+        ):
             value = getattr(self, name)
             if not integer(value) or value < 0:
                 raise ValueError(f"server.{name}: must be an integer >= 0, got {value!r}")

@@ -94,12 +94,17 @@ class ViewStep:
             else:
                 report, after = self.worker.integrate(planner, frame, self.capture_budget)  # works on a copy
         except Exception:
-            if stored is not None and self.journal is not None:
-                self.journal.discard_frame(stored[0])
+            if stored is not None:
+                self.discard_frame(stored[0])
             raise
         cov = None if self.surface_samples is None else float(coverage(self.surface_samples, after.cloud))
         occupied = after.voxel_map.centers(VoxelClass.OCCUPIED)
         return ViewOutcome(frame, report, stored, voxel_counts(after), cov, occupied, after)
+
+    def discard_frame(self, name: str) -> None:
+        """Remove a stored frame whose view was not taken (rejected, or its event could not be journaled)."""
+        if self.journal is not None:
+            self.journal.discard_frame(name)
 
     def _wait_for_the_last_move(self) -> None:
         moving = self._moving
@@ -138,7 +143,7 @@ def failure_of(exc: Exception, session_id: str, restored_plan: bool) -> tuple[st
     elif isinstance(exc, ValueError):
         message = f"frame rejected: {exc}"
     elif isinstance(exc, OSError):
-        message = f"journal: cannot store the frame ({exc.strerror or exc})"
+        message = f"journal: cannot store the view ({exc.strerror or exc})"
     else:
         return f"internal error: {type(exc).__name__}: {exc}", None
     hint = "retry (POST .../retry)" + (" or approve the plan again" if restored_plan else "")

@@ -105,7 +105,7 @@ async def events(ws: WebSocket, session: str | None = None, create: str | None =
     def on_create(s: Session) -> None:
         nonlocal wb
         push({"type": "sessions", "change": "created", "id": s.id})
-        if s.id == session and wb is None:  # resumed: follow it from now on
+        if s.id == session and wb is not s:  # resumed or woken: follow it from now on
             wb = s
             s.listeners.append(on_session)
             push({"type": "status", "event": "state", "status": s.status()})

@@ -154,3 +154,28 @@ def test_a_journaled_session_replays_as_a_source(settings: AppSettings, mode: st
             assert r.status_code == 503 and "all 3 recorded frames" in r.json()["detail"]
         bad = {"source": {"kind": "replay", "session": "0badc0de"}}
         assert b.post("/api/sessions", json=bad).status_code == 404
+
+
+def test_views_taken_after_a_resume_survive_the_next_restart(settings: AppSettings) -> None:
+    """Issue 21: a resumed session journals its new views (its view step once held the journal of before the
+    resume, None, and wrote no frame), so a second restart brings back all of them."""
+    with server(settings) as a:
+        sid = a.post("/api/sessions", json={"model": "mug", "config": SMALL, "seed": 3}).json()["id"]
+        assert a.post(f"/api/sessions/{sid}/capture").status_code == 200
+        for _ in range(2):
+            assert a.post(f"/api/sessions/{sid}/step").status_code == 200
+    with server(settings) as b:
+        r = b.post(f"/api/sessions/{sid}/resume")
+        assert r.status_code == 200 and r.json()["dropped"] == [], r.text
+        for expected in (4, 5):
+            r = b.post(f"/api/sessions/{sid}/step")
+            assert (r.status_code, r.json()["iteration"]) == (200, expected), r.text
+        before = state_of(b, sid)
+    frames = sorted(p.name for p in (settings.data_dir / "sessions" / sid / "frames").iterdir())
+    assert frames == [f"{i:06d}.npz" for i in range(1, 6)]
+    with server(settings) as c:
+        r = c.post(f"/api/sessions/{sid}/resume")
+        assert r.status_code == 200, r.text
+        assert (r.json()["dropped"], r.json()["mismatches"]) == ([], [])
+        after = state_of(c, sid)
+        assert after["iteration"] == 5 and after == before

@@ -14,10 +14,12 @@ or a torn last line (ignored by the reader, cut off when the journal is reopened
 
 from __future__ import annotations
 
+import errno
 import fcntl
 import json
 import os
 import re
+import shutil
 import threading
 import time
 from dataclasses import dataclass, field
@@ -27,6 +29,7 @@ from typing import Any
 from devices.frames import fsync_dir, load_frame, save_frame
 from planner import DepthFrame
 from workbench.jsonable import jsonable
+from workbench.storage import write_failure
 
 JOURNAL_FORMAT = "nbv-journal"
 JOURNAL_VERSION = 1
@@ -73,10 +76,17 @@ class JournalWriter:
         root = sessions_dir(data_dir)
         directory = root / session_id
         directory.mkdir(parents=True, exist_ok=False)
-        writer = cls(directory, fsync=fsync)
-        if fsync:
-            fsync_dir(root)
-        writer.append("session", format=JOURNAL_FORMAT, version=JOURNAL_VERSION, id=session_id, **header)
+        writer = None
+        try:
+            writer = cls(directory, fsync=fsync)
+            if fsync:
+                fsync_dir(root)
+            writer.append("session", format=JOURNAL_FORMAT, version=JOURNAL_VERSION, id=session_id, **header)
+        except BaseException:  # a full disk: no empty journal stays behind (listed as damaged after a restart)
+            if writer is not None:
+                writer.close()
+            shutil.rmtree(directory, ignore_errors=True)
+            raise
         return writer
 
     @classmethod
@@ -106,16 +116,25 @@ class JournalWriter:
         with self._lock:
             event = make_event(self._seq, kind, data)
             line = (json.dumps(event, separators=(",", ":"), allow_nan=False) + "\n").encode("utf-8")
-            os.write(self._fd, line)
-            if self.fsync:
-                os.fsync(self._fd)
+            try:
+                written = os.write(self._fd, line)
+                if written != len(line):  # a disk that filled up mid-line: cut the torn line off again
+                    os.ftruncate(self._fd, os.lseek(self._fd, 0, os.SEEK_END) - written)
+                    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+                if self.fsync:
+                    os.fsync(self._fd)
+            except OSError as exc:
+                raise OSError(exc.errno, write_failure(exc, self.directory, len(line))) from exc
             self._seq += 1
             return event
 
     def write_frame(self, iteration: int, frame: DepthFrame) -> tuple[str, str]:
         """Store the frame of capture ``iteration``; returns (path relative to the journal folder, sha256)."""
         name = f"frames/{iteration:06d}.npz"
-        digest = save_frame(self.directory / name, frame, fsync=self.fsync)
+        try:
+            digest = save_frame(self.directory / name, frame, fsync=self.fsync)
+        except OSError as exc:
+            raise OSError(exc.errno, write_failure(exc, self.directory, frame.depth.nbytes + 4096)) from exc
         return name, digest
 
     def discard_frame(self, name: str) -> None:

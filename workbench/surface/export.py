@@ -1,0 +1,53 @@
+"""The surface for the browser and for download: simplified to a triangle budget, exported as PLY, OBJ, GLB bytes."""
+
+from __future__ import annotations
+
+from typing import Literal, get_args
+
+import numpy as np
+
+from workbench.surface.mesh import SurfaceError, SurfaceMesh
+
+ExportFormat = Literal["ply", "obj", "glb"]
+EXPORT_FORMATS: tuple[str, ...] = get_args(ExportFormat)
+
+LAYER_TRIANGLES = 15_000
+"""The browser layer's triangle budget: about 270 kB of float32 vertices and uint32 faces (goal <= 300 kB)."""
+
+
+def simplify(surface: SurfaceMesh, max_triangles: int = LAYER_TRIANGLES) -> SurfaceMesh:
+    """``surface`` with at most ``max_triangles`` triangles (open3d's quadric decimation; unchanged when it
+    already fits). ValueError for a budget < 1."""
+    import open3d as o3d
+
+    if not isinstance(max_triangles, int) or isinstance(max_triangles, bool) or max_triangles < 1:
+        raise ValueError(f"max_triangles: must be an integer >= 1, got {max_triangles!r}")
+    if surface.triangles <= max_triangles:
+        return surface
+    mesh = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(surface.vertices.copy()), o3d.utility.Vector3iVector(surface.faces.astype(np.int32))
+    )
+    small = mesh.simplify_quadric_decimation(target_number_of_triangles=max_triangles)
+    small.remove_degenerate_triangles()
+    small.remove_unreferenced_vertices()
+    faces = np.asarray(small.triangles, dtype=np.int64)
+    if len(faces) == 0:
+        raise SurfaceError("simplify: no triangles left")
+    return SurfaceMesh.canonical(np.asarray(small.vertices), faces)
+
+
+def layer_bytes(surface: SurfaceMesh) -> int:
+    """Bytes of the surface as the scene sends it: float32 vertices and uint32 faces."""
+    return 12 * len(surface.vertices) + 12 * surface.triangles
+
+
+def export_bytes(surface: SurfaceMesh, fmt: str) -> bytes:
+    """The surface as a ``fmt`` file ('ply': binary PLY, 'obj', 'glb': binary glTF), written by trimesh.
+
+    ValueError naming the known formats for any other ``fmt``.
+    """
+    if fmt not in EXPORT_FORMATS:
+        raise ValueError(f"format: one of {', '.join(EXPORT_FORMATS)}, got {fmt!r}")
+    mesh = surface.to_trimesh()
+    data = mesh.export(file_type=fmt)
+    return data.encode() if isinstance(data, str) else bytes(data)

@@ -1,0 +1,43 @@
+"""The ``surface`` block of a scan's metrics.json: the final surface's accuracy, size and time."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import trimesh
+from numpy.typing import ArrayLike
+
+from workbench.surface.integrator import SurfaceIntegrator
+from workbench.surface.mesh import SurfaceError, SurfaceMesh
+from workbench.surface.scoring import surface_accuracy
+
+SCORES = ("fscore_2mm", "fscore_5mm", "precision_5mm", "recall_5mm", "chamfer_mm")
+"""The accuracy fields of the block (None without a ground truth)."""
+
+
+def surface_block(
+    integrator: SurfaceIntegrator,
+    ground_truth: trimesh.Trimesh | None,
+    ground_truth_samples: ArrayLike | None = None,
+) -> tuple[SurfaceMesh | None, dict[str, Any]]:
+    """(the final surface, its block) after a scan fed every frame to ``integrator``.
+
+    The block: ``fscore_2mm``, ``fscore_5mm``, ``precision_5mm``, ``recall_5mm``, ``chamfer_mm`` (None without
+    a ``ground_truth``, e.g. a real object), ``triangles``, ``seconds`` (every integrate plus the extraction),
+    ``method``, ``voxel_size``, ``frames``. When there is no surface (no frame saw the object), the surface is
+    None and the block says why in ``error`` with 0 triangles.
+    """
+    t0 = time.perf_counter()
+    block: dict[str, Any] = dict.fromkeys(SCORES)
+    block |= {"method": integrator.config.method, "voxel_size": integrator.config.voxel_size}
+    block["frames"] = integrator.frames
+    try:
+        surface = integrator.mesh()
+    except SurfaceError as exc:
+        return None, block | {"triangles": 0, "seconds": sum(integrator.seconds), "error": str(exc)}
+    seconds = sum(integrator.seconds) + time.perf_counter() - t0
+    if ground_truth is not None:
+        accuracy = surface_accuracy(surface, ground_truth, ground_truth_samples)
+        block |= {key: getattr(accuracy, key) for key in SCORES}
+    return surface, block | {"triangles": surface.triangles, "seconds": seconds}
