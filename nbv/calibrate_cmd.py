@@ -51,24 +51,24 @@ def _progress(quiet: bool) -> Any:
     return report
 
 
-def _print_result(result: Any) -> None:
+def _print_result(data: dict[str, Any]) -> None:
+    """The estimate as :meth:`CalibrationResult.to_json` gives it: residual per capture, values, uncertainty."""
     print("residual per capture (rms of the sphere centres, mm):")
-    for label, r in zip(result.labels, result.residuals_mm, strict=True):
+    for label, r in data["residuals_mm"].items():
         print(f"    {label:24s} {r:6.3f}")
-    data = result.to_json()
     t, rpy = data["hand_eye_translation"], data["hand_eye_rotation_deg"]
     print(
         f"hand-eye T_flange_camera: translation [{', '.join(f'{v:.5f}' for v in t)}] m, "
         f"rotation_deg [{', '.join(f'{v:.4f}' for v in rpy)}]  "
-        f"(+-{result.hand_eye_std_mm:.3f} mm, +-{result.hand_eye_std_deg:.4f} deg)"
+        f"(+-{data['hand_eye_std_mm']:.3f} mm, +-{data['hand_eye_std_deg']:.4f} deg)"
     )
     p, d = data["axis_point"], data["axis_direction"]
     print(
         f"turntable axis: through [{p[0] * 1000:.3f}, {p[1] * 1000:.3f}] mm at the plate top, direction "
-        f"[{', '.join(f'{v:.5f}' for v in d)}], tilt {result.axis_tilt_deg:.3f} deg  "
-        f"(+-{result.axis_std_mm:.3f} mm, +-{result.axis_std_deg:.4f} deg)"
+        f"[{', '.join(f'{v:.5f}' for v in d)}], tilt {data['axis_tilt_deg']:.3f} deg  "
+        f"(+-{data['axis_std_mm']:.3f} mm, +-{data['axis_std_deg']:.4f} deg)"
     )
-    print(f"rms {result.rms_mm:.3f} mm over {len(result.labels)} captures")
+    print(f"rms {data['rms_mm']:.3f} mm over {len(data['residuals_mm'])} captures")
 
 
 def _dry_run(routine: Any) -> int:
@@ -112,9 +112,13 @@ def run(args: argparse.Namespace) -> int:
             if args.json:
                 print(json.dumps(out))
                 return 0
-            for key in ("hand_eye_error_mm", "hand_eye_error_deg", "axis_error_mm", "axis_error_deg"):
-                print(f"{key:20s} {out[key]:.4f}")
-            print(json.dumps(out["nominal_error"]))
+            _print_result(out["recovered"])
+            before = out["nominal_error"]
+            print("against the truth (the nominal values' error in brackets):")
+            for key, nominal in (("hand_eye_error_mm", "hand_eye_mm"), ("hand_eye_error_deg", "hand_eye_deg")):
+                print(f"    {key:20s} {out[key]:8.4f}   ({before[nominal]:.4f})")
+            for key, nominal in (("axis_error_mm", "axis_mm"), ("axis_error_deg", "axis_deg")):
+                print(f"    {key:20s} {out[key]:8.4f}   ({before[nominal]:.4f})")
             return 0
         return _run_cell(args, Calibration)
     except CalibrationError as exc:
@@ -152,7 +156,7 @@ def _run_cell(args: argparse.Namespace, Calibration: Any) -> int:
     else:
         for label, reason in routine.skipped:
             print(f"skipped {label}: {reason}", file=sys.stderr)
-        _print_result(result)
+        _print_result(result.to_json())
     if args.write:
         backup = write_calibration(args.cell, result)
         print(f"wrote {args.cell} (the old file kept as {backup})")

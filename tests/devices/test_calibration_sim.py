@@ -25,12 +25,15 @@ def routine() -> Calibration:
 
 def test_poses_are_listed_before_anything_moves(routine: Calibration) -> None:
     assert len(routine.poses) == 36 and len({p.label for p in routine.poses}) == 36
-    assert routine.captures == [] and routine.cell.arm.joint_positions() is not None
+    assert routine.captures == []
     angles = {round(float(np.degrees(p.plate_angle))) for p in routine.poses}
     assert angles == {0, 60, 120, 180, -120, -60}
+    q, plate = routine.cell.arm.joint_positions().copy(), routine.cell.angle
     motion = routine.preview(0)  # a plan, not a move
     assert abs(motion.angle - routine.poses[0].plate_angle) < 1e-9 and motion.trajectory is not None
-    assert routine.cell.arm.moves == 0 if hasattr(routine.cell.arm, "moves") else True
+    assert np.array_equal(routine.cell.arm.joint_positions(), q) and routine.cell.angle == plate
+    # the plan reaches the pose: the camera at the asked pose at the asked plate angle
+    assert np.allclose(motion.T_base_camera.matrix, routine.poses[0].T_base_camera.matrix, atol=1e-6)
 
 
 @pytest.mark.timeout(300)
