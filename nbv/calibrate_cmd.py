@@ -32,6 +32,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="--sim: seeds the drawn errors and the noise (default 0)")
     p.add_argument("--angle-sigma-deg", type=float, default=0.1, help="plate angle error per move, deg (0: exact)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument(
+        "--plate-angles", default=None, help="plate angles of the poses, degrees, comma-separated (default 6: 0,60,...)"
+    )
+
+
+def _plate_angles(text: str | None) -> dict[str, Any]:
+    """Calibration keyword arguments for --plate-angles."""
+    if text is None:
+        return {}
+    try:
+        angles = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise CliError(f"--plate-angles: comma-separated degrees, got {text!r}") from None
+    return {"plate_angles_deg": angles}
 
 
 def _pose_line(i: int, label: str, text: str) -> str:
@@ -105,9 +119,15 @@ def run(args: argparse.Namespace) -> int:
             if args.write:
                 raise CliError("--write needs --cell (the simulated cell has no file)")
             if args.dry_run:
-                return _dry_run(Calibration(calibration_sim_cell(args.sensor, args.calibration, args.seed)))
+                cell = calibration_sim_cell(args.sensor, args.calibration, args.seed)
+                return _dry_run(Calibration(cell, **_plate_angles(args.plate_angles)))
             out = calibrate_sim(
-                args.sensor, args.calibration, args.seed, args.angle_sigma_deg, progress=_progress(args.json)
+                args.sensor,
+                args.calibration,
+                args.seed,
+                args.angle_sigma_deg,
+                progress=_progress(args.json),
+                **_plate_angles(args.plate_angles),
             )
             if args.json:
                 print(json.dumps(out))
@@ -136,9 +156,9 @@ def _run_cell(args: argparse.Namespace, Calibration: Any) -> int:
     cellfile = load_cell_file(args.cell)
     if args.dry_run:
         rehearsal = make_sim_cell(DEFAULT_TARGET.mesh(), CameraConfig(), arm_cell_config(cellfile, CellConfig()))
-        return _dry_run(Calibration(rehearsal))
+        return _dry_run(Calibration(rehearsal, **_plate_angles(args.plate_angles)))
     with open_rig(cellfile) as rig:
-        routine = Calibration(hardware_cell(rig, CellConfig()))
+        routine = Calibration(hardware_cell(rig, CellConfig()), **_plate_angles(args.plate_angles))
         print(
             f"{len(routine.poses)} poses (the target: {DEFAULT_TARGET.count} spheres of "
             f"{DEFAULT_TARGET.radius * 2000:.0f} mm on the plate):"

@@ -15,7 +15,7 @@ from collections.abc import Callable
 import numpy as np
 
 from devices.calibration.fit import estimate
-from devices.calibration.poses import CalibrationPose, calibration_poses
+from devices.calibration.poses import PLATE_ANGLES_DEG, CalibrationPose, calibration_poses
 from devices.calibration.result import CalibrationError, CalibrationResult, Capture
 from devices.calibration.spheres import find_spheres
 from devices.calibration.target import DEFAULT_TARGET, SphereTarget
@@ -26,11 +26,15 @@ from planner.types import Pose
 
 class Calibration:
     """Calibrate ``cell`` with ``target`` on its plate. poses: the list to visit (default
-    :func:`calibration_poses` on the arm's side). ``captures`` grows with each :meth:`capture`; ``skipped`` holds
+    :func:`calibration_poses` on the arm's side, at ``plate_angles_deg``). ``captures`` grows with each :meth:`capture`; ``skipped`` holds
     (label, reason) of the poses that could not be reached or saw no sphere."""
 
     def __init__(
-        self, cell: Cell, target: SphereTarget = DEFAULT_TARGET, poses: list[CalibrationPose] | None = None
+        self,
+        cell: Cell,
+        target: SphereTarget = DEFAULT_TARGET,
+        poses: list[CalibrationPose] | None = None,
+        plate_angles_deg: tuple[float, ...] = PLATE_ANGLES_DEG,
     ) -> None:
         if cell.kinematics is None:
             raise CalibrationError("calibration: the cell has no arm model (cell.kinematics = 'urdf' is needed)")
@@ -38,7 +42,9 @@ class Calibration:
         self.target = target
         mount = cell.kinematics.model.T_base_mount.translation
         self.poses: list[CalibrationPose] = (
-            poses if poses is not None else calibration_poses(target, math.atan2(mount[1], mount[0]))
+            poses
+            if poses is not None
+            else calibration_poses(target, math.atan2(mount[1], mount[0]), plate_angles_deg=plate_angles_deg)
         )
         self.captures: list[Capture] = []
         self.skipped: list[tuple[str, str]] = []

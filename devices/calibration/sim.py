@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from devices.calibration.poses import CalibrationPose
+from devices.calibration.poses import PLATE_ANGLES_DEG, CalibrationPose
 from devices.calibration.result import CalibrationResult, Capture, axis_error, pose_error
 from devices.calibration.target import DEFAULT_TARGET, SphereTarget
 from devices.cell import Cell
@@ -84,6 +84,7 @@ def calibrate_sim(
     seed: int = 0,
     angle_sigma_deg: float = 0.1,
     progress: Callable[[int, CalibrationPose, Capture | None], None] | None = None,
+    plate_angles_deg: tuple[float, ...] = PLATE_ANGLES_DEG,
 ) -> dict[str, Any]:
     """Run the whole routine on a simulated cell and compare with its truth: :func:`compare`'s dict plus the
     seed, sensor, calibration, the drawn errors, captures, skipped poses and seconds. progress: as in
@@ -94,7 +95,7 @@ def calibrate_sim(
 
     t0 = time.perf_counter()
     cell = calibration_sim_cell(sensor, calibration, seed)
-    routine = Calibration(cell)
+    routine = Calibration(cell, plate_angles_deg=plate_angles_deg)
     result = routine.run(progress, angle_sigma_deg)
     out = {
         "seed": seed,
