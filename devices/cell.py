@@ -183,7 +183,7 @@ class Cell:
             else:
                 self.kinematics.set_object_box(bbox.lower, bbox.upper)
 
-    def plan_motion(self, T_table_camera: Pose) -> Motion:
+    def plan_motion(self, T_table_camera: Pose, plate_angle: float | None = None) -> Motion:
         """The turntable angle and arm motion that put the camera at ``T_table_camera``.
 
         URDF arm: the reachable, collision-free plate angle and IK solution with the shortest move, and its
@@ -192,11 +192,13 @@ class Cell:
         the turntable axis keeps the current angle. Raises UnreachableError (with
         the numbers) when the camera would be below ``min_height`` above the plate
         top, or farther than ``arm_reach`` / nearer than ``arm_min_reach`` from the arm base.
+        plate_angle: the plate must be at this angle (rad; a calibration pose): the URDF arm takes only that
+        angle (one of its tried angles, else UnreachableError ``plate_angle``), the reach sphere uses it.
         """
         if not isinstance(T_table_camera, Pose):
             raise ValueError(f"T_table_camera: expected a Pose, got {type(T_table_camera).__name__}")
         if self.kinematics is not None:
-            move = self.kinematics.plan(T_table_camera, self.arm.joint_positions(), self.turntable.angle)
+            move = self.kinematics.plan(T_table_camera, self.arm.joint_positions(), self.turntable.angle, plate_angle)
             t = move.target
             return Motion(
                 t.angle,
@@ -214,7 +216,9 @@ class Cell:
             raise UnreachableError(
                 f"unreachable: camera at height {z:.3f} m is below the plate top + clearance ({cfg.min_height:.3f} m)"
             )
-        if math.hypot(x, y) < 1e-9:
+        if plate_angle is not None:
+            theta = wrap_angle(plate_angle)
+        elif math.hypot(x, y) < 1e-9:
             theta = wrap_angle(self.turntable.angle)
         else:
             arm_azimuth = math.atan2(self._arm_base[1], self._arm_base[0])
@@ -322,15 +326,16 @@ class Cell:
 
     # ------------------------------------------------------------------ actions
 
-    def move_to(self, T_table_camera: Pose) -> Motion:
+    def move_to(self, T_table_camera: Pose, plate_angle: float | None = None) -> Motion:
         """Turn the plate, then move the arm, so the camera is at ``T_table_camera`` (a URDF arm retracts first
         when the turn would sweep the object's box into it: ``Motion.retract``).
 
-        Plans first: an unreachable view raises UnreachableError and moves nothing.
+        Plans first (``plate_angle``: as in :meth:`plan_motion`): an unreachable view raises UnreachableError and
+        moves nothing.
         A device fault (DeviceError) after the turntable moved leaves the plate at its
         new angle; a fault during the trajectory leaves the arm where it stopped.
         """
-        motion = self.plan_motion(T_table_camera)
+        motion = self.plan_motion(T_table_camera, plate_angle)
         self.last_motion = motion
         if motion.retract is not None:
             self.arm.execute(motion.retract)

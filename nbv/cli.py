@@ -8,7 +8,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from nbv import devices_cmd
+from nbv import calibrate_cmd, devices_cmd
 from nbv.options import EXIT_BAD_INPUT, CliError, add_scan_options
 from planner.config import PlannerConfig
 
@@ -82,6 +82,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("devices", help="real hardware: nbv devices check --config cell.toml")
     devices_cmd.add_arguments(p)
     p.set_defaults(func=devices_cmd.run)
+
+    p = sub.add_parser("calibrate", help="commission a cell: hand-eye transform and turntable axis from a target")
+    calibrate_cmd.add_arguments(p)
+    p.set_defaults(func=calibrate_cmd.run)
 
     for name in ("bench", "replay"):
         try:

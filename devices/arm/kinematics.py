@@ -148,12 +148,22 @@ class ArmKinematics:
             return target
         return ArmTarget(target.angle, q, self.camera_pose(q), target.move_estimate)
 
-    def plan(self, T_table_camera: Pose, q: NDArray[np.float64], angle: float) -> ArmMove:
+    def plan(
+        self, T_table_camera: Pose, q: NDArray[np.float64], angle: float, plate_angle: float | None = None
+    ) -> ArmMove:
         """The move to a view from the state (q (n,), plate angle): the reachable, collision-free target with the
-        shortest move and its trajectory. UnreachableError(reason) when there is none."""
+        shortest move and its trajectory. UnreachableError(reason) when there is none.
+        plate_angle: only this plate angle (rad) is allowed (a calibration pose; it must be one of the angles
+        :meth:`ArmReach.plate_angles` tries, reason ``plate_angle`` otherwise)."""
         t0 = time.perf_counter()
         q = np.asarray(q, dtype=np.float64)
-        target, reason = self.reach.best_target(T_table_camera, q, angle, lambda a: self.turn_blocked(q, angle, a))
+
+        def turn_check(a: float) -> str | None:
+            if plate_angle is not None and abs(wrap(a - plate_angle)) > 1e-9:
+                return "plate_angle"
+            return self.turn_blocked(q, angle, a)
+
+        target, reason = self.reach.best_target(T_table_camera, q, angle, turn_check)
         if target is None:
             raise UnreachableError(f"unreachable: {reason}", reason=reason or "no_ik")
         target = self._refined(T_table_camera, target)

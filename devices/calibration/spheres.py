@@ -1,0 +1,100 @@
+"""Spheres in a depth frame: segment the points near where a sphere should be, fit its centre by least squares.
+
+:func:`fit_sphere` is scipy's ``least_squares`` on the geometric residual ``|p - c| - r`` (radius known or free)
+with a soft-L1 loss, so flying pixels at the silhouette and a post's points weigh little; a second pass drops the
+points farther than ``TRIM`` from the first fit's surface.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+
+MIN_POINTS = 60
+"""A sphere with fewer points than this in its window is 'not seen'."""
+TRIM = 0.003
+"""Second pass: points farther than this from the first fit's surface are dropped, metres."""
+LOSS_SCALE = 0.001
+"""Soft-L1 scale of the fit: residuals beyond about this count linearly, metres."""
+
+
+@dataclass(frozen=True)
+class SphereFit:
+    """centre: (3,) float64 (the points' frame). radius: fitted (or the known one). rms: of the residuals of the
+    points kept, metres. points: how many were kept."""
+
+    centre: NDArray[np.float64]
+    radius: float
+    rms: float
+    points: int
+
+
+def fit_sphere(
+    points: NDArray[np.float64], radius: float | None = None, start: NDArray[np.float64] | None = None
+) -> SphereFit:
+    """Fit a sphere to points (N, 3) of its surface (a cap is enough). radius: known (only the centre is fitted)
+    or None (fitted too). start: (3,) a centre guess (default: the centroid pushed back from the origin, the
+    camera, by the radius). ValueError if fewer than ``MIN_POINTS`` points."""
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3 or len(p) < MIN_POINTS:
+        raise ValueError(f"sphere fit: need at least {MIN_POINTS} points (N, 3), got {p.shape}")
+    if start is None:
+        centroid = p.mean(axis=0)
+        spread = float(np.sqrt(((p - centroid) ** 2).sum(axis=1).mean()))
+        r0 = radius if radius is not None else spread * 1.3
+        c0 = centroid + r0 * 0.6 * centroid / max(float(np.linalg.norm(centroid)), 1e-9)
+    else:
+        c0 = np.asarray(start, dtype=np.float64)
+        r0 = radius if radius is not None else float(np.linalg.norm(p - c0, axis=1).mean())
+    x = c0 if radius is not None else np.append(c0, r0)
+    for keep in (np.ones(len(p), dtype=bool), None):
+        if keep is None:
+            r = radius if radius is not None else float(x[3])
+            keep = np.abs(np.linalg.norm(p - x[:3], axis=1) - r) < TRIM
+            if int(keep.sum()) < MIN_POINTS:
+                raise ValueError(f"sphere fit: only {int(keep.sum())} points within {TRIM * 1000:.0f} mm of the fit")
+        q = p[keep]
+
+        def residual(v: NDArray[np.float64], q: NDArray[np.float64] = q) -> NDArray[np.float64]:
+            r = radius if radius is not None else v[3]
+            return np.linalg.norm(q - v[:3], axis=1) - r
+
+        x = least_squares(residual, x, loss="soft_l1", f_scale=LOSS_SCALE, method="trf").x
+    q = p[keep]
+    r = float(radius if radius is not None else x[3])
+    res = np.linalg.norm(q - x[:3], axis=1) - r
+    return SphereFit(np.array(x[:3]), r, float(np.sqrt(np.mean(res**2))), len(q))
+
+
+def find_spheres(
+    points_camera: NDArray[np.float64], predicted_camera: NDArray[np.float64], radius: float, window: float = 0.03
+) -> list[SphereFit | None]:
+    """Fit each target sphere in one frame. points_camera: (N, 3) the frame's points. predicted_camera: (K, 3) where
+    the centres should be (from the nominal calibration), camera frame. Points within ``radius + window`` of a
+    prediction (and nearer to it than to any other) are its cap; None for a sphere with too few points or a fit
+    that lands more than ``window`` from its prediction. A second fit takes the points within ``radius + TRIM``
+    of the first fit's centre (the post and the plate fall away)."""
+    p = np.asarray(points_camera, dtype=np.float64)
+    pred = np.asarray(predicted_camera, dtype=np.float64)
+    out: list[SphereFit | None] = []
+    if len(p) == 0:
+        return [None] * len(pred)
+    distances = np.linalg.norm(p[:, None, :] - pred[None, :, :], axis=2)  # (N, K)
+    nearest = distances.argmin(axis=1)
+    for k in range(len(pred)):
+        mask = (nearest == k) & (distances[:, k] < radius + window)
+        if int(mask.sum()) < MIN_POINTS:
+            out.append(None)
+            continue
+        try:
+            fit = fit_sphere(p[mask], radius, start=pred[k])
+            near = np.linalg.norm(p - fit.centre, axis=1) < radius + TRIM
+            fit = fit_sphere(p[near], radius, start=fit.centre)
+        except ValueError:
+            out.append(None)
+            continue
+        out.append(fit if float(np.linalg.norm(fit.centre - pred[k])) < window else None)
+    return out

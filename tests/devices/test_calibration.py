@@ -1,0 +1,207 @@
+"""Calibration maths on synthetic data: sphere fits, hand-eye and axis from exact poses, bad input, the cell file."""
+
+from __future__ import annotations
+
+import math
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from devices.calibration import (
+    DEFAULT_TARGET,
+    CalibrationError,
+    Capture,
+    axis_error,
+    calibrated_cell_text,
+    estimate,
+    fit_sphere,
+    pose_error,
+    write_calibration,
+)
+from devices.calibration.result import CalibrationResult
+from devices.cellfile import load_cell_file
+from planner.types import Pose
+
+
+def _rz(theta: float) -> Pose:
+    return Pose(Rotation.from_euler("z", theta).as_matrix(), np.zeros(3))
+
+
+def test_sphere_fit_on_a_noisy_cap_recovers_centre_and_radius() -> None:
+    rng = np.random.default_rng(3)
+    centre, radius = np.array([0.02, -0.01, 0.45]), 0.02
+    # the cap a camera at the origin sees: directions within 70 degrees of the one towards the camera
+    towards = -centre / np.linalg.norm(centre)
+    d = rng.normal(size=(20000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d = d[d @ towards > math.cos(math.radians(70))][:3000]
+    points = centre + radius * d + rng.normal(0.0, 0.0005, (len(d), 3))
+    free = fit_sphere(points)
+    assert np.linalg.norm(free.centre - centre) < 2e-4
+    assert abs(free.radius - radius) < 2e-4
+    known = fit_sphere(points, radius=radius)
+    assert np.linalg.norm(known.centre - centre) < 1e-4 and known.radius == radius
+    assert 0.0003 < known.rms < 0.0007  # the noise, not the bias of a wrong model
+    with pytest.raises(ValueError, match="at least 60 points"):
+        fit_sphere(points[:10])
+
+
+def _synthetic(
+    X: Pose, A: Pose, flange_rotvecs: list[np.ndarray], angles_deg: list[float], P: np.ndarray
+) -> list[Capture]:
+    """Exact captures: the camera at the arm's side looking at the target, rotated per capture."""
+    captures = []
+    for i, (rotvec, angle_deg) in enumerate(zip(flange_rotvecs, angles_deg, strict=True)):
+        eye = np.array([-0.35, 0.0, 0.45])
+        T_base_camera = Pose.look_at(eye, [0.0, 0.0, 0.12])
+        T_base_camera = Pose(T_base_camera.rotation @ Rotation.from_rotvec(rotvec).as_matrix(), eye)
+        T_base_flange = T_base_camera @ X.inverse()
+        theta = math.radians(angle_deg)
+        T_base_table = A @ _rz(theta) @ A.inverse()
+        centres = (T_base_camera.inverse() @ T_base_table).apply(P)
+        captures.append(Capture(T_base_flange, theta, centres, np.zeros(len(P)), f"c{i}"))
+    return captures
+
+
+X_TRUE = Pose(Rotation.from_euler("xyz", [1.0, -0.7, 91.0], degrees=True).as_matrix(), np.array([0.003, 0.052, 0.041]))
+A_TRUE = Pose(Rotation.from_rotvec([0.004, -0.003, 0.0]).as_matrix(), np.array([0.0015, -0.002, 0.0]))
+
+
+def _varied(n: int) -> tuple[list[np.ndarray], list[float]]:
+    rng = np.random.default_rng(1)
+    rotvecs = [rng.normal(0.0, 0.35, 3) for _ in range(n)]
+    angles = [float(a) for a in np.resize([0.0, 60.0, 120.0, 180.0, -120.0, -60.0], n)]
+    return rotvecs, angles
+
+
+def test_hand_eye_and_axis_from_exact_poses_to_a_micrometre() -> None:
+    rotvecs, angles = _varied(12)
+    # the nominal X the cell would hold is irrelevant: OpenCV starts from the data
+    result = estimate(_synthetic(X_TRUE, A_TRUE, rotvecs, angles, DEFAULT_TARGET.centres_table), DEFAULT_TARGET)
+    mm, deg = pose_error(result.T_flange_camera, X_TRUE)
+    assert mm < 1e-3 and deg < 1e-4  # 1e-6 m, ~2e-6 rad
+    axis_mm, axis_deg = axis_error(
+        result.axis_point_base, result.axis_direction_base, A_TRUE.translation, A_TRUE.rotation[:, 2]
+    )
+    assert axis_mm < 1e-3 and axis_deg < 1e-4
+    assert np.abs(result.centres_table - DEFAULT_TARGET.centres_table).max() < 1e-6
+    assert result.rms_mm < 1e-3 and result.residuals_mm.shape == (12,)
+    assert result.hand_eye_std_mm < 1e-3  # exact data: no spread
+
+
+def test_too_few_captures_is_a_clear_error() -> None:
+    rotvecs, angles = _varied(4)
+    with pytest.raises(CalibrationError, match="4 captures saw three or more spheres, need at least 6"):
+        estimate(_synthetic(X_TRUE, A_TRUE, rotvecs, angles, DEFAULT_TARGET.centres_table), DEFAULT_TARGET)
+    with pytest.raises(CalibrationError, match="no captures"):
+        estimate([], DEFAULT_TARGET)
+
+
+def test_one_plate_angle_is_a_clear_error() -> None:
+    rotvecs, _ = _varied(8)
+    captures = _synthetic(X_TRUE, A_TRUE, rotvecs, [30.0] * 8, DEFAULT_TARGET.centres_table)
+    with pytest.raises(CalibrationError, match="1 plate angles, need at least 3"):
+        estimate(captures, DEFAULT_TARGET)
+
+
+def test_poses_all_about_one_axis_are_degenerate() -> None:
+    # one camera pose looking straight down, only the plate turning: in the plate frame every rotation between
+    # captures is about the vertical (the hand-eye offset along it cannot be found)
+    angles = [0.0, 45.0, 90.0, 135.0, 180.0, -135.0, -90.0, -45.0]
+    captures = []
+    for i, angle_deg in enumerate(angles):
+        down = Pose.look_at([0.0, 0.0, 0.6], [0.0, 0.0, 0.0], up=(1.0, 0.0, 0.0))
+        T_base_flange = down @ X_TRUE.inverse()
+        theta = math.radians(angle_deg)
+        centres = (down.inverse() @ _rz(theta)).apply(DEFAULT_TARGET.centres_table)
+        captures.append(Capture(T_base_flange, theta, centres, np.zeros(4), f"c{i}"))
+    with pytest.raises(CalibrationError, match="degenerate poses: the camera turns about one axis only"):
+        estimate(captures, DEFAULT_TARGET)
+
+
+def test_target_not_seen_is_a_clear_error() -> None:
+    rotvecs, angles = _varied(8)
+    captures = _synthetic(X_TRUE, A_TRUE, rotvecs, angles, DEFAULT_TARGET.centres_table)
+    blind = [Capture(c.T_base_flange, c.plate_angle, np.full((4, 3), np.nan), np.full(4, np.nan)) for c in captures]
+    with pytest.raises(CalibrationError, match="the target was not seen in any of the 8 captures"):
+        estimate(blind, DEFAULT_TARGET)
+
+
+CELL = """\
+# the lab's cell
+[devices]
+allow_auto = false
+
+[devices.camera]
+driver = "sim"
+
+[devices.hand_eye]            # measured by hand
+translation = [0.0, 0.0, 0.05]
+rotation_deg = [0.0, 0.0, 0.0]
+
+[devices.arm_base]
+translation = [-0.85, 0.0, 0.0]
+rotation_deg = [0.0, 0.0, 0.0]
+
+[planner]
+resolution = 0.01
+"""
+
+
+def _result() -> CalibrationResult:
+    return CalibrationResult(
+        T_flange_camera=X_TRUE,
+        axis_point_base=A_TRUE.translation,
+        axis_direction_base=A_TRUE.rotation[:, 2],
+        centres_table=DEFAULT_TARGET.centres_table,
+        hand_eye_std_mm=0.3,
+        hand_eye_std_deg=0.05,
+        axis_std_mm=0.1,
+        axis_std_deg=0.04,
+        residuals_mm=np.array([0.2, 0.3]),
+        rms_mm=0.25,
+        labels=("a", "b"),
+        T_flange_camera_initial=X_TRUE,
+    )
+
+
+def test_writing_the_cell_file_keeps_a_backup_and_round_trips(tmp_path: Path) -> None:
+    path = tmp_path / "cell.toml"
+    path.write_text(CELL)
+    backup = write_calibration(path, _result())
+    assert backup.read_text() == CELL and backup.name.startswith("cell.toml.") and backup.suffix == ".bak"
+    cell = load_cell_file(path)
+    assert np.allclose(cell.hand_eye.matrix, X_TRUE.matrix, atol=1e-6)
+    # the base frame moves onto the measured axis: the arm base by minus its offset
+    assert np.allclose(cell.arm_base.translation, [-0.85 - 0.0015, 0.002, 0.0], atol=1e-9)
+    text = path.read_text()
+    assert "# the lab's cell" in text and "[planner]\nresolution = 0.01" in text  # the rest is kept
+    assert "turntable axis tilt 0.286 deg" in text  # the tilt, reported
+    assert text.count("[devices.hand_eye]") == 1 and text.count("[devices.arm_base]") == 1
+    # writing again round-trips: the same values, a second backup
+    again = write_calibration(path, _result())
+    assert again.exists() and np.allclose(load_cell_file(path).hand_eye.matrix, X_TRUE.matrix, atol=1e-6)
+
+
+def test_a_cell_file_without_the_sections_gets_them(tmp_path: Path) -> None:
+    text = calibrated_cell_text('[devices]\n[devices.camera]\ndriver = "sim"\n', _result(), Pose.identity())
+    path = tmp_path / "c.toml"
+    path.write_text(text)
+    cell = load_cell_file(path)
+    assert np.allclose(cell.hand_eye.matrix, X_TRUE.matrix, atol=1e-6)
+    assert np.allclose(cell.arm_base.translation, [-0.0015, 0.002, 0.0])
+
+
+def test_a_bad_cell_file_is_refused_and_left_alone(tmp_path: Path) -> None:
+    path = tmp_path / "cell.toml"
+    bad = textwrap.dedent("""\
+        [devices]
+        hand_eye = { translation = [0, 0, 0.05] }
+        """)
+    path.write_text(bad)
+    with pytest.raises(ValueError):
+        write_calibration(path, _result())
+    assert path.read_text() == bad and sorted(p.name for p in tmp_path.iterdir()) == ["cell.toml"]
