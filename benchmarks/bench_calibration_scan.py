@@ -27,11 +27,10 @@ from devices.config import CameraConfig, CellConfig
 from devices.mesh import sample_surface
 from devices.planner_noise import planner_config_for
 from devices.sim import make_sim_cell
-from nbv.scan import run_scan
 from planner import Planner
 from planner.config import PlannerConfig
 from planner.types import Pose
-from workbench.evaluation import GroundTruth
+from workbench.evaluation import GroundTruth, run_scan
 
 
 def _scan(mesh: Any, camera: CameraConfig, cell_config: CellConfig, seed: int, patch: Any = None) -> float:

@@ -178,12 +178,12 @@ class HardwareCell(Cell):
             q = last
         return "arm at joints [" + ", ".join(f"{math.degrees(float(v)):.2f}" for v in q) + "] deg"
 
-    def move_to(self, T_table_camera: Pose) -> Motion:
-        """:meth:`Cell.move_to`; a DeviceError (a fault, a refused trajectory, a stop) names the arm's last joints."""
+    def move_to(self, T_table_camera: Pose, plate_angle: float | None = None) -> Motion:
+        """:meth:`Cell.move_to` (``plate_angle`` as there); a DeviceError (a fault, a refused trajectory, a stop) names the arm's last joints."""
         self.stop_requested.clear()
         self.moving.set()
         try:
-            motion = super().move_to(T_table_camera)
+            motion = super().move_to(T_table_camera, plate_angle)
             if self.stop_requested.is_set():
                 raise DeviceError("stopped on request")
             return motion
