@@ -335,6 +335,7 @@ class SessionCore:
                 plate_radius=self.devices.cell.plate_radius,
                 fov_y=float(2.0 * np.arctan2(k.height / 2.0, k.fy)),
                 aspect=k.width / k.height,
+                surface=None if self._surface is None else self._surface.layer,
             )
 
     def object_region(self) -> ObjectRegion:
