@@ -307,7 +307,7 @@ class SessionDrawing:
         self.surface_sends += 1
         self._put("/surface", self.scene.add_mesh_simple(
             "/surface", data.surface.vertices.astype(np.float32), data.surface.faces.astype(np.uint32),
-            color=COLORS["surface"], flat_shading=False, side="double", cast_shadow=False, receive_shadow=False,
+            color=COLORS["surface"], flat_shading=True, side="double", cast_shadow=False, receive_shadow=False,
         ))  # fmt: skip
 
     def _draw_mesh(self, data: SceneData) -> None:

@@ -266,3 +266,17 @@ def test_surface_block_of_a_scan(box: trimesh.Trimesh, box_frames, box_surface: 
         empty.integrate(frame)
     nothing, failed = surface_block(empty, box)
     assert nothing is None and failed["triangles"] == 0 and "empty surface" in failed["error"]
+
+
+def test_the_layer_fits_its_budget_fast_and_keeps_the_shape(box_surface: SurfaceMesh) -> None:
+    from workbench.surface import layer_mesh
+
+    budget = box_surface.triangles // 3
+    layer = layer_mesh(box_surface, budget)
+    assert 0.3 * budget < layer.triangles <= budget
+    assert layer_mesh(box_surface, box_surface.triangles) is box_surface  # within the budget: as it is
+    np.testing.assert_allclose(layer.vertices.min(axis=0), box_surface.vertices.min(axis=0), atol=0.01)
+    np.testing.assert_allclose(layer.vertices.max(axis=0), box_surface.vertices.max(axis=0), atol=0.01)
+    assert layer.to_trimesh().area == pytest.approx(box_surface.to_trimesh().area, rel=0.1)
+    with pytest.raises(ValueError, match="max_triangles"):
+        layer_mesh(box_surface, 0)

@@ -12,7 +12,15 @@ for the browser, export to PLY / OBJ / GLB; its accuracy against the ground-trut
 """
 
 from workbench.surface.config import SurfaceConfig, SurfaceMethod
-from workbench.surface.export import EXPORT_FORMATS, LAYER_TRIANGLES, ExportFormat, export_bytes, layer_bytes, simplify
+from workbench.surface.export import (
+    EXPORT_FORMATS,
+    LAYER_TRIANGLES,
+    ExportFormat,
+    export_bytes,
+    layer_bytes,
+    layer_mesh,
+    simplify,
+)
 from workbench.surface.integrator import SurfaceIntegrator, reconstruct
 from workbench.surface.mesh import SurfaceError, SurfaceMesh
 from workbench.surface.report import surface_block
@@ -39,6 +47,7 @@ __all__ = [
     "export_bytes",
     "ground_truth",
     "layer_bytes",
+    "layer_mesh",
     "reconstruct",
     "simplify",
     "surface_accuracy",

@@ -1,8 +1,8 @@
 """``LiveSurface``: a session's surface as it follows the scan, and :class:`SurfaceUpdate`, what the server keeps.
 
 It runs where the session's integration runs (its worker process, workbench/workers/child.py): each captured
-view's registered frame is fused (:class:`SurfaceIntegrator`), the surface extracted and simplified to the
-layer's triangle budget. The pose fused is the one the journal keeps (``pose_used``, through its JSON form), so
+view's registered frame is fused (:class:`SurfaceIntegrator`), the surface extracted and reduced to the
+layer's triangle budget (:func:`layer_mesh`, vertex clustering: fast). The pose fused is the one the journal keeps (``pose_used``, through its JSON form), so
 a rebuild from the journal (workbench/journal/surface.py) fuses the same numbers and gives the same surface.
 A surface that cannot be built never fails a capture: the update says why (``error``).
 """
@@ -17,7 +17,7 @@ from typing import Any
 from planner import DepthFrame, Pose
 from workbench.evaluation.accuracy import Accuracy, GroundTruth
 from workbench.surface.config import SurfaceConfig
-from workbench.surface.export import LAYER_TRIANGLES, layer_bytes, simplify
+from workbench.surface.export import LAYER_TRIANGLES, layer_bytes, layer_mesh
 from workbench.surface.integrator import SurfaceIntegrator
 from workbench.surface.mesh import SurfaceMesh
 from workbench.surface.report import SCORES
@@ -96,7 +96,7 @@ class LiveSurface:
         mesh = layer = None
         try:
             mesh = self.integrator.mesh()
-            layer = simplify(mesh, self.max_triangles)
+            layer = layer_mesh(mesh, self.max_triangles)
         except Exception as exc:
             mesh, layer = None, None
             error = f"{type(exc).__name__}: {exc}" if error is None else error
