@@ -18,7 +18,6 @@ import httpx
 from app.settings import AppSettings
 from tests.e2e.conftest import CHROMIUM_ARGS, chromium_path, free_port, running_server
 
-
 SURFACE_LAYERS = {
     "surface": True,
     **dict.fromkeys(("occupied", "frontier", "unknown", "cloud", "ellipsoids", "candidates", "sectors"), False),
