@@ -35,7 +35,7 @@ from workbench import SessionRegistry, WorkbenchSettings
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--model", type=Path, default=Path("../shared/models/bunny.obj"))
     parser.add_argument("--views", type=int, default=10)
     parser.add_argument("--seed", type=int, default=0)
