@@ -351,6 +351,9 @@ class MetricPoint(BaseModel):
     points: int
     plan_seconds: float | None
     decision: str | None
+    surface_fscore_5mm: float | None = Field(
+        default=None, description="the reconstructed surface's F-score at 5 mm after this view (simulated sessions)"
+    )
 
 
 class MetricsOut(BaseModel):
@@ -380,6 +383,10 @@ class ExportOut(BaseModel):
     plans: list[dict[str, Any]]
     decisions: list[dict[str, Any]]
     events: list[dict[str, Any]]
+    surface: dict[str, Any] = Field(
+        description="the reconstructed surface: fscore_2mm, fscore_5mm, precision_5mm, recall_5mm, chamfer_mm "
+        "(null without a ground truth), triangles, layer_triangles, views, seconds, error (why there is none)"
+    )
 
 
 class ArmTargetOut(BaseModel):

@@ -15,7 +15,9 @@ ceilings of its (model, placement) pairs. results.csv, per iteration:
 - ``fit_seconds``: ``projection``'s clustering + ellipsoid fitting (0 for the baselines).
   ``projection``'s full evaluation cost is eval + fit;
 - ``precision_5mm``, ``recall_5mm``, ``fscore_5mm``, the same at 2 mm, ``chamfer_mm``: the cloud's accuracy
-  after the view against the mesh (:mod:`workbench.evaluation.accuracy`; recall at 5 mm is the coverage).
+  after the view against the mesh (:mod:`workbench.evaluation.accuracy`; recall at 5 mm is the coverage);
+- ``surface_fscore_5mm``: the reconstructed surface's F-score at 5 mm (TSDF of every registered frame,
+  :mod:`workbench.surface`), on a run's last row only (empty on the others).
 
 Plots: ``ratio.png`` (coverage / ceiling against view, one panel per model, mean over seeds and
 placements with a ± one standard deviation band), ``coverage.png`` (raw coverage, ceiling dashed),
@@ -56,6 +58,7 @@ COLUMNS = (
     "views_to_95",
     "views_to_98",
     *ACCURACY_COLUMNS,
+    "surface_fscore_5mm",
 )
 """The columns of results.csv, in order."""
 

@@ -56,16 +56,20 @@ METRICS: tuple[tuple[str, str, bool, float, int], ...] = (
 """(key, label, higher is better, tie tolerance, digits) of the paired comparisons."""
 
 
-FSCORE_LABEL = "F@5mm at the last view"
-"""The accuracy row of the paired comparisons (precision and recall at 5 mm: ``workbench.evaluation``)."""
+FSCORES = (("fscore_5mm", "F@5mm at the last view"), ("surface_fscore_5mm", "surface F@5mm at the last view"))
+"""The accuracy rows of the paired comparisons: (results.csv column, label): the cloud's F-score at 5 mm
+(``workbench.evaluation``) and the reconstructed surface's (``workbench.surface``)."""
 
 
-def final_fscores(outcomes: Sequence[RunOutcome], planner: str) -> dict[tuple[str, int, float], float]:
-    """(model, seed, yaw) -> F@5mm at the last view of ``planner``'s finished runs (runs without one left out)."""
+def final_fscores(
+    outcomes: Sequence[RunOutcome], planner: str, column: str = "fscore_5mm"
+) -> dict[tuple[str, int, float], float]:
+    """(model, seed, yaw) -> ``column`` (an F-score) at the last view of ``planner``'s finished runs (runs
+    without one left out)."""
     out: dict[tuple[str, int, float], float] = {}
     for o in outcomes:
-        if o.planner == planner and o.error is None and o.rows and o.rows[-1].get("fscore_5mm") is not None:
-            out[o.key] = float(o.rows[-1]["fscore_5mm"])
+        if o.planner == planner and o.error is None and o.rows and o.rows[-1].get(column) is not None:
+            out[o.key] = float(o.rows[-1][column])
     return out
 
 
@@ -133,14 +137,15 @@ def ceiling_sections(
             body.append(
                 [p, label, str(c.n), f"{c.mean:+.{digits}f}", _interval(c, digits), f"{c.wins} / {c.ties} / {c.losses}"]
             )
-        mine_f, ref_f = final_fscores(ok, p), final_fscores(ok, reference)
-        c = paired_comparison(mine_f, ref_f, higher_is_better=True, tie=TIE)
-        if c is None:
-            body.append([p, FSCORE_LABEL, "0", "–", "–", "–"])
-        else:
-            body.append(
-                [p, FSCORE_LABEL, str(c.n), f"{c.mean:+.4f}", _interval(c, 4), f"{c.wins} / {c.ties} / {c.losses}"]
-            )
+        for column, label in FSCORES:
+            mine_f, ref_f = final_fscores(ok, p, column), final_fscores(ok, reference, column)
+            c = paired_comparison(mine_f, ref_f, higher_is_better=True, tie=TIE)
+            if c is None:
+                body.append([p, label, "0", "–", "–", "–"])
+            else:
+                body.append(
+                    [p, label, str(c.n), f"{c.mean:+.4f}", _interval(c, 4), f"{c.wins} / {c.ties} / {c.losses}"]
+                )
     lines += _table(head, body, left=2)
     lines += [
         "",

@@ -22,16 +22,23 @@ import zstandard
 from websockets.typing import Subprotocol
 
 SCENE_PREFIXES = ("/map", "/ellipsoids", "/gmm", "/candidates", "/nbv", "/selected", "/views", "/cloud",
-                  "/context/bbox", "/context/sectors", "/context/turntable", "/context/mesh", "/context/session", "/override")  # fmt: skip
+                  "/context/bbox", "/context/sectors", "/context/turntable", "/context/mesh", "/context/session", "/override", "/surface")  # fmt: skip
 """Node names that only a session draws."""
 
 
 def decode_frame(data: bytes) -> list[dict[str, Any]]:
-    """The messages of one server -> client frame."""
+    """The messages of one server -> client frame. An array sent as a binary buffer stays the placeholder
+    ``{"__binary_index": i, "dtype": ...}``, with ``"nbytes"``: its buffer's length, added."""
     size = int.from_bytes(data[0:8], "little")
     compressed = int.from_bytes(data[8:16], "little")
     inner = zstandard.ZstdDecompressor().decompress(data[16 : 16 + compressed], max_output_size=size)
-    return list(msgspec.msgpack.decode(inner)["messages"])
+    decoded = msgspec.msgpack.decode(inner)
+    lengths = decoded.get("binaryBufferLengths") or []
+    for message in decoded["messages"]:
+        for value in (message.get("props") or {}).values():
+            if isinstance(value, dict) and "__binary_index" in value and value["__binary_index"] < len(lengths):
+                value["nbytes"] = int(lengths[value["__binary_index"]])
+    return list(decoded["messages"])
 
 
 def session_nodes(messages: list[dict[str, Any]]) -> set[str]:

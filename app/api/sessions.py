@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Body, Response
 from fastapi.responses import JSONResponse
@@ -144,6 +144,28 @@ def cloud_ply(session: SessionDep) -> Response:
         ply_bytes(session.planner.cloud),
         media_type="application/octet-stream",
         headers={"Content-Disposition": f'attachment; filename="nbv-{session.id}-cloud.ply"'},
+    )
+
+
+SURFACE_MEDIA = {"ply": "application/octet-stream", "obj": "text/plain", "glb": "model/gltf-binary"}
+"""The media type of each surface format."""
+
+
+@router.get(
+    "/{session_id}/surface.ply",
+    response_class=Response,
+    responses={
+        200: {"content": {media: {} for media in SURFACE_MEDIA.values()}},
+        409: {"description": "no surface yet (no view captured, or none saw the object)"},
+    },
+)
+def surface_file(session: SessionDep, format: Literal["ply", "obj", "glb"] = "ply") -> Response:
+    """The reconstructed surface (TSDF of the registered views, the plate cut away) as binary PLY, or as
+    ``?format=obj`` / ``?format=glb``. 409 before there is a surface."""
+    return Response(
+        session.surface_file(format),
+        media_type=SURFACE_MEDIA[format],
+        headers={"Content-Disposition": f'attachment; filename="nbv-{session.id}-surface.{format}"'},
     )
 
 

@@ -11,11 +11,13 @@ Node names (stable, per client)::
     /context/bbox /context/sectors /context/turntable /context/mesh
     /context/session                                         "session ID": which session this scene shows
     /cloud/0, /cloud/1, ...                                  the registered cloud, one chunk per new part
+    /surface                                                 the reconstructed surface (simplified, one mesh)
     /override/gizmo (+ /override/gizmo/frustum)              custom-pose transform gizmo
 
 What is re-sent: the plan's layers when the plan changes, only the views and cloud points that are new after
 a capture, the selection when it changes. Hidden heavy layers (``LAZY``: empty / unknown voxels, GMM
-ellipsoids, the ground-truth mesh) are sent only when first shown.
+ellipsoids, the ground-truth mesh) are sent only when first shown. The surface is sent while its layer is shown,
+again only when the session's surface changed (a new view, a discard).
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ from app.scene.geometry import (
 )
 from planner import PlanResult, Pose
 from workbench import SceneData
+from workbench.surface import SurfaceMesh
 
 log = logging.getLogger(__name__)
 
@@ -81,6 +84,9 @@ class SessionDrawing:
         self._cloud_chunks = 0
         self._selection_key: tuple[Any, ...] | None = None
         self._context = False
+        self._surface: SurfaceMesh | None = None  # the surface drawn now
+        self.surface_sends = 0
+        """How many times the surface was sent (it is re-sent only when it changed)."""
         for name, layer in GROUPS.items():
             visible = True if layer is None else self.layers[layer]
             self._put(name, self.scene.add_frame(name, show_axes=False, visible=visible))
@@ -107,6 +113,7 @@ class SessionDrawing:
             self._sync_views(data)
             self._sync_cloud(data)
             self._sync_selection(data)
+            self._sync_surface(data)
             for layer in LAZY:
                 if self.layers[layer] and layer not in self._drawn_lazy:
                     self._draw_lazy(layer, data)
@@ -122,6 +129,7 @@ class SessionDrawing:
             self._cloud_cells.clear()
             self._selection_key = None
             self._context = False
+            self._surface = None
 
     def set_layers(self, changes: dict[str, bool]) -> None:
         """Show / hide layers (names checked by the caller); a lazy layer shown for the first time is sent now."""
@@ -134,6 +142,8 @@ class SessionDrawing:
                         handle.visible = on
                 if on and layer in LAZY and layer not in self._drawn_lazy and self._data is not None:
                     self._draw_lazy(layer, self._data)
+            if changes.get("surface") and self._data is not None:
+                self._sync_surface(self._data)
             if "gizmo" in changes and self._data is not None:
                 self._selection_key = None
                 self._sync_selection(self._data)
@@ -284,6 +294,20 @@ class SessionDrawing:
         self._put("/context/turntable", self.scene.add_cylinder(
             "/context/turntable", radius=data.plate_radius, height=0.01, color=COLORS["plate"], radial_segments=48,
             position=(0.0, 0.0, -0.0051), cast_shadow=False, receive_shadow=False, visible=self.layers["turntable"],
+        ))  # fmt: skip
+
+    def _sync_surface(self, data: SceneData) -> None:
+        """Send the surface when its layer is shown and it is not the one drawn (drop it when there is none)."""
+        if data.surface is self._surface or not self.layers["surface"]:
+            return
+        self._drop("/surface")
+        self._surface = data.surface
+        if data.surface is None:
+            return
+        self.surface_sends += 1
+        self._put("/surface", self.scene.add_mesh_simple(
+            "/surface", data.surface.vertices.astype(np.float32), data.surface.faces.astype(np.uint32),
+            color=COLORS["surface"], flat_shading=True, side="double", cast_shadow=False, receive_shadow=False,
         ))  # fmt: skip
 
     def _draw_mesh(self, data: SceneData) -> None:

@@ -40,6 +40,7 @@ DEFAULT_LAYERS: dict[str, bool] = {
     "cloud": True,
     "turntable": True,
     "mesh": False,
+    "surface": False,
     "gizmo": False,
 }
 LAYER_NODES: dict[str, tuple[str, ...]] = {
@@ -57,6 +58,7 @@ LAYER_NODES: dict[str, tuple[str, ...]] = {
     "cloud": ("/cloud",),
     "turntable": ("/context/turntable",),
     "mesh": ("/context/mesh",),
+    "surface": ("/surface",),
     "gizmo": ("/override",),
 }
 GROUPS: dict[str, str | None] = {
@@ -87,6 +89,7 @@ COLORS: dict[str, tuple[int, int, int]] = {
     "cloud": (20, 20, 20),
     "plate": (205, 195, 180),
     "mesh": (200, 170, 120),
+    "surface": (120, 160, 205),
     "custom_ok": (0, 170, 70),
     "custom_bad": (220, 0, 0),
 }

@@ -25,6 +25,7 @@ const S = {
 };
 const FORM_KEY = "nbv-form";
 const LAYER_KEY = "nbv-layers";
+const SURFACE_FORMATS = ["ply", "obj", "glb"]; // GET /api/sessions/{id}/surface.ply?format=
 
 // ------------------------------------------------------------------ helpers
 
@@ -314,6 +315,7 @@ function updateButtons() {
   $("create").disabled = S.inFlight;
   $("delete").disabled = S.inFlight || !S.session;
   for (const id of ["export-ply", "export-json"]) $(id).classList.toggle("disabled", !st);
+  for (const fmt of SURFACE_FORMATS) $(`export-surface-${fmt}`).classList.toggle("disabled", !st || !st.iteration);
 }
 
 function renderStatus(st) {
@@ -547,6 +549,9 @@ async function init() {
     document.title = `${S.session} · NBV workbench`;
     $("export-ply").href = withToken(`/api/sessions/${S.session}/cloud.ply`);
     $("export-json").href = withToken(`/api/sessions/${S.session}/export`);
+    for (const fmt of SURFACE_FORMATS) {
+      $(`export-surface-${fmt}`).href = withToken(`/api/sessions/${S.session}/surface.ply?format=${fmt}`);
+    }
     connectEvents(500);
     await openViewer();
   } else {

@@ -3,6 +3,7 @@ incremental updates, layers, clicks and the gizmo, the viewer URL."""
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 from types import SimpleNamespace
 from typing import Any
@@ -291,3 +292,40 @@ def test_two_viewers_of_one_session_stay_in_step(scene_client: TestClient, plann
     finally:
         r1.close()
         r2.close()
+
+
+def test_the_surface_layer_is_sent_when_shown_and_again_only_when_it_changed(
+    scene_client: TestClient, planned_session
+) -> None:
+    sid, plan = planned_session(scene_client)
+    body, raw = open_viewer(scene_client, sid)
+
+    def surface_meshes() -> list[dict[str, Any]]:
+        return [m for m in raw.messages() if m.get("name") == "/surface" and "Mesh" in m.get("type", "")]
+
+    try:
+        vid = body["viewer"]
+        assert wait_for(lambda: scene_client.get(f"/api/scene/{vid}").json()["connected"])
+        layers = scene_client.get(f"/api/scene/{vid}").json()["layers"]
+        assert layers["surface"] is False and "/surface" not in drawn(scene_client, vid)  # hidden: not sent
+        assert scene_client.put(f"/api/scene/{vid}/layers", json={"surface": True}).json()["surface"] is True
+        assert "/surface" in drawn(scene_client, vid)
+        assert wait_for(lambda: len(surface_meshes()) == 1)
+        first = surface_meshes()[0]
+        layer = scene_client.app.state.registry.get(sid).surface.layer  # type: ignore[attr-defined]
+        assert 0 < layer.triangles <= 15_000
+        props = first["props"]
+        assert props["vertices"]["nbytes"] == 12 * len(layer.vertices)  # float32, as the layer's budget counts
+        assert props["faces"]["nbytes"] == 12 * layer.triangles
+        # off and on again, a new plan: the same surface, not sent again
+        scene_client.put(f"/api/scene/{vid}/layers", json={"surface": False})
+        scene_client.put(f"/api/scene/{vid}/layers", json={"surface": True})
+        plan = scene_client.post(f"/api/sessions/{sid}/plan").json()
+        time.sleep(0.3)
+        assert len(surface_meshes()) == 1
+        # a new view changes the surface: sent once more
+        body2 = {"plan_id": plan["plan_id"], "index": plan["best"]["index"]}
+        assert scene_client.post(f"/api/sessions/{sid}/approve", json=body2).status_code == 200
+        assert wait_for(lambda: len(surface_meshes()) == 2)
+    finally:
+        raw.close()

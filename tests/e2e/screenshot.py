@@ -1,5 +1,7 @@
 """Take the README screenshots of the workbench page:
-``python -m tests.e2e.screenshot docs/workbench.png 1600 1000`` (and ``docs/workbench-1024.png 1024 700``).
+``python -m tests.e2e.screenshot docs/workbench.png 1600 1000`` (and ``docs/workbench-1024.png 1024 700``);
+``python -m tests.e2e.screenshot docs/workbench-surface.png 1600 1000 --surface``: the reconstructed surface layer
+shown (the voxel and cloud layers hidden), after more views.
 
 Scans the built-in L-block for a few views, plans, selects a candidate other than the planner's choice (so the
 inspector shows its breakdown and projection), points this tab's viewer at the object and saves the page.
@@ -16,8 +18,16 @@ import httpx
 from app.settings import AppSettings
 from tests.e2e.conftest import CHROMIUM_ARGS, chromium_path, free_port, running_server
 
+SURFACE_LAYERS = {
+    "surface": True,
+    **dict.fromkeys(("occupied", "frontier", "unknown", "cloud", "ellipsoids", "candidates", "sectors"), False),
+}
+"""The layers of the surface screenshot (the rest as the page has them)."""
 
-def main(out: str = "docs/workbench.png", width: int = 1600, height: int = 1000, steps: int = 2) -> None:
+
+def main(
+    out: str = "docs/workbench.png", width: int = 1600, height: int = 1000, steps: int = 2, surface: bool = False
+) -> None:
     from playwright.sync_api import expect, sync_playwright
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -41,7 +51,13 @@ def main(out: str = "docs/workbench.png", width: int = 1600, height: int = 1000,
                 if api.get(f"/api/scene/{viewer}").json()["connected"]:
                     break
                 page.wait_for_timeout(200)
-            api.post(f"/api/scene/{viewer}/camera", json={"position": [0.8, -0.62, 0.6], "look_at": [0.0, 0.0, 0.06]})
+            eye = [0.42, -0.33, 0.3] if surface else [0.8, -0.62, 0.6]
+            api.post(f"/api/scene/{viewer}/camera", json={"position": eye, "look_at": [0.0, 0.0, 0.06]})
+            if surface:
+                for name, on in SURFACE_LAYERS.items():  # through the layer bar, as a person would
+                    box = page.locator(f"#layers input[data-layer='{name}']")
+                    if box.is_checked() != on:
+                        box.click()
             close = page.frame_locator("#viewer").locator("button.mantine-Notification-closeButton")
             if close.count():
                 close.first.dispatch_event("click")  # under the page's layer bar (a headless-only warning)
@@ -53,5 +69,7 @@ def main(out: str = "docs/workbench.png", width: int = 1600, height: int = 1000,
 
 
 if __name__ == "__main__":
-    args = sys.argv[1:]
-    main(args[0] if args else "docs/workbench.png", *(int(a) for a in args[1:3]))
+    args = [a for a in sys.argv[1:] if a != "--surface"]
+    with_surface = "--surface" in sys.argv[1:]
+    main(args[0] if args else "docs/workbench.png", *(int(a) for a in args[1:3]), steps=5 if with_surface else 2,
+         surface=with_surface)  # fmt: skip

@@ -69,6 +69,11 @@ def check_outputs(out: Path, reachable: bool) -> list[dict[str, str]]:
         assert int(r["points"]) > 0
         assert 0.0 < float(r["eval_seconds"]) < float(r["plan_seconds"])
         assert (float(r["fit_seconds"]) > 0.0) == (r["planner"] == "projection")
+        # the final surface's F@5mm on a run's last row only, at or below 1 and not far below the cloud's
+        if r["iteration"] == "2":
+            assert float(r["fscore_5mm"]) - 0.1 < float(r["surface_fscore_5mm"]) <= 1.0
+        else:
+            assert r["surface_fscore_5mm"] == ""
     ceilings = {r["reachable_coverage"] for r in rows}
     if reachable:  # computed once per (model, placement) and shared by every planner's rows
         assert len(ceilings) == 1
@@ -96,6 +101,7 @@ def check_outputs(out: Path, reachable: bool) -> list[dict[str, str]]:
         assert heading in text
     if reachable:
         assert "| random | coverage / ceiling at the last view | 1 |" in text
+        assert "| random | surface F@5mm at the last view | 1 |" in text
     page = (out / "report.html").read_text()
     assert page.startswith("<!DOCTYPE html>") and "<table>" in page and "data:image/png;base64," in page
     assert "<h2>Paired comparison against projection</h2>" in page
@@ -175,6 +181,7 @@ def _outcome(planner: str, evals: list[float], fits: list[float], cov: float) ->
         }
         for i, (e, f) in enumerate(zip(evals, fits, strict=True))
     ]
+    rows[-1]["surface_fscore_5mm"] = cov + 0.1  # the final surface's F@5mm, on the last row
     return RunOutcome("m", planner, 0, rows=rows, terminated="max_views", seconds=1.0)
 
 
@@ -204,6 +211,7 @@ def test_summary_numbers() -> None:
     assert "| projection | 0.8889 | 0.8889 | 3.00 | 3.00 | 3.00 |" in text
     assert "| raycast-oa | coverage / ceiling at the last view | 1 | -0.1111 | – | 0 / 0 / 1 |" in text
     assert "| raycast-oa | views to 95 % of the ceiling | 1 | +0.00 | – | 0 / 1 / 0 |" in text
+    assert "| raycast-oa | surface F@5mm at the last view | 1 | -0.1000 | – | 0 / 0 / 1 |" in text
 
 
 @pytest.mark.parametrize(

@@ -4,6 +4,7 @@ accuracy against the true mesh, determinism, simplification, export and bad inpu
 from __future__ import annotations
 
 import io
+from typing import Any, cast
 
 import numpy as np
 import pytest
@@ -266,3 +267,37 @@ def test_surface_block_of_a_scan(box: trimesh.Trimesh, box_frames, box_surface: 
         empty.integrate(frame)
     nothing, failed = surface_block(empty, box)
     assert nothing is None and failed["triangles"] == 0 and "empty surface" in failed["error"]
+
+
+def test_the_layer_fits_its_budget_fast_and_keeps_the_shape(box_surface: SurfaceMesh) -> None:
+    from workbench.surface import layer_mesh
+
+    budget = box_surface.triangles // 3
+    layer = layer_mesh(box_surface, budget)
+    assert 0.3 * budget < layer.triangles <= budget
+    assert layer_mesh(box_surface, box_surface.triangles) is box_surface  # within the budget: as it is
+    np.testing.assert_allclose(layer.vertices.min(axis=0), box_surface.vertices.min(axis=0), atol=0.01)
+    np.testing.assert_allclose(layer.vertices.max(axis=0), box_surface.vertices.max(axis=0), atol=0.01)
+    assert layer.to_trimesh().area == pytest.approx(box_surface.to_trimesh().area, rel=0.1)
+    with pytest.raises(ValueError, match="max_triangles"):
+        layer_mesh(box_surface, 0)
+
+
+def test_a_live_surface_never_raises_and_says_why(box: trimesh.Trimesh, box_frames, box_surface: SurfaceMesh) -> None:
+    from workbench.journal.surface import in_step
+    from workbench.surface.live import LiveSurface, update_block
+
+    live = LiveSurface()
+    empty = live.add(ring_of_views(None, views=1)[0], box_frames[0].T_world_camera)  # nothing above the plate
+    assert empty.mesh is None and empty.layer is None and "empty surface" in (empty.error or "")
+    assert update_block(empty)["triangles"] == 0 and update_block(empty)["error"] == empty.error
+    noted = live.add(cast(Any, "not a frame"), box_frames[0].T_world_camera)  # a failure of any kind is noted
+    assert live.views == 2 and "not fused" in (noted.error or "") and noted.mesh is None
+    for f in box_frames:
+        update = live.add(f, f.T_world_camera)
+    assert update.error is None and update.views == 2 + len(box_frames) and update.layer is not None
+    assert update.mesh == box_surface  # the failed views changed nothing
+    # out of step with the session's views and no journal: an empty surface that says what was lost
+    lost = in_step(live, 3, None)
+    assert lost is not live and lost.views == 3 and "lost" in (lost.update.error or "")
+    assert in_step(live, live.views, None) is live

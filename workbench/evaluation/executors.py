@@ -69,6 +69,10 @@ def _execute(task: RunTask, mesh: MeshPayload | None, t0: float) -> RunOutcome:
     from workbench.evaluation.accuracy import ACCURACY_COLUMNS
     from workbench.evaluation.scan import icp_rejections
     from workbench.evaluation.simulate import simulate
+    from workbench.surface.integrator import SurfaceIntegrator
+    from workbench.surface.report import surface_block
+
+    surface = SurfaceIntegrator()
 
     scan = simulate(
         task.model if mesh is None else task.label,
@@ -85,6 +89,7 @@ def _execute(task: RunTask, mesh: MeshPayload | None, t0: float) -> RunOutcome:
         mesh=None if mesh is None else mesh.to_trimesh(),
         sensor=task.sensor,
         calibration=task.calibration,
+        on_frame=surface.integrate,
     )
     outcome = RunOutcome(task.label, task.planner, task.seed, task.yaw_deg, terminated=scan.result.terminated)
     outcome.refused_moves = scan.result.refused_moves
@@ -104,9 +109,14 @@ def _execute(task: RunTask, mesh: MeshPayload | None, t0: float) -> RunOutcome:
                 "fit_seconds": r.timings.get("cluster", 0.0) + r.timings.get("ellipsoids", 0.0),
                 "robot_seconds": r.robot_seconds,
                 **{k: None if r.accuracy is None else r.accuracy[k] for k in ACCURACY_COLUMNS},
+                "surface_fscore_5mm": None,
             }
         )
         outcome.poses.append(r.pose.to_dict())
+    if outcome.rows:  # the final surface, scored like the cloud (the same surface samples for recall)
+        outcome.rows[-1]["surface_fscore_5mm"] = surface_block(surface, scan.mesh, scan.surface_samples)[1][
+            "fscore_5mm"
+        ]
     outcome.seconds = time.perf_counter() - t0
     return outcome
 

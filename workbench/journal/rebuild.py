@@ -28,6 +28,7 @@ from workbench.planning import plan_in
 from workbench.session.record import SessionRecord
 from workbench.session.summaries import best_of, capture_fields, plan_fields, voxel_counts
 from workbench.session.values import PendingPlan
+from workbench.surface.live import SurfaceUpdate
 
 SCORE_RTOL = 1e-9
 """Relative tolerance of a replayed score (the same computation on the same build is exact)."""
@@ -68,6 +69,8 @@ class Rebuilt:
     """Events of the journal replayed (all of them unless one was damaged)."""
     dropped: list[str] = field(default_factory=list)
     """What was lost: the damaged event or frame, and how many events after it (empty when nothing was)."""
+    surface: SurfaceUpdate | None = None
+    """The surface of the kept captures (workbench/journal/surface.py), when the rebuild was asked for it."""
 
 
 def _close(a: float | None, b: float | None, rtol: float = SCORE_RTOL) -> bool:

@@ -34,7 +34,7 @@ from workbench.session.values import SessionEvent
 from workbench.settings import WorkbenchSettings
 from workbench.sources.limits import check_config
 from workbench.sources.parts import SURFACE_SAMPLES, SessionParts, build_parts, session_devices
-from workbench.workers.client import JobKilled, offload_rendering, render_spec
+from workbench.workers.client import JobKilled, offload_rendering, render_spec, truth_spec
 from workbench.workers.pool import Engine
 
 __all__ = ["SURFACE_SAMPLES", "DormantSession", "SessionRegistry"]
@@ -283,6 +283,7 @@ class SessionRegistry:
         worker = None
         if self.engine is not None:
             worker = self.engine.worker(sid, render_spec(parts.cell, devices.cell))
+            worker.truth = truth_spec(parts.mesh, parts.surface_samples)
             offload_rendering(parts.cell, worker, s.capture_budget)
             worker.start_soon()
         session = Session(

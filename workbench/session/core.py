@@ -30,7 +30,8 @@ from numpy.typing import NDArray
 
 from devices.config import DeviceConfig
 from planner import Planner, PlannerConfig, PlanResult, VoxelClass
-from workbench.errors import Conflict, DeviceFault, Gone
+from workbench.errors import Conflict, DeviceFault, Gone, Invalid
+from workbench.evaluation.accuracy import GroundTruth
 from workbench.evaluation.curves import ceiling_metrics
 from workbench.journal.rebuild import Rebuilt
 from workbench.journal.store import JournalWriter, make_event
@@ -42,6 +43,8 @@ from workbench.session.summaries import capture_fields, plan_fields, session_sta
 from workbench.session.values import CustomPose, Decision, FailedStep, PendingPlan, SceneData, SessionEvent
 from workbench.session.view_step import ViewOutcome, ViewStep, failure_of
 from workbench.sources.parts import SessionParts
+from workbench.surface.export import EXPORT_FORMATS, export_bytes
+from workbench.surface.live import SurfaceUpdate, update_block
 from workbench.workers.client import SessionWorker
 
 log = logging.getLogger(__name__)
@@ -96,6 +99,8 @@ class SessionCore:
         self.step_runner = ViewStep(
             self.cell, journal, parts.surface_samples, capture_timeout, move_timeout, worker, capture_budget
         )
+        if worker is None and parts.surface_samples is not None and len(parts.mesh.faces):
+            self.step_runner.truth = GroundTruth.of(parts.mesh, parts.surface_samples)  # the surface scored here
         self.record = SessionRecord(session_id, parts.model, config.to_dict(), seed, time.time())
         self.listeners: list[Listener] = []
         self.lock = threading.RLock()
@@ -116,6 +121,7 @@ class SessionCore:
         self._terminated: str | None = None  # planner facts cached under the lock: reads never touch the planner
         self._region: ObjectRegion | None = None
         self._occupied: NDArray[np.float64] = np.zeros((0, 3))
+        self._surface: SurfaceUpdate | None = None
         self._auto_remaining = 0
         self.stop_plan_asked = False
         """Stop was asked for the running plan (loop.stop_plan); the plan's failure then restores the state."""
@@ -289,9 +295,21 @@ class SessionCore:
             return {**self.record.metrics(), **ceiling_metrics(self.record.iterations, self.ceiling)}
 
     def export(self) -> dict[str, Any]:
-        """The whole session as one JSON document."""
+        """The whole session as one JSON document (with the surface's block, workbench/surface/live.py)."""
         with self.lock:
-            return self.record.export(self.status())
+            return {**self.record.export(self.status()), "surface": update_block(self._surface)}
+
+    def surface_file(self, fmt: str) -> bytes:
+        """The reconstructed surface as a ``fmt`` file ('ply', 'obj', 'glb'). Invalid for another format; Conflict
+        when there is no surface yet (no view, or none saw the object: the message says why)."""
+        if fmt not in EXPORT_FORMATS:
+            raise Invalid(f"format: one of {', '.join(EXPORT_FORMATS)}, got {fmt!r}")
+        with self.lock:
+            update = self._surface
+        if update is None or update.mesh is None:
+            why = "no view captured yet" if update is None else update.error
+            raise Conflict(f"session {self.id}: no surface yet ({why})")
+        return export_bytes(update.mesh, fmt)
 
     def plan_for(self) -> PendingPlan:
         """The pending plan, or the last plan when nothing is pending (for inspection). Conflict when none."""
@@ -317,6 +335,7 @@ class SessionCore:
                 plate_radius=self.devices.cell.plate_radius,
                 fov_y=float(2.0 * np.arctan2(k.height / 2.0, k.fy)),
                 aspect=k.width / k.height,
+                surface=None if self._surface is None else self._surface.layer,
             )
 
     def object_region(self) -> ObjectRegion:
@@ -399,6 +418,7 @@ class SessionCore:
                     decision=str(decision.kind),
                     plan_id=decision.plan_id,
                     device_state=self.cell.device_state(),
+                    surface_fscore_5mm=None if outcome.surface is None else outcome.surface.fscore_5mm,
                 )
             except OSError:
                 if stored is not None:
@@ -407,6 +427,7 @@ class SessionCore:
             self.planner = outcome.planner
             self._terminated = self.planner.terminated
             self._occupied = outcome.occupied
+            self._surface = outcome.surface
             self._region = None
             self._selected = None
             self._custom = None
@@ -453,6 +474,11 @@ class SessionCore:
         self.notify(SessionEvent.STATE)
         raise DeviceFault(f"session {self.id}: {message}. The map is unchanged; state error: plan again")
 
+    @property
+    def surface(self) -> SurfaceUpdate | None:
+        """The reconstructed surface after the last view (workbench/surface/live.py), None before the first."""
+        return self._surface
+
     def take_config(self, config: PlannerConfig, changes: dict[str, Any]) -> None:
         """Take ``config`` (the mutable sections changed by ``changes``), journaled (caller holds the lock)."""
         self.config = self.planner.config = config
@@ -476,6 +502,7 @@ class SessionCore:
             self._failed = None
             self._region = None
             self.moves = len(rebuilt.captures)
+            self._surface = rebuilt.surface if rebuilt.captures else None
             self._terminated = self.planner.terminated
             if rebuilt.captures:
                 self._occupied = self.planner.voxel_map.centers(VoxelClass.OCCUPIED)

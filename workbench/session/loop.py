@@ -19,6 +19,7 @@ from workbench.errors import Conflict, Invalid, NotFound, Unreachable
 from workbench.evaluation.coverage import coverage
 from workbench.journal.rebuild import Rebuilt, rebuild
 from workbench.journal.store import Journal
+from workbench.journal.surface import surface_of_journal
 from workbench.planning import plan_in
 from workbench.session.core import SessionCore
 from workbench.session.states import BUSY, Action, State
@@ -274,7 +275,9 @@ def replay(s: SessionCore, journal: Journal, progress: Callable[[str, int, int],
     worker = planning_worker(s)
     if worker is None:
         truth = None if samples is None else (lambda cloud: coverage(samples, cloud))
-        return rebuild(journal, s.cell, truth, progress)
+        rebuilt = rebuild(journal, s.cell, truth, progress)
+        rebuilt.surface = surface_of_journal(journal, s.step_runner.truth).update
+        return rebuilt
     q, angle = s.cell.joint_positions(), s.cell.angle
     rebuilt = worker.rebuild(journal, s.cell.config, q, angle, samples, progress)
     if rebuilt.planner.voxel_map.bbox is not None:

@@ -64,6 +64,7 @@ class SessionRecord:
                 "points": ev["points"],
                 "growth": ev.get("growth"),
                 "coverage": ev.get("coverage"),
+                "surface_fscore_5mm": ev.get("surface_fscore_5mm"),
                 "registration": ev.get("registration"),
                 "timings": ev.get("timings", {}),
                 "plan_seconds": None,
@@ -102,7 +103,10 @@ class SessionRecord:
         last = self.plans[-1] if self.plans else None
         return {
             "iterations": [
-                {k: r[k] for k in ("iteration", "coverage", "points", "plan_seconds", "decision")}
+                {
+                    k: r.get(k)
+                    for k in ("iteration", "coverage", "points", "plan_seconds", "decision", "surface_fscore_5mm")
+                }
                 for r in self.iterations
             ],
             "fits": [] if last is None else last["fits"],

@@ -12,6 +12,7 @@ import trimesh
 from numpy.typing import NDArray
 
 from planner import PlanResult, Pose
+from workbench.surface.mesh import SurfaceMesh
 
 
 class SessionEvent(StrEnum):
@@ -113,3 +114,5 @@ class SceneData:
     plate_radius: float
     fov_y: float
     aspect: float
+    surface: SurfaceMesh | None = None
+    """The reconstructed surface simplified for the page (``SurfaceUpdate.layer``), None before there is one."""

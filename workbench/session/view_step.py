@@ -1,4 +1,5 @@
-"""Taking one view, the device half of an approve: move, capture (each under a deadline), store, integrate.
+"""Taking one view, the device half of an approve: move, capture (each under a deadline), store, integrate (the
+map, then the surface).
 
 :class:`ViewStep` runs outside the session's lock after the session claimed a busy state; it touches no
 session field, so the session publishes its :class:`ViewOutcome` under its lock. ``Planner.integrate`` is
@@ -22,9 +23,12 @@ from devices.timeout import DeviceTimeoutError, call_with_timeout
 from planner import DepthFrame, Planner, Pose, VoxelClass
 from planner.planner import IntegrationReport
 from workbench.errors import DeviceFault, Unreachable, WorkbenchError
+from workbench.evaluation.accuracy import GroundTruth
 from workbench.evaluation.coverage import coverage
 from workbench.journal.store import JournalWriter
+from workbench.journal.surface import in_step
 from workbench.session.summaries import voxel_counts
+from workbench.surface.live import LiveSurface, SurfaceUpdate
 from workbench.workers.client import JobKilled, SessionWorker
 
 
@@ -44,6 +48,8 @@ class ViewOutcome:
     occupied: NDArray[np.float64]
     planner: Planner
     """The planner after the view (the session's own, or the copy its worker process integrated into)."""
+    surface: SurfaceUpdate | None = None
+    """The session's surface after the view (workbench/surface/live.py)."""
 
 
 @dataclass
@@ -59,7 +65,11 @@ class ViewStep:
     """Where integration (and the simulated camera's rendering) runs; None: in this process."""
     capture_budget: float = 30.0
     """The worker's budget for one integration, seconds (0: none)."""
+    truth: GroundTruth | None = None
+    """What the surface is scored against when integration runs in this process (a worker has its own)."""
     _moving: threading.Event | None = field(default=None, repr=False)
+    _surface: LiveSurface | None = field(default=None, repr=False)
+    """The surface when integration runs in this process (a worker keeps its own)."""
     """Set when the last move that timed out has really ended (None: no such move)."""
 
     def run(self, planner: Planner, pose: Pose, moved: Callable[[], None]) -> ViewOutcome:
@@ -89,17 +99,21 @@ class ViewStep:
                 raise
             if self.journal is not None:
                 stored = self.journal.write_frame(planner.iteration + 1, frame)
+            journal_dir = None if self.journal is None else self.journal.directory
             if self.worker is None:
+                views = len(planner.views)
                 report, after = planner.integrate(frame), planner  # atomic: a ValueError leaves the map as it was
-            else:
-                report, after = self.worker.integrate(planner, frame, self.capture_budget)  # works on a copy
+                self._surface = in_step(self._surface, views, journal_dir, self.truth)
+                surface = self._surface.add(frame, report.T_world_camera)
+            else:  # works on a copy; the worker keeps the surface
+                report, after, surface = self.worker.integrate(planner, frame, self.capture_budget, journal_dir)
         except Exception:
             if stored is not None:
                 self.discard_frame(stored[0])
             raise
         cov = None if self.surface_samples is None else float(coverage(self.surface_samples, after.cloud))
         occupied = after.voxel_map.centers(VoxelClass.OCCUPIED)
-        return ViewOutcome(frame, report, stored, voxel_counts(after), cov, occupied, after)
+        return ViewOutcome(frame, report, stored, voxel_counts(after), cov, occupied, after, surface)
 
     def discard_frame(self, name: str) -> None:
         """Remove a stored frame whose view was not taken (rejected, or its event could not be journaled)."""

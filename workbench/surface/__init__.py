@@ -6,23 +6,37 @@ for the browser, export to PLY / OBJ / GLB; its accuracy against the ground-trut
   :func:`reconstruct` ``(frames, config, box)`` at once (a rebuild: the same frames give the same surface);
 - :class:`SurfaceMesh`: the value (vertices, faces in canonical order; area, volume, watertight);
 - :func:`simplify` ``(surface, max_triangles)``, :func:`layer_bytes`, :func:`export_bytes` ``(surface, fmt)``;
-- :func:`surface_accuracy`, :func:`cloud_accuracy` -> :class:`Accuracy` (F-score at 2 and 5 mm, chamfer);
+- :func:`surface_accuracy`, :func:`cloud_accuracy`: the shared ``workbench.evaluation.Accuracy`` (F at 2 and 5 mm,
+  chamfer) of the surface's points (:func:`surface_points`) or a cloud; :func:`ground_truth` builds the truth once;
 - :func:`surface_block`: the ``surface`` block of a scan's metrics.json.
 """
 
 from workbench.surface.config import SurfaceConfig, SurfaceMethod
-from workbench.surface.export import EXPORT_FORMATS, LAYER_TRIANGLES, ExportFormat, export_bytes, layer_bytes, simplify
+from workbench.surface.export import (
+    EXPORT_FORMATS,
+    LAYER_TRIANGLES,
+    ExportFormat,
+    export_bytes,
+    layer_bytes,
+    layer_mesh,
+    simplify,
+)
 from workbench.surface.integrator import SurfaceIntegrator, reconstruct
 from workbench.surface.mesh import SurfaceError, SurfaceMesh
 from workbench.surface.report import surface_block
-from workbench.surface.scoring import GROUND_TRUTH_SAMPLES, Accuracy, cloud_accuracy, surface_accuracy
+from workbench.surface.scoring import (
+    GROUND_TRUTH_SAMPLES,
+    cloud_accuracy,
+    ground_truth,
+    surface_accuracy,
+    surface_points,
+)
 from workbench.surface.watertight import watertight
 
 __all__ = [
     "EXPORT_FORMATS",
     "GROUND_TRUTH_SAMPLES",
     "LAYER_TRIANGLES",
-    "Accuracy",
     "ExportFormat",
     "SurfaceConfig",
     "SurfaceError",
@@ -31,10 +45,13 @@ __all__ = [
     "SurfaceMethod",
     "cloud_accuracy",
     "export_bytes",
+    "ground_truth",
     "layer_bytes",
+    "layer_mesh",
     "reconstruct",
     "simplify",
     "surface_accuracy",
     "surface_block",
+    "surface_points",
     "watertight",
 ]

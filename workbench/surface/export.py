@@ -36,6 +36,32 @@ def simplify(surface: SurfaceMesh, max_triangles: int = LAYER_TRIANGLES) -> Surf
     return SurfaceMesh.canonical(np.asarray(small.vertices), faces)
 
 
+def layer_mesh(surface: SurfaceMesh, max_triangles: int = LAYER_TRIANGLES) -> SurfaceMesh:
+    """``surface`` for the page's layer, at most ``max_triangles`` triangles, fast: open3d's vertex clustering
+    on cells sized from the area for the budget (grown by 1.25 until it fits). About 15x faster than
+    :func:`simplify`'s quadric decimation (30 ms against 0.5 s for 39 000 -> 12 000 triangles on the bunny),
+    coarser where the surface is detailed; a surface within the budget is returned as it is."""
+    import open3d as o3d
+
+    if not isinstance(max_triangles, int) or isinstance(max_triangles, bool) or max_triangles < 1:
+        raise ValueError(f"max_triangles: must be an integer >= 1, got {max_triangles!r}")
+    if surface.triangles <= max_triangles:
+        return surface
+    mesh = o3d.geometry.TriangleMesh(
+        o3d.utility.Vector3dVector(surface.vertices.copy()), o3d.utility.Vector3iVector(surface.faces.astype(np.int32))
+    )
+    cell = float(np.sqrt(2.0 * surface.to_trimesh().area / max_triangles))
+    for _ in range(20):
+        small = mesh.simplify_vertex_clustering(cell)
+        small.remove_degenerate_triangles()
+        small.remove_unreferenced_vertices()
+        faces = np.asarray(small.triangles, dtype=np.int64)
+        if 0 < len(faces) <= max_triangles:
+            return SurfaceMesh.canonical(np.asarray(small.vertices), faces)
+        cell *= 1.25
+    raise SurfaceError(f"layer: no clustering fits {max_triangles} triangles")
+
+
 def layer_bytes(surface: SurfaceMesh) -> int:
     """Bytes of the surface as the scene sends it: float32 vertices and uint32 faces."""
     return 12 * len(surface.vertices) + 12 * surface.triangles

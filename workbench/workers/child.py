@@ -5,15 +5,19 @@ The server (workbench/workers/client.py) sends ``(kind, payload)`` over a Pipe a
 after the job pickled back), so a killed worker loses nothing: the server process keeps the session's planner
 and a fresh worker takes up the next job. Jobs:
 
+- ``("truth", TruthSpec)`` once per process (simulated sessions): what the surface is scored against;
 - ``("render", RenderSpec)`` once per process, then ``("render", T_table_camera)``: (H, W) float32 depth of the
   simulated camera (open3d ``cast_rays``, which holds the GIL for the whole image);
 - ``("plan", (planner, cell_config, q, angle))``: ``("progress", PlanProgress)`` messages on the way, then
   ``(PlanResult, planner)``, reachability by the cell's geometry
   and, for an arm model, its kinematics with the arm at joints ``q`` and the plate at ``angle`` (the same
   verdicts as the server's cell: reachability is a pure function of the view and the object box);
-- ``("integrate", (planner, frame))``: ``(IntegrationReport, planner)``;
+- ``("integrate", (planner, frame, journal_dir))``: ``(IntegrationReport, planner, SurfaceUpdate)``: the frame
+  at its registered pose fused into the session's surface, which this process keeps between jobs (a new
+  process rebuilds it from the journal in ``journal_dir`` first, workbench/journal/surface.py);
 - ``("rebuild", (journal, cell_config, q, angle, surface_samples))``: ``("progress", (stage, done, total))``
-  messages on the way, then the ``Rebuilt`` session (a resume or a discard replays its journal here).
+  messages on the way, then the ``Rebuilt`` session (a resume or a discard replays its journal here), its
+  surface rebuilt too (``Rebuilt.surface``).
 
 This module imports the planner and (on the first render) open3d; the server imports it only to name the
 target of its processes, and the forkserver preloads it so a new worker starts in milliseconds.
@@ -33,10 +37,13 @@ from devices.cell import Cell
 from devices.config import CameraConfig, CellConfig
 from planner import DepthFrame, Planner, Pose
 from planner.progress import PlanProgress
+from workbench.evaluation.accuracy import GroundTruth
 from workbench.journal.rebuild import Rebuilt
 from workbench.journal.store import Journal
+from workbench.journal.surface import in_step, surface_of_journal
 from workbench.planning import plan_in
 from workbench.progress import Throttle
+from workbench.surface.live import LiveSurface
 
 
 @dataclass(frozen=True, eq=False)
@@ -51,6 +58,19 @@ class RenderSpec:
     camera: CameraConfig
     plate_radius: float
     plate_thickness: float
+
+
+@dataclass(frozen=True, eq=False)
+class TruthSpec:
+    """The ground truth a worker scores the session's surface against (simulated sessions).
+
+    vertices: (V, 3) float64 and faces: (F, 3) int64 of the object in the table frame; samples: (M, 3) float64
+    points uniform on it (the session's ``surface_samples``).
+    """
+
+    vertices: NDArray[np.float64]
+    faces: NDArray[np.int64]
+    samples: NDArray[np.float64]
 
 
 class _ArmState:
@@ -103,6 +123,10 @@ class _Worker:
     def __init__(self) -> None:
         self.camera: Any = None
         self.geometry: dict[CellConfig, tuple[Cell, tuple[_ArmState, _PlateState] | None]] = {}
+        self.surface: LiveSurface | None = None
+        """The session's surface, kept between jobs (None in a new process)."""
+        self.truth: GroundTruth | None = None
+        """What the surface is scored against (the ``truth`` job, once per process), None: not scored."""
 
     def setup(self, spec: RenderSpec) -> None:
         import trimesh
@@ -155,12 +179,18 @@ class _Worker:
         rebuilt = rebuild(journal, self.reach(config, q, angle), truth, report)
         for capture in rebuilt.captures:
             capture.plans.clear()
+        self.surface = surface_of_journal(journal, self.truth)
+        rebuilt.surface = self.surface.update
         return rebuilt
 
     def run(self, kind: str, payload: Any, send: Callable[[Any], None] | None = None) -> Any:
         """The answer of one job; ``send`` ships ``("progress", value)`` messages to the server on the way."""
         if kind == "setup":
             return self.setup(payload)
+        if kind == "truth":
+            spec = cast(TruthSpec, payload)
+            self.truth = GroundTruth(spec.vertices, spec.faces, spec.samples)
+            return None
         if kind == "render":
             return self.render(payload)
         if kind == "plan":
@@ -171,9 +201,11 @@ class _Worker:
         if kind == "rebuild":
             return self.rebuild(payload, send)
         if kind == "integrate":
-            planner, frame = cast(tuple[Planner, DepthFrame], payload)
-            report = planner.integrate(frame)
-            return report, planner
+            planner, frame, journal_dir = cast(tuple[Planner, DepthFrame, Any], payload)
+            views = len(planner.views)
+            report = planner.integrate(frame)  # a rejected frame raises here: the surface does not see it
+            self.surface = in_step(self.surface, views, journal_dir, self.truth)
+            return report, planner, self.surface.add(frame, report.T_world_camera)
         if kind == "sleep":  # tests: a job that holds the worker (like a plan that never ends)
             import time
 

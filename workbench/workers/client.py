@@ -14,6 +14,7 @@ import threading
 import time
 from collections.abc import Callable
 from multiprocessing.connection import Connection, wait
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
@@ -26,7 +27,8 @@ from planner.planner import IntegrationReport, PlanResult
 from planner.progress import ProgressFn
 from workbench.journal.rebuild import Rebuilt
 from workbench.journal.store import Journal
-from workbench.workers.child import RenderSpec, serve
+from workbench.surface.live import SurfaceUpdate
+from workbench.workers.child import RenderSpec, TruthSpec, serve
 
 log = logging.getLogger(__name__)
 SETUP_TIMEOUT = 60.0
@@ -73,6 +75,8 @@ class SessionWorker:
         self.engine = engine
         self.name = name
         self.render_spec = render
+        self.truth: TruthSpec | None = None
+        """The ground truth shipped to each new process (the surface is scored in the worker), None: not scored."""
         self.busy = False
         self.jobs = 0
         self._job_lock = threading.Lock()  # one job at a time
@@ -121,9 +125,12 @@ class SessionWorker:
         report = None if on_progress is None else (lambda value: on_progress(*value))
         return self.call("rebuild", (journal, cell, q, angle, samples), 0.0, "rebuild", report)
 
-    def integrate(self, planner: Planner, frame: DepthFrame, budget: float) -> tuple[IntegrationReport, Planner]:
-        """``planner.integrate(frame)`` in the worker: (report, the planner after it)."""
-        return self.call("integrate", (planner, frame), budget, "integration")
+    def integrate(
+        self, planner: Planner, frame: DepthFrame, budget: float, journal_dir: Path | None = None
+    ) -> tuple[IntegrationReport, Planner, SurfaceUpdate]:
+        """``planner.integrate(frame)`` in the worker: (report, the planner after it, the session's surface after
+        it, which the worker keeps; a new worker rebuilds it from the journal in ``journal_dir`` first)."""
+        return self.call("integrate", (planner, frame, journal_dir), budget, "integration")
 
     def renderer(self, budget: float) -> Callable[[Pose], NDArray[np.float32]]:
         """A ``render(T_table_camera)`` for the simulated camera that runs in the worker."""
@@ -224,9 +231,11 @@ class SessionWorker:
             self._kill()
             raise JobKilled("the session is closed")
         log.debug("session %s: worker %d started", self.name, proc.pid)
-        if self.render_spec is not None:
+        for kind, spec in (("setup", self.render_spec), ("truth", self.truth)):
+            if spec is None:
+                continue
             try:
-                parent.send(("setup", self.render_spec))
+                parent.send((kind, spec))
                 if not parent.poll(SETUP_TIMEOUT):
                     raise OSError(f"no answer within {SETUP_TIMEOUT:g} s")
                 status, result = parent.recv()
@@ -293,6 +302,15 @@ def render_spec(cell: Cell, cell_config: CellConfig) -> RenderSpec | None:
         cell_config.plate_radius,
         cell_config.plate_thickness,
     )
+
+
+def truth_spec(mesh: Any, samples: NDArray[np.float64] | None) -> TruthSpec | None:
+    """What a worker scores the surface against: the session's ground-truth ``mesh`` (a trimesh in the table
+    frame) and its ``samples`` (M, 3); None without a ground truth (``samples`` None or an empty mesh)."""
+    if samples is None or len(mesh.faces) == 0:
+        return None
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    return TruthSpec(vertices, np.asarray(mesh.faces, dtype=np.int64), np.asarray(samples, dtype=np.float64))
 
 
 def offload_rendering(cell: Cell, worker: SessionWorker, budget: float) -> bool:
