@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 from devices.config import DeviceConfig
 from planner import Planner, PlannerConfig, PlanResult, VoxelClass
 from workbench.errors import Conflict, DeviceFault, Gone
+from workbench.evaluation.accuracy import GroundTruth
 from workbench.evaluation.curves import ceiling_metrics
 from workbench.journal.rebuild import Rebuilt
 from workbench.journal.store import JournalWriter, make_event
@@ -93,8 +94,11 @@ class SessionCore:
         self.worker = worker
         """The worker process of the heavy steps (workbench/workers/); None: they run in this process."""
         self.plan_budget = plan_budget
+        truth = None
+        if parts.surface_samples is not None and len(parts.mesh.faces) > 0:  # a ground truth: accuracy per view
+            truth = GroundTruth.of(parts.mesh, parts.surface_samples)
         self.step_runner = ViewStep(
-            self.cell, journal, parts.surface_samples, capture_timeout, move_timeout, worker, capture_budget
+            self.cell, journal, parts.surface_samples, capture_timeout, move_timeout, worker, capture_budget, truth
         )
         self.record = SessionRecord(session_id, parts.model, config.to_dict(), seed, time.time())
         self.listeners: list[Listener] = []
@@ -357,6 +361,21 @@ class SessionCore:
         self._error = None
         self.emit("retry", action=str(step.decision.kind), plan_id=step.decision.plan_id)
 
+    def refuse_move(self, decision: Decision, exc: Exception, fallback: Decision | None) -> None:
+        """Journal that the cell refused ``decision``'s move or its frame was unusable (``exc``), and the
+        ``fallback`` taken instead (None: no eligible view left), also as a decision (caller holds the lock)."""
+        self.emit(
+            "refused",
+            plan_id=decision.plan_id,
+            candidate=decision.index,
+            reason=getattr(exc, "reason", "frame_rejected"),
+            message=str(exc),
+            next=None if fallback is None else fallback.index,
+        )
+        if fallback is not None:
+            fields = fallback.to_json()
+            self.emit("decision", decision=fields.pop("kind"), **fields)
+
     def add_move(self) -> None:
         with self.lock:
             self.moves += 1
@@ -392,6 +411,7 @@ class SessionCore:
                     "capture",
                     strict=True,
                     **capture_fields(outcome.report, outcome.voxels, outcome.coverage),
+                    accuracy=outcome.accuracy,
                     frame=None if stored is None else stored[0],
                     frame_sha256=None if stored is None else stored[1],
                     requested_pose=decision.pose.to_dict(),

@@ -12,6 +12,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,10 +23,16 @@ from devices.timeout import DeviceTimeoutError, call_with_timeout
 from planner import DepthFrame, Planner, Pose, VoxelClass
 from planner.planner import IntegrationReport
 from workbench.errors import DeviceFault, Unreachable, WorkbenchError
+from workbench.evaluation.accuracy import GroundTruth, accuracy
 from workbench.evaluation.coverage import coverage
 from workbench.journal.store import JournalWriter
 from workbench.session.summaries import voxel_counts
 from workbench.workers.client import JobKilled, SessionWorker
+
+
+class UnusableFrame(ValueError):  # noqa: N818 - it says what the frame is
+    """The planner could not use the frame (``Planner.integrate``'s ValueError: no return, nothing on the object);
+    the map is unchanged. The planner's choice then falls back to the next candidate (loop.take_view)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,6 +51,8 @@ class ViewOutcome:
     occupied: NDArray[np.float64]
     planner: Planner
     """The planner after the view (the session's own, or the copy its worker process integrated into)."""
+    accuracy: dict[str, Any] | None = None
+    """The cloud's accuracy against the ground truth after the view (``Accuracy.to_json``), None without one."""
 
 
 @dataclass
@@ -59,6 +68,8 @@ class ViewStep:
     """Where integration (and the simulated camera's rendering) runs; None: in this process."""
     capture_budget: float = 30.0
     """The worker's budget for one integration, seconds (0: none)."""
+    truth: GroundTruth | None = None
+    """The true surface (simulation): each view's cloud is scored against it (precision, F, chamfer)."""
     _moving: threading.Event | None = field(default=None, repr=False)
     """Set when the last move that timed out has really ended (None: no such move)."""
 
@@ -89,17 +100,21 @@ class ViewStep:
                 raise
             if self.journal is not None:
                 stored = self.journal.write_frame(planner.iteration + 1, frame)
-            if self.worker is None:
-                report, after = planner.integrate(frame), planner  # atomic: a ValueError leaves the map as it was
-            else:
-                report, after = self.worker.integrate(planner, frame, self.capture_budget)  # works on a copy
+            try:
+                if self.worker is None:
+                    report, after = planner.integrate(frame), planner  # atomic: a ValueError leaves the map as it was
+                else:
+                    report, after = self.worker.integrate(planner, frame, self.capture_budget)  # works on a copy
+            except ValueError as exc:
+                raise UnusableFrame(str(exc)) from exc
         except Exception:
             if stored is not None:
                 self.discard_frame(stored[0])
             raise
         cov = None if self.surface_samples is None else float(coverage(self.surface_samples, after.cloud))
+        scores = None if self.truth is None else accuracy(self.truth, after.cloud).to_json()
         occupied = after.voxel_map.centers(VoxelClass.OCCUPIED)
-        return ViewOutcome(frame, report, stored, voxel_counts(after), cov, occupied, after)
+        return ViewOutcome(frame, report, stored, voxel_counts(after), cov, occupied, after, scores)
 
     def discard_frame(self, name: str) -> None:
         """Remove a stored frame whose view was not taken (rejected, or its event could not be journaled)."""
