@@ -189,3 +189,23 @@ def test_an_older_journal_without_camera_models_resumes_as_ideal(settings: AppSe
         assert r.status_code == 200, r.text
         assert r.json()["mismatches"] == []
         assert b.get(f"/api/sessions/{sid}").json()["voxels"] == before["voxels"]
+
+
+def test_only_no_eligible_view_left_ends_the_step(client: TestClient) -> None:
+    """Every eligible candidate of the plan refused at move time: the step fails (422 no eligible view left), the
+    map unchanged and the plan pending again, every refusal journaled."""
+    sid, plan = planned(client)
+    eligible = eligible_by_score(client, sid)
+    sid, plan = planned(
+        client, faults={"schedule": [{"kind": "move_refused", "at": n} for n in range(2, len(eligible) + 2)]}
+    )
+    assert eligible_by_score(client, sid) == eligible  # the same seed and object: the same plan
+    before = client.get(f"/api/sessions/{sid}").json()
+    r = client.post(f"/api/sessions/{sid}/approve", json={"plan_id": plan["plan_id"], "index": plan["best"]["index"]})
+    assert r.status_code == 422 and "no eligible view left" in r.json()["detail"], r.text
+    assert f"{len(eligible)} candidate(s) refused" in r.json()["detail"]
+    st = client.get(f"/api/sessions/{sid}").json()
+    assert (st["state"], st["iteration"], st["voxels"]) == ("error", 1, before["voxels"])
+    assert st["refused_moves"] == len(eligible) and st["pending_plan"]["plan_id"] == plan["plan_id"]
+    refusals = client.get(f"/api/sessions/{sid}/export").json()["refusals"]
+    assert [r["candidate"] for r in refusals] == eligible and refusals[-1]["next"] is None
