@@ -101,6 +101,21 @@ class SourceIn(BaseModel):
         return self
 
 
+class CameraIn(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    sensor: str | None = Field(
+        default=None, max_length=40, description="the simulated depth sensor (GET /api/sensors; default the server's)"
+    )
+    calibration: str | None = Field(
+        default=None, max_length=40, description="the simulated calibration error (GET /api/sensors)"
+    )
+
+
+class CameraModelsOut(BaseModel):
+    sensors: list[str] = Field(description="depth sensor models of the simulated camera, the default first")
+    calibrations: list[str] = Field(description="calibration and motion error models, the default first")
+
+
 class SessionCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
     model: str | None = Field(
@@ -120,6 +135,11 @@ class SessionCreate(BaseModel):
     )
     seed: StrictInt = Field(
         default=0, ge=0, le=2**32 - 1, description="seeds the planner's fits and the simulated noise"
+    )
+    camera: CameraIn | None = Field(
+        default=None,
+        description='the simulated camera\'s error models, e.g. {"sensor": "realsense-d435", "calibration": '
+        '"typical"} (simulated sessions only; a hardware session refuses them)',
     )
     planner: str = Field(
         default="projection",
@@ -332,7 +352,15 @@ class ResumeOut(BaseModel):
 
 class FaultRequest(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    kind: Literal["camera_timeout", "capture_failure", "nan_frame", "empty_frame", "arm_halfway", "turntable_error"]
+    kind: Literal[
+        "camera_timeout",
+        "capture_failure",
+        "nan_frame",
+        "empty_frame",
+        "arm_halfway",
+        "turntable_error",
+        "move_refused",
+    ]
 
 
 class DiscardOut(BaseModel):
@@ -354,6 +382,11 @@ class MetricPoint(BaseModel):
     surface_fscore_5mm: float | None = Field(
         default=None, description="the reconstructed surface's F-score at 5 mm after this view (simulated sessions)"
     )
+    precision_5mm: float | None = Field(default=None, description="share of the cloud within 5 mm of the truth")
+    fscore_5mm: float | None = Field(default=None, description="F-score of precision and coverage at 5 mm")
+    precision_2mm: float | None = None
+    fscore_2mm: float | None = None
+    chamfer_mm: float | None = None
 
 
 class MetricsOut(BaseModel):
@@ -386,6 +419,9 @@ class ExportOut(BaseModel):
     surface: dict[str, Any] = Field(
         description="the reconstructed surface: fscore_2mm, fscore_5mm, precision_5mm, recall_5mm, chamfer_mm "
         "(null without a ground truth), triangles, layer_triangles, views, seconds, error (why there is none)"
+    )
+    refusals: list[dict[str, Any]] = Field(
+        default_factory=list, description="the planner's choices refused (plan_id, candidate, reason, message, next)"
     )
 
 

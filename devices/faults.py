@@ -19,6 +19,8 @@ arm_halfway        arm        the arm stops halfway (a joint arm: half-way throu
                               trajectory; a pose arm: pose interpolated between the
                               current and the target pose) and raises DeviceError
 turntable_error    turntable  DeviceError before the plate moves
+move_refused       arm        UnreachableError (reason ``refused``) before the arm
+                              moves: a move the cell refuses at move time
 =================  =========  =====================================================
 
 ``Cell.move_to`` turns the plate before moving the arm, so ``arm_halfway`` also
@@ -35,12 +37,14 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from devices.cell import Cell
-from devices.protocols import Arm, Camera, CaptureError, DeviceError, JointArm, Turntable
+from devices.protocols import Arm, Camera, CaptureError, DeviceError, JointArm, Turntable, UnreachableError
 from devices.trajectory import JointTrajectory
 from planner.types import DepthFrame, Intrinsics, Pose
 from planner.validate import finite, integer
 
-FaultKind = Literal["camera_timeout", "capture_failure", "nan_frame", "empty_frame", "arm_halfway", "turntable_error"]
+FaultKind = Literal[
+    "camera_timeout", "capture_failure", "nan_frame", "empty_frame", "arm_halfway", "turntable_error", "move_refused"
+]
 FAULT_KINDS: tuple[str, ...] = get_args(FaultKind)
 DEVICE_OF: dict[str, str] = {
     "camera_timeout": "camera",
@@ -49,6 +53,7 @@ DEVICE_OF: dict[str, str] = {
     "empty_frame": "camera",
     "arm_halfway": "arm",
     "turntable_error": "turntable",
+    "move_refused": "arm",
 }
 
 
@@ -82,6 +87,8 @@ class FaultConfig:
     """Probability that an arm move stops halfway with an error."""
     turntable_error: float = 0.0
     """Probability that a turntable rotation fails before moving."""
+    move_refused: float = 0.0
+    """Probability that the arm refuses a move before it starts (UnreachableError, reason ``refused``)."""
     schedule: tuple[ScheduledFault, ...] = ()
     """Deterministic faults, e.g. ``[{"kind": "capture_failure", "at": 3}]``: the 3rd capture fails."""
     seed: int = 0
@@ -250,18 +257,27 @@ class FaultyArm(_Wrapper):
         return self.inner.pose
 
     def move_to(self, T_base_camera: Pose) -> None:
-        if self.injector.draw("arm") == "arm_halfway":
+        kind = self.injector.draw("arm")
+        _refuse(kind)
+        if kind == "arm_halfway":
             self.inner.move_to(interpolate(self.inner.pose, T_base_camera, 0.5))
             raise DeviceError("arm: stopped halfway to the target (simulated fault); the camera is between poses")
         self.inner.move_to(T_base_camera)
 
     def execute(self, trajectory: JointTrajectory) -> None:
-        if self.injector.draw("arm") == "arm_halfway":
+        kind = self.injector.draw("arm")
+        _refuse(kind)
+        if kind == "arm_halfway":
             self.inner.execute(trajectory.truncated(0.5 * trajectory.duration))
             raise DeviceError(
                 "arm: stopped halfway through its trajectory (simulated fault); the arm is between configurations"
             )
         self.inner.execute(trajectory)
+
+
+def _refuse(kind: str | None) -> None:
+    if kind == "move_refused":
+        raise UnreachableError("arm: the move was refused (simulated fault); the arm did not move", "refused")
 
 
 class FaultyTurntable(_Wrapper):

@@ -6,10 +6,14 @@ Used by ``nbv.cli`` as ``serve.add_arguments(parser)`` and ``serve.run(args) -> 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 from pathlib import Path
 
 from app.settings import AppSettings, check_exposure, load_settings
+from devices.calibration_error import CALIBRATIONS
+from devices.sensors.presets import SENSORS
+from nbv.options import calibration_name, sensor_name
 
 TOKEN_ENV = "NBV_TOKEN"
 GRACE = 2
@@ -28,6 +32,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--model", default=None, help="default object of a new session (default l-block)")
     parser.add_argument("--models-dir", type=Path, default=None, help="directory of mesh files offered as models")
+    parser.add_argument(
+        "--sensor",
+        type=sensor_name,
+        default=None,
+        help=f"default depth sensor of new simulated sessions: {', '.join(SENSORS)} (default ideal, or the config's)",
+    )
+    parser.add_argument(
+        "--calibration",
+        type=calibration_name,
+        default=None,
+        help=f"default calibration error of new simulated sessions: {', '.join(CALIBRATIONS)} (default none)",
+    )
     parser.add_argument(
         "--data-dir", type=Path, default=None, help="where uploads, session journals and recordings go (./nbv-data)"
     )
@@ -78,6 +94,12 @@ def settings_from_args(args: argparse.Namespace) -> AppSettings:
         cell=str(args.cell) if getattr(args, "cell", None) else None,
         dry_run=getattr(args, "dry_run", None),
     )
+    camera = {k: v for k in ("sensor", "calibration") if (v := getattr(args, k, None)) is not None}
+    if camera:  # the default of new simulated sessions (a hardware session never takes it)
+        devices = settings.devices
+        settings = settings.replace(
+            devices=dataclasses.replace(devices, camera=dataclasses.replace(devices.camera, **camera))
+        )
     check_exposure(settings)
     check_cell(settings)
     return settings

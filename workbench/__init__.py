@@ -29,6 +29,7 @@ from workbench.session.states import BUSY, Listed, State
 from workbench.session.summaries import SessionStatus, best_of, plan_summary
 from workbench.session.values import SceneData, SessionEvent
 from workbench.settings import WorkbenchSettings
+from workbench.sources.camera_models import camera_models
 from workbench.sources.catalog import list_models, save_upload
 from workbench.sources.parts import list_recordings
 
@@ -54,6 +55,7 @@ __all__ = [
     "WorkbenchError",
     "WorkbenchSettings",
     "best_of",
+    "camera_models",
     "jsonable",
     "list_models",
     "list_recordings",

@@ -9,6 +9,7 @@ from fastapi.responses import JSONResponse
 
 from app.api.deps import Registry, SessionDep, Settings
 from app.schemas import (
+    CameraModelsOut,
     DiscardOut,
     ExportOut,
     FaultQueuedOut,
@@ -20,11 +21,12 @@ from app.schemas import (
     SessionOut,
 )
 from app.serialize import SafeJSONResponse
-from workbench import Conflict, Invalid, NotFound
+from workbench import Conflict, Invalid, NotFound, camera_models
 
 router = APIRouter(prefix="/sessions", tags=["sessions"])
 creations_router = APIRouter(prefix="/creations", tags=["sessions"])
 planners_router = APIRouter(prefix="/planners", tags=["sessions"])
+sensors_router = APIRouter(prefix="/sensors", tags=["sessions"])
 
 
 @router.post("", status_code=201, response_model=SessionCreated)
@@ -45,6 +47,7 @@ def create_session(
         faults=body.faults,
         planner=body.planner,
         progress_id=body.progress_id,
+        camera=None if body.camera is None else body.camera.model_dump(exclude_none=True),
     )
     return {"id": session.id}
 
@@ -177,4 +180,10 @@ def export(session: SessionDep) -> JSONResponse:
     )
 
 
-routers = [router, creations_router, planners_router]
+@sensors_router.get("", response_model=CameraModelsOut)
+def sensors() -> dict[str, list[str]]:
+    """The simulated camera's sensor and calibration models a create's ``camera`` may name (the default first)."""
+    return camera_models()
+
+
+routers = [router, creations_router, planners_router, sensors_router]

@@ -100,7 +100,7 @@ async function action(label, fn) {
 
 // ------------------------------------------------------------------ form (restored on reload)
 
-const FORM_IDS = ["model", "planner", "p-resolution", "p-parallels", "p-count", "p-sectors", "p-revisit", "p-gamma",
+const FORM_IDS = ["model", "planner", "sensor", "calibration", "p-resolution", "p-parallels", "p-count", "p-sectors", "p-revisit", "p-gamma",
   "p-dc", "p-tmin", "p-tmax", "p-views", "p-seed", "auto-count"];
 
 function saveForm() {
@@ -157,6 +157,18 @@ async function loadPlanners() {
   const keep = sel.value || JSON.parse(localStorage.getItem(FORM_KEY) || "{}").planner || "projection";
   sel.innerHTML = names.map((n) => `<option value="${P.esc(n)}">${P.esc(n)}${n === "projection" ? " (the paper's)" : ""}</option>`).join("");
   sel.value = names.includes(keep) ? keep : "projection";
+}
+
+// The simulated camera's sensor and calibration models (GET /api/sensors); "" asks for the server's default.
+async function loadSensors() {
+  const names = await api("GET", "/api/sensors");
+  const saved = JSON.parse(localStorage.getItem(FORM_KEY) || "{}");
+  for (const [id, list] of [["sensor", names.sensors], ["calibration", names.calibrations]]) {
+    const sel = $(id);
+    sel.innerHTML = '<option value="">(server default)</option>' +
+      list.map((n) => `<option value="${P.esc(n)}">${P.esc(n)}</option>`).join("");
+    sel.value = list.includes(saved[id]) ? saved[id] : "";
+  }
 }
 
 async function loadSessions() {
@@ -325,6 +337,7 @@ function renderStatus(st) {
   $("points").textContent = st ? st.points : 0;
   $("session-info").textContent = st ? `${st.id} · ${P.shortModel(st.model)} · planner ${st.planner || "projection"} · seed ${st.seed}` : "";
   if (st && st.error) showError(st.error);
+  P.renderViewNotes($("view-notes"), st ? st.views || [] : []);
   const term = $("terminated");
   term.hidden = !(st && st.terminated);
   if (st && st.terminated) term.textContent = `The planner would stop here (${st.terminated}); you may still plan and approve more views.`;
@@ -422,8 +435,10 @@ function wire() {
   $("create").addEventListener("click", () => action("creating the session", async () => {
     saveForm();
     const progressId = "c" + Math.random().toString(36).slice(2) + Date.now().toString(36);
+    const camera = { sensor: $("sensor").value || null, calibration: $("calibration").value || null };
     const body = { model: $("model").value || null, planner: $("planner").value, config: paramConfig(),
-      seed: Number($("p-seed").value), progress_id: progressId };
+      seed: Number($("p-seed").value), progress_id: progressId,
+      camera: camera.sensor || camera.calibration ? camera : null };
     const follow = await followCreate(progressId);
     try {
       const r = await api("POST", "/api/sessions", body);
@@ -539,7 +554,7 @@ async function init() {
   P.renderHelp();
   wire();
   restoreForm();
-  await Promise.all([loadModels(), loadPlanners()]);
+  await Promise.all([loadModels(), loadPlanners(), loadSensors()]);
   await loadSessions();
   const compare = QUERY.get("compare");
   if (compare) {

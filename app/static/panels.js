@@ -147,7 +147,10 @@ function renderLayers(layers, onToggle) {
 
 function renderCharts(m) {
   const it = m.iterations;
-  const cov = [{ points: it.map((r) => [r.iteration, r.coverage === null ? null : 100 * r.coverage]), color: "#15894a", label: "coverage" }];
+  const pct = (key) => it.map((r) => [r.iteration, r[key] === null || r[key] === undefined ? null : 100 * r[key]]);
+  const cov = [{ points: pct("coverage"), color: "#15894a", label: "coverage" },
+    { points: pct("precision_5mm"), color: "#2e63d8", label: "precision@5mm" },
+    { points: pct("fscore_5mm"), color: "#e08a00", label: "F@5mm" }];
   const ceiling = m.ceiling === undefined || m.ceiling === null ? null : 100 * m.ceiling;
   $("ceiling-note").textContent = ceiling === null ? "" : `(dashed: reachable ceiling ${num(ceiling)} %)`;
   lineChart($("chart-coverage"), cov, { xInteger: true, yMin: 0, yMax: 100, xLabel: "view", yLabel: "%", hline: ceiling });
@@ -226,9 +229,19 @@ const SHORTCUTS = [
   ["1 … 9", "toggle the layers in the 3D view's layer bar"], ["?", "this help"], ["Esc", "close the help"],
 ];
 
+// Which views ICP rejected (and why) and which of the planner's choices the cell refused before a view.
+function renderViewNotes(box, views) {
+  const notes = [];
+  for (const v of views) {
+    if (v.icp_rejected) notes.push(`view ${v.iteration}: ICP rejected the frame (${v.icp_rejected}); its reported pose was kept`);
+    for (const r of v.refused || []) notes.push(`view ${v.iteration}: candidate ${r.candidate} refused (${r.reason}), the next one taken`);
+  }
+  box.innerHTML = notes.map((n) => `<div class="view-note">${esc(n)}</div>`).join("");
+}
+
 function renderHelp() {
   $("help-keys").innerHTML = SHORTCUTS.map(([k, what]) => `<tr><td><kbd>${esc(k)}</kbd></td><td>${esc(what)}</td></tr>`).join("");
 }
 
 window.Panels = { Table, renderTable, pageOf, candidateOf, renderInspector, renderLegend, renderLayers, renderCharts,
-  renderPicker, renderCompare, renderHelp, renderProgress, shortModel, num, esc };
+  renderViewNotes, renderPicker, renderCompare, renderHelp, renderProgress, shortModel, num, esc };

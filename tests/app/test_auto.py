@@ -62,3 +62,22 @@ def test_the_stop_button_ends_auto_mode_after_the_action_in_flight(client: TestC
     assert len(doc["plans"]) == 2 and [d["kind"] for d in doc["decisions"]] == ["auto", "auto"]
     assert [e["kind"] for e in doc["events"]] == ["auto_start", "auto_stop"]
     assert client.post(f"/api/sessions/{sid}/stop").json()["state"] == "ready"  # stopping again: no-op
+
+
+def test_auto_mode_goes_on_past_a_refused_move_and_an_unusable_frame(client: TestClient) -> None:
+    """The planner's choice refused at move time (arm action 2) or its frame unusable (capture 4): auto mode takes
+    the plan's next eligible candidate each time and runs all its steps (issue 23)."""
+    faults = {"schedule": [{"kind": "move_refused", "at": 2}, {"kind": "empty_frame", "at": 4}]}
+    config = {**SMALL, "termination": {"max_views": 30, "stop_without_frontier": False}}  # the rule never stops it
+    sid = client.post("/api/sessions", json={"config": config, "faults": faults}).json()["id"]
+    client.post(f"/api/sessions/{sid}/capture")
+    assert client.post(f"/api/sessions/{sid}/auto", json={"count": 4}).status_code == 202
+    st = wait_until_not_auto(client, sid)
+    assert (st["state"], st["iteration"], st["error"]) == ("ready", 5, None)
+    assert st["refused_moves"] == 2
+    doc = client.get(f"/api/sessions/{sid}/export").json()
+    assert [r["reason"] for r in doc["refusals"]] == ["refused", "frame_rejected"]
+    for refusal in doc["refusals"]:  # each refusal names the candidate taken instead, decided in the same plan
+        taken = [d["index"] for d in doc["decisions"] if d["plan_id"] == refusal["plan_id"]]
+        assert taken == [refusal["candidate"], refusal["next"]] and refusal["next"] != refusal["candidate"]
+    assert [e["kind"] for e in doc["events"]].count("refused") == 2

@@ -61,6 +61,24 @@ def test_serve_arguments() -> None:
     assert AppSettings().host == "127.0.0.1"
 
 
+def test_serve_sensor_and_calibration_set_the_default_of_new_sessions(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    parser = argparse.ArgumentParser()
+    serve.add_arguments(parser)
+    s = serve.settings_from_args(parser.parse_args(["--sensor", "realsense-d435", "--calibration", "typical"]))
+    assert (s.devices.camera.sensor, s.devices.camera.calibration) == ("realsense-d435", "typical")
+    plain = serve.settings_from_args(parser.parse_args([]))
+    assert (plain.devices.camera.sensor, plain.devices.camera.calibration) == ("ideal", "none")
+    path = tmp_path / "wb.toml"
+    path.write_text('[devices]\ncamera = { sensor = "structured-light" }\n')
+    s = serve.settings_from_args(parser.parse_args(["--config", str(path), "--calibration", "poor"]))
+    assert (s.devices.camera.sensor, s.devices.camera.calibration) == ("structured-light", "poor")  # flags win
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--sensor", "kinect"])
+    assert "realsense-d435" in capsys.readouterr().err  # the error lists the names
+
+
 def test_colormap_and_candidate_colors() -> None:
     c = colormap(np.array([0.0, 0.5, 1.0]))
     assert c[0].tolist() == list(VIRIDIS[0]) and c[2].tolist() == list(VIRIDIS[-1])

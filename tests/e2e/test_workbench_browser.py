@@ -18,6 +18,7 @@ from typing import Any
 import httpx
 from playwright.sync_api import BrowserContext, Page, expect
 
+from tests.e2e.forms import fill_small_form
 from tests.helpers import SMALL
 from tests.servers import LiveServer
 from tests.viewer_wire import decode_frame, session_labels, session_nodes
@@ -72,14 +73,7 @@ def test_two_tabs_show_only_their_own_session(live_server: LiveServer, browser_c
     expect(tb.page.locator("#picker")).to_be_visible()
     expect(tb.page.locator(f"#picker a[data-session='{a}']")).to_be_visible()
     tb.page.select_option("#model", "two-boxes")
-    for field, value in (
-        ("p-resolution", "0.02"),
-        ("p-count", "60"),
-        ("p-parallels", "4"),
-        ("p-tmin", "2"),
-        ("p-tmax", "6"),
-    ):
-        tb.page.fill(f"#{field}", value)
+    fill_small_form(tb.page)
     tb.page.click("#create")
     tb.page.wait_for_url(re.compile(r"\?session=[0-9a-f]{8}"))
     b = re.search(r"session=([0-9a-f]{8})", tb.page.url).group(1)  # type: ignore[union-attr]

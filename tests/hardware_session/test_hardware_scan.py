@@ -290,3 +290,21 @@ def test_simulated_faults_never_reach_the_real_devices(tmp_path: Path, rig: Any)
         sim = c.post("/api/sessions", json={"seed": 0, "source": {"kind": "sim"}, "config": SMALL_PLANNER}).json()
         r = c.post(f"/api/sessions/{sim['id']}/capture")
         assert r.status_code == 503 and "capture" in r.json()["detail"], r.text  # a simulated one fails as told
+
+
+def test_simulated_sensor_errors_never_reach_the_real_camera(tmp_path: Path, rig: Any) -> None:
+    """A request's sensor or calibration model is refused for the real devices (422, the devices not taken), and
+    the server's default simulated sensor is left out of a hardware session: its journal says ideal / none and its
+    planner config has no simulated noise."""
+    devices = DeviceConfig(camera=dataclasses.replace(CAMERA, sensor="realsense-d435", calibration="typical"))
+    settings = dataclasses.replace(app_settings(tmp_path, rig.path, "sensor"), devices=devices)
+    with TestClient(create_app(settings), base_url=BASE_URL) as c:
+        hardware = {"kind": "hardware", "truth": "l-block"}
+        r = c.post("/api/sessions", json={"seed": 0, "source": hardware, "camera": {"sensor": "realsense-d435"}})
+        assert r.status_code == 422 and "real camera" in r.json()["detail"], r.text
+        r = c.post("/api/sessions", json={"seed": 0, "source": hardware})  # the devices are free
+        assert r.status_code == 201, r.text
+        header = read_journal(sessions_dir(settings.data_dir) / r.json()["id"]).header
+        camera = header["devices"]["camera"]
+        assert (camera["sensor"], camera["calibration"]) == ("ideal", "none")
+        assert header["config"]["noise"]["depth_z2"] == 0 and header["config"]["noise"]["fit_plate"] is False

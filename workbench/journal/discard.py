@@ -1,7 +1,7 @@
 """Discarded views in a journal: which events a rebuild replays once a person discarded the last view.
 
 A ``discard`` event names the capture it undoes (``capture_seq``). Replaying the journal without that capture
-and without the plans, decisions, retries and errors that followed it (up to the discard) gives the session
+and without the plans, decisions, refusals, retries and errors that followed it (up to the discard) gives the session
 exactly as it was before the capture; config changes in between are kept. The discard event itself stays in
 the replayed list, so the session's record (and its export) shows it.
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-UNDONE_KINDS = frozenset({"capture", "plan", "decision", "retry", "error"})
+UNDONE_KINDS = frozenset({"capture", "plan", "decision", "retry", "error", "refused"})
 """Events after a discarded capture that the discard undoes too."""
 
 

@@ -16,6 +16,7 @@ from typing import Any
 
 from devices.config import DeviceConfig
 from devices.faults import FaultConfig
+from devices.planner_noise import planner_config_for
 from planner import PlannerConfig
 from planner.config import from_dict
 from planner.evaluators import evaluator_names
@@ -32,6 +33,7 @@ from workbench.session.states import Listed
 from workbench.session.summaries import session_status
 from workbench.session.values import SessionEvent
 from workbench.settings import WorkbenchSettings
+from workbench.sources.camera_models import check_camera_models
 from workbench.sources.limits import check_config
 from workbench.sources.parts import SURFACE_SAMPLES, SessionParts, build_parts, session_devices
 from workbench.workers.client import JobKilled, offload_rendering, render_spec, truth_spec
@@ -190,10 +192,16 @@ class SessionRegistry:
         faults: dict[str, Any] | None = None,
         planner: str = "projection",
         progress_id: str | None = None,
+        camera: dict[str, Any] | None = None,
     ) -> Session:
-        """A new session. 422 for a bad config, model, source, fault setting or planner; 404 for an unknown recording.
+        """A new session. 422 for a bad config, model, source, fault setting, planner or camera model; 404 for an
+        unknown recording.
 
         planner: the view evaluator (``planner.evaluators.evaluator_names()``), journaled in the header.
+        camera: ``{"sensor": NAME, "calibration": NAME}`` (either optional; default the server's
+        ``devices.camera``): the simulated sensor and calibration error (``workbench.sources.camera_models``).
+        The planner config follows the camera (``devices.planner_noise.planner_config_for``) and the journal
+        header records both, so a resume rebuilds the same map.
         progress_id: names this create for its progress and its cancellation (:attr:`creations`); cancelled,
         it raises Conflict at its next stage and leaves nothing.
         """
@@ -206,10 +214,11 @@ class SessionRegistry:
             raise Invalid(str(exc)) from None
         if progress_id is not None and progress_id.startswith(resume_id("")):
             raise Invalid(f"progress_id: {progress_id!r} starts with 'resume-', which resumes use")
+        camera_models = check_camera_models(camera)
         self._make_room()
         with self.creations.run(progress_id) as creation:
             return self._create(
-                planner_config, model, seed, source, fault_config, faults is not None, planner, creation
+                planner_config, model, seed, source, fault_config, faults is not None, planner, creation, camera_models
             )
 
     def _create(
@@ -222,18 +231,23 @@ class SessionRegistry:
         faults_asked: bool,
         planner: str,
         creation: Creation,
+        camera: dict[str, str] | None = None,
     ) -> Session:
         name = model or self.settings.devices.model
-        devices = session_devices(self.settings, name, seed)
-        parts = build_parts(self.settings, name, source, seed, devices, fault_config, creation.stage, faults_asked)
+        devices = session_devices(self.settings, name, seed, camera)
+        parts = build_parts(
+            self.settings, name, source, seed, devices, fault_config, creation.stage, faults_asked, bool(camera)
+        )
         if parts.injector is None:
             fault_config = FaultConfig()  # real hardware: none injected (the journal says so)
+            camera = {"sensor": "ideal", "calibration": "none"}  # nor the server's simulated sensor: its own noise
         try:
             creation.stage("starting the session")
         except Conflict:
             _release(parts)
             raise
-        devices = session_devices(self.settings, parts.model, seed)
+        devices = session_devices(self.settings, parts.model, seed, camera)
+        planner_config = planner_config_for(planner_config, devices.camera)  # also what the header records
         with self._lock:
             session_id = self._new_id()
             self._resuming.add(session_id)  # reserved while the journal is created outside the lock

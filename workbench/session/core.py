@@ -96,11 +96,12 @@ class SessionCore:
         self.worker = worker
         """The worker process of the heavy steps (workbench/workers/); None: they run in this process."""
         self.plan_budget = plan_budget
+        truth = None
+        if parts.surface_samples is not None and len(parts.mesh.faces) > 0:  # a ground truth: accuracy per view
+            truth = GroundTruth.of(parts.mesh, parts.surface_samples)
         self.step_runner = ViewStep(
-            self.cell, journal, parts.surface_samples, capture_timeout, move_timeout, worker, capture_budget
+            self.cell, journal, parts.surface_samples, capture_timeout, move_timeout, worker, capture_budget, truth
         )
-        if worker is None and parts.surface_samples is not None and len(parts.mesh.faces):
-            self.step_runner.truth = GroundTruth.of(parts.mesh, parts.surface_samples)  # the surface scored here
         self.record = SessionRecord(session_id, parts.model, config.to_dict(), seed, time.time())
         self.listeners: list[Listener] = []
         self.lock = threading.RLock()
@@ -376,6 +377,21 @@ class SessionCore:
         self._error = None
         self.emit("retry", action=str(step.decision.kind), plan_id=step.decision.plan_id)
 
+    def refuse_move(self, decision: Decision, exc: Exception, fallback: Decision | None) -> None:
+        """Journal that the cell refused ``decision``'s move or its frame was unusable (``exc``), and the
+        ``fallback`` taken instead (None: no eligible view left), also as a decision (caller holds the lock)."""
+        self.emit(
+            "refused",
+            plan_id=decision.plan_id,
+            candidate=decision.index,
+            reason=getattr(exc, "reason", "frame_rejected"),
+            message=str(exc),
+            next=None if fallback is None else fallback.index,
+        )
+        if fallback is not None:
+            fields = fallback.to_json()
+            self.emit("decision", decision=fields.pop("kind"), **fields)
+
     def add_move(self) -> None:
         with self.lock:
             self.moves += 1
@@ -411,6 +427,7 @@ class SessionCore:
                     "capture",
                     strict=True,
                     **capture_fields(outcome.report, outcome.voxels, outcome.coverage),
+                    accuracy=outcome.accuracy,
                     frame=None if stored is None else stored[0],
                     frame_sha256=None if stored is None else stored[1],
                     requested_pose=decision.pose.to_dict(),

@@ -24,6 +24,7 @@ from workbench.planning import plan_in
 from workbench.session.core import SessionCore
 from workbench.session.states import BUSY, Action, State
 from workbench.session.values import CustomPose, Decision, DecisionKind, FailedStep, PendingPlan, SessionEvent
+from workbench.session.view_step import UnusableFrame
 from workbench.sources.limits import check_config
 from workbench.workers.client import JobKilled, SessionWorker
 
@@ -251,20 +252,68 @@ def take_view(
 ) -> dict[str, Any]:
     """Move, capture, integrate (the caller has claimed a busy state); returns the new iteration's record.
 
+    A refused move (Unreachable) or an unusable frame (ValueError of integrate) of the planner's choice never
+    ends the step: the next eligible candidate of the pending plan is taken (:func:`next_choice`, score order),
+    each refusal journaled (``refused`` event) and decided anew; only "no eligible view left" fails it. A
+    person's explicit choice (an override, a custom pose) that is refused fails at once.
+
     Raises DeviceFault for a device fault, a timeout or a rejected frame, Unreachable when the cell
     refuses the pose; the session is then in state error with the map unchanged. news: where to say that a
     view was integrated once the action settles (None: say it now, auto mode).
     """
-    try:
-        outcome = s.step_runner.run(s.planner, decision.pose, s.add_move)
-        s.publish_view(outcome, decision)
-    except Exception as exc:
-        s.fail_step(exc, FailedStep(decision, entry))
+    first, tried = decision, set[int]()
+    planners_choice = entry is not None and not decision.custom and decision.index == decision.best_index
+    while True:
+        try:
+            outcome = s.step_runner.run(s.planner, decision.pose, s.add_move)
+            s.publish_view(outcome, decision)
+            break
+        except (UnreachableError, UnusableFrame) as exc:
+            if not planners_choice or entry is None or s.deleted:
+                s.fail_step(exc, FailedStep(decision, entry))
+            assert decision.index is not None  # the planner's choice is a candidate
+            tried.add(decision.index)
+            following = next_choice(entry, tried)
+            fallback = (
+                None
+                if following is None
+                else Decision(
+                    decision.kind,
+                    entry.plan.candidates[following].T_world_camera,
+                    entry.plan_id,
+                    following,
+                    first.best_index,
+                )
+            )
+            with s.lock:
+                s.refuse_move(decision, exc, fallback)
+            if fallback is None:
+                last = f"{getattr(exc, 'reason', 'frame_rejected')}: {exc}"
+                s.fail_step(
+                    UnreachableError(
+                        f"no eligible view left in plan {entry.plan_id}: {len(tried)} candidate(s) refused "
+                        f"(the last: {last})",
+                        "no_eligible_view",
+                    ),
+                    FailedStep(first, entry),
+                )
+            decision = fallback
+        except Exception as exc:
+            s.fail_step(exc, FailedStep(decision, entry))
     if news is None:
         s.notify(SessionEvent.CAPTURED)
     else:
         news.append(SessionEvent.CAPTURED)
     return s.record.iterations[-1]
+
+
+def next_choice(entry: PendingPlan, tried: set[int]) -> int | None:
+    """The next view to take when the planner's choice was refused: the best-scored eligible candidate of the
+    pending plan not yet ``tried`` (the headless scan's rule, workbench/evaluation/scan.py), None when none is
+    left."""
+    plan = entry.plan
+    ranked = sorted((c for c in plan.scores if c.eligible and c.index not in tried), key=lambda c: -c.score)
+    return None if not ranked else int(ranked[0].index)
 
 
 def replay(s: SessionCore, journal: Journal, progress: Callable[[str, int, int], None] | None = None) -> Rebuilt:

@@ -10,7 +10,11 @@ from __future__ import annotations
 
 from typing import Any
 
+from workbench.session.summaries import VIEW_ACCURACY
+
 EXPORT_VERSION = 1
+REFUSAL_KEYS = ("plan_id", "candidate", "reason", "message", "next")
+"""A ``refused`` event's fields: the plan and candidate refused, why, and the candidate taken instead."""
 HEADER_KINDS = ("session", "resume")
 """Events that describe the journal rather than the scan; they are not listed among the record's events."""
 
@@ -29,6 +33,9 @@ class SessionRecord:
         self.decisions: list[dict[str, Any]] = []
         self.events: list[dict[str, Any]] = []
         self.voxels: dict[str, int] = {"occupied": 0, "frontier": 0, "unknown": 0, "empty": 0}
+        self.refusals: list[dict[str, Any]] = []
+        """Every move the cell refused or frame the planner could not use, of the planner's choices (in order)."""
+        self._refused_since: list[dict[str, Any]] = []  # the refusals before the next view
 
     @classmethod
     def from_header(cls, header: dict[str, Any]) -> SessionRecord:
@@ -48,6 +55,10 @@ class SessionRecord:
             fields = {k: v for k, v in event.items() if k not in ("seq", "kind", "decision")}
             self.decisions.append({**fields, "kind": event["decision"]})
         elif kind not in HEADER_KINDS:
+            if kind == "refused":
+                refusal = {k: event.get(k) for k in REFUSAL_KEYS}
+                self.refusals.append(refusal)
+                self._refused_since.append(refusal)
             if kind == "config":
                 self.config = event["config"]
             self.events.append({k: v for k, v in event.items() if k != "seq"})
@@ -66,10 +77,13 @@ class SessionRecord:
                 "coverage": ev.get("coverage"),
                 "surface_fscore_5mm": ev.get("surface_fscore_5mm"),
                 "registration": ev.get("registration"),
+                "accuracy": ev.get("accuracy"),
+                "refused": self._refused_since,
                 "timings": ev.get("timings", {}),
                 "plan_seconds": None,
             }
         )
+        self._refused_since = []
         if ev.get("voxels") is not None:
             self.voxels = dict(ev["voxels"])
 
@@ -103,10 +117,9 @@ class SessionRecord:
         last = self.plans[-1] if self.plans else None
         return {
             "iterations": [
-                {
-                    k: r.get(k)
-                    for k in ("iteration", "coverage", "points", "plan_seconds", "decision", "surface_fscore_5mm")
-                }
+                {k: r[k] for k in ("iteration", "coverage", "points", "plan_seconds", "decision")}
+                | {"surface_fscore_5mm": r.get("surface_fscore_5mm")}
+                | {k: (r.get("accuracy") or {}).get(k) for k in VIEW_ACCURACY}
                 for r in self.iterations
             ],
             "fits": [] if last is None else last["fits"],
@@ -126,4 +139,5 @@ class SessionRecord:
             "plans": list(self.plans),
             "decisions": list(self.decisions),
             "events": list(self.events),
+            "refusals": list(self.refusals),
         }

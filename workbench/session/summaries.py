@@ -116,6 +116,15 @@ class SessionStatus:
     seed: int = field(metadata=_doc("seeds the planner's fits and the simulated noise"))
     planner: str = field(default="projection", metadata=_doc("the view evaluator this session plans with"))
     progress: dict[str, Any] | None = field(default=None, metadata=_doc("the long operation running now, if any"))
+    views: list[dict[str, Any]] = field(
+        default_factory=list,
+        metadata=_doc(
+            "per view: iteration, decision, coverage, precision_5mm, fscore_5mm, precision_2mm, fscore_2mm, "
+            "chamfer_mm (null without a ground truth), icp_rejected (why ICP rejected the frame, null when it "
+            "accepted or did not run), refused (the planner's choices refused before this view: candidate, reason)"
+        ),
+    )
+    refused_moves: int = field(default=0, metadata=_doc("moves refused (or frames unusable) of the planner's choices"))
 
     def to_json(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -163,4 +172,23 @@ def session_status(
         seed=record.seed,
         planner=planner,
         progress=progress,
+        views=[view_summary(r) for r in record.iterations],
+        refused_moves=len(getattr(record, "refusals", [])),
     ).to_json()
+
+
+VIEW_ACCURACY = ("precision_5mm", "fscore_5mm", "precision_2mm", "fscore_2mm", "chamfer_mm")
+
+
+def view_summary(iteration: dict[str, Any]) -> dict[str, Any]:
+    """One view of the status's ``views``: its coverage and accuracy, ICP's verdict, the refusals before it."""
+    scores = iteration.get("accuracy") or {}
+    reg = iteration.get("registration") or {}
+    return {
+        "iteration": iteration["iteration"],
+        "decision": iteration.get("decision"),
+        "coverage": iteration.get("coverage"),
+        **{k: scores.get(k) for k in VIEW_ACCURACY},
+        "icp_rejected": None if not reg or reg.get("accepted", True) else reg.get("reason"),
+        "refused": [{"candidate": r.get("candidate"), "reason": r.get("reason")} for r in iteration.get("refused", [])],
+    }

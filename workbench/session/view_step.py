@@ -13,6 +13,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,13 +24,18 @@ from devices.timeout import DeviceTimeoutError, call_with_timeout
 from planner import DepthFrame, Planner, Pose, VoxelClass
 from planner.planner import IntegrationReport
 from workbench.errors import DeviceFault, Unreachable, WorkbenchError
-from workbench.evaluation.accuracy import GroundTruth
+from workbench.evaluation.accuracy import GroundTruth, accuracy
 from workbench.evaluation.coverage import coverage
 from workbench.journal.store import JournalWriter
 from workbench.journal.surface import in_step
 from workbench.session.summaries import voxel_counts
 from workbench.surface.live import LiveSurface, SurfaceUpdate
 from workbench.workers.client import JobKilled, SessionWorker
+
+
+class UnusableFrame(ValueError):  # noqa: N818 - it says what the frame is
+    """The planner could not use the frame (``Planner.integrate``'s ValueError: no return, nothing on the object);
+    the map is unchanged. The planner's choice then falls back to the next candidate (loop.take_view)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -50,6 +56,8 @@ class ViewOutcome:
     """The planner after the view (the session's own, or the copy its worker process integrated into)."""
     surface: SurfaceUpdate | None = None
     """The session's surface after the view (workbench/surface/live.py)."""
+    accuracy: dict[str, Any] | None = None
+    """The cloud's accuracy against the ground truth after the view (``Accuracy.to_json``), None without one."""
 
 
 @dataclass
@@ -66,11 +74,12 @@ class ViewStep:
     capture_budget: float = 30.0
     """The worker's budget for one integration, seconds (0: none)."""
     truth: GroundTruth | None = None
-    """What the surface is scored against when integration runs in this process (a worker has its own)."""
+    """The true surface (simulation): each view's cloud is scored against it (precision, F, chamfer); in this
+    process it also scores the surface (a worker has its own)."""
     _moving: threading.Event | None = field(default=None, repr=False)
+    """Set when the last move that timed out has really ended (None: no such move)."""
     _surface: LiveSurface | None = field(default=None, repr=False)
     """The surface when integration runs in this process (a worker keeps its own)."""
-    """Set when the last move that timed out has really ended (None: no such move)."""
 
     def run(self, planner: Planner, pose: Pose, moved: Callable[[], None]) -> ViewOutcome:
         """Take the view at ``T_table_camera = pose`` into ``planner``; ``moved()`` is called once the cell moved.
@@ -100,20 +109,24 @@ class ViewStep:
             if self.journal is not None:
                 stored = self.journal.write_frame(planner.iteration + 1, frame)
             journal_dir = None if self.journal is None else self.journal.directory
-            if self.worker is None:
-                views = len(planner.views)
-                report, after = planner.integrate(frame), planner  # atomic: a ValueError leaves the map as it was
-                self._surface = in_step(self._surface, views, journal_dir, self.truth)
-                surface = self._surface.add(frame, report.T_world_camera)
-            else:  # works on a copy; the worker keeps the surface
-                report, after, surface = self.worker.integrate(planner, frame, self.capture_budget, journal_dir)
+            try:
+                if self.worker is None:
+                    views = len(planner.views)
+                    report, after = planner.integrate(frame), planner  # atomic: a ValueError leaves the map as it was
+                    self._surface = in_step(self._surface, views, journal_dir, self.truth)
+                    surface = self._surface.add(frame, report.T_world_camera)
+                else:  # works on a copy; the worker keeps the surface
+                    report, after, surface = self.worker.integrate(planner, frame, self.capture_budget, journal_dir)
+            except ValueError as exc:
+                raise UnusableFrame(str(exc)) from exc
         except Exception:
             if stored is not None:
                 self.discard_frame(stored[0])
             raise
         cov = None if self.surface_samples is None else float(coverage(self.surface_samples, after.cloud))
+        scores = None if self.truth is None else accuracy(self.truth, after.cloud).to_json()
         occupied = after.voxel_map.centers(VoxelClass.OCCUPIED)
-        return ViewOutcome(frame, report, stored, voxel_counts(after), cov, occupied, after, surface)
+        return ViewOutcome(frame, report, stored, voxel_counts(after), cov, occupied, after, surface, scores)
 
     def discard_frame(self, name: str) -> None:
         """Remove a stored frame whose view was not taken (rejected, or its event could not be journaled)."""

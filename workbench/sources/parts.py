@@ -123,12 +123,14 @@ def build_parts(
     faults: FaultConfig,
     stage: Callable[[str], None] = lambda name: None,
     faults_asked: bool = False,
+    camera_asked: bool = False,
 ) -> SessionParts:
     """The object and the (fault-injecting) devices of a session. 404/422 with a clear message on bad input.
 
     stage: told each stage as it starts (``workbench.progress.CREATE_STAGES``); it may raise to cancel.
     Simulated faults are never injected into real hardware: ``faults`` asked by the request
-    (``faults_asked``) are refused for it (422), the server's ``[faults]`` are left out with a warning."""
+    (``faults_asked``) are refused for it (422), the server's ``[faults]`` are left out with a warning; so is a
+    simulated sensor or calibration error the request asked for (``camera_asked``)."""
     from devices.sim import make_sim_cell
 
     source = dict(source or {"kind": "hardware" if settings.cell else "sim"})
@@ -172,6 +174,11 @@ def build_parts(
             except NotFound as exc:
                 raise Invalid(f"source.truth: {exc.detail}") from None
             mesh, samples = ground_truth(settings, truth, seed)
+        if not source["dry_run"] and camera_asked:
+            raise Invalid(
+                "camera: a simulated sensor or calibration error goes into the simulated camera only; this session "
+                "drives the real camera of the cell file, which has its own noise"
+            )
         if not source["dry_run"] and faults.enabled:
             if faults_asked:
                 raise Invalid(
@@ -191,5 +198,12 @@ def build_parts(
     return SessionParts(name, model_kind, mesh, cell, samples, source, injector)
 
 
-def session_devices(settings: WorkbenchSettings, model: str, seed: int) -> DeviceConfig:
-    return dataclasses.replace(settings.devices, model=model, seed=seed)
+def session_devices(
+    settings: WorkbenchSettings, model: str, seed: int, camera: dict[str, str] | None = None
+) -> DeviceConfig:
+    """The server's device config for one session: its model and seed, and the ``camera`` models it asked for
+    (``{"sensor", "calibration"}``, checked by ``workbench.sources.camera_models.check_camera_models``)."""
+    devices = dataclasses.replace(settings.devices, model=model, seed=seed)
+    if camera:
+        devices = dataclasses.replace(devices, camera=dataclasses.replace(devices.camera, **camera))
+    return devices
