@@ -1,12 +1,12 @@
-"""The planner's noise settings (``planner.config.NoiseConfig``) for a configured camera: the cell knows its
-sensor, the planner sees only frames."""
+"""The planner's noise and range settings (``planner.config.NoiseConfig``, ``candidates.max_range``) and the
+cell's first view for a configured camera: the cell knows its sensor, the planner sees only frames."""
 
 from __future__ import annotations
 
 import dataclasses
 import math
 
-from devices.config import CameraConfig
+from devices.config import CameraConfig, CellConfig
 from devices.sensors.presets import sensor_named
 from planner.config import NoiseConfig, PlannerConfig
 
@@ -29,14 +29,33 @@ SUPPORT_MIN_POINTS = 5
 
 def planner_config_for(config: PlannerConfig, camera: CameraConfig) -> PlannerConfig:
     """``config`` with its ``noise`` section set from ``camera`` (a perfect camera leaves it at 0; a calibration
-    error turns ``fit_plate`` on) and, for a sensor
-    with flying pixels, the support filter on (``SUPPORT_MIN_POINTS`` per voxel of the map) unless already set."""
+    error turns ``fit_plate`` on), for a sensor with flying pixels the support filter on (``SUPPORT_MIN_POINTS``
+    per voxel of the map) unless already set, and for a sensor with a finite range ``candidates.max_range`` set
+    to it unless already set (the candidate sphere shrinks so B's far corner stays in range)."""
     out = dataclasses.replace(config, noise=noise_config(camera, config.noise))
+    sensor = sensor_named(camera.sensor)
+    if math.isfinite(sensor.max_range) and config.candidates.max_range == 0:
+        out = dataclasses.replace(out, candidates=dataclasses.replace(out.candidates, max_range=sensor.max_range))
     if camera.calibration != "none":  # the plate seen through the reported pose is tilted and offset
         out = dataclasses.replace(out, noise=dataclasses.replace(out.noise, fit_plate=True))
-    if sensor_named(camera.sensor).flying_probability > 0 and config.preprocess.support_min_points == 0:
+    if sensor.flying_probability > 0 and config.preprocess.support_min_points == 0:
         pre = dataclasses.replace(
             config.preprocess, support_min_points=SUPPORT_MIN_POINTS, support_voxel=config.voxel.resolution
         )
         out = dataclasses.replace(out, preprocess=pre)
     return out
+
+
+FIRST_VIEW_RANGE_FRACTION = 0.7
+"""The first view is at most this share of the sensor's maximum range from its look-at point (the object spans
+about +-0.15 m around it: a D405, 0.5 m, looks from 0.35 m, the paper's d_c, instead of the cell's 0.55 m)."""
+
+
+def cell_config_for(cell: CellConfig, camera: CameraConfig) -> CellConfig:
+    """``cell`` with its first view (``initial_distance``) brought within ``FIRST_VIEW_RANGE_FRACTION`` of the
+    sensor's maximum range when it lies beyond: from 0.55 m a D405 (0.5 m) returns nothing of the object, and the
+    scan cannot start. Sensors with range to spare (ideal, D435, structured light at 0.8 m) leave it alone."""
+    limit = FIRST_VIEW_RANGE_FRACTION * sensor_named(camera.sensor).max_range
+    if cell.initial_distance <= limit:
+        return cell
+    return dataclasses.replace(cell, initial_distance=limit)

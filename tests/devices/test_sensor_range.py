@@ -1,0 +1,50 @@
+"""A sensor's range sets the planner's candidate sphere and the cell's first view: a D405 (0.5 m) from the
+cell's 0.55 m first view returned nothing of the object and the scan could not start."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from devices.builtins import make_builtin
+from devices.config import CameraConfig, CellConfig
+from devices.planner_noise import FIRST_VIEW_RANGE_FRACTION, cell_config_for, planner_config_for
+from devices.sim import make_sim_cell
+from planner import Planner, PlannerConfig
+
+
+@pytest.mark.parametrize(
+    ("sensor", "max_range", "first_view"),
+    [("ideal", 0.0, 0.55), ("realsense-d435", 3.0, 0.55), ("structured-light", 0.8, 0.55), ("realsense-d405", 0.5, 0.35)],
+)
+def test_range_follows_the_sensor(sensor: str, max_range: float, first_view: float) -> None:
+    camera = CameraConfig(sensor=sensor)
+    assert planner_config_for(PlannerConfig(), camera).candidates.max_range == max_range
+    assert cell_config_for(CellConfig(), camera).initial_distance == pytest.approx(first_view)
+    assert cell_config_for(CellConfig(), CameraConfig()) == CellConfig()  # the ideal camera: the cell as given
+
+
+def test_an_explicit_range_is_kept() -> None:
+    config = PlannerConfig().replace(candidates={"max_range": 0.4})
+    assert planner_config_for(config, CameraConfig(sensor="realsense-d405")).candidates.max_range == 0.4
+    near = dataclasses.replace(CellConfig(), initial_distance=0.3)
+    assert cell_config_for(near, CameraConfig(sensor="realsense-d405")) == near
+    assert FIRST_VIEW_RANGE_FRACTION * 0.5 == pytest.approx(0.35)
+
+
+def test_d405_first_frame_sees_the_object() -> None:
+    """The D405's first view, brought within its range by the cell, has returns on the object; the planner
+    takes it."""
+    camera = CameraConfig(sensor="realsense-d405")
+    cell = make_sim_cell(make_builtin("sphere"), camera, CellConfig(), seed=0)
+    frame = cell.capture()
+    points = frame.points_world
+    on_object = points[points[:, 2] > 0.01]
+    assert len(on_object) > 1000
+    planner = Planner(planner_config_for(PlannerConfig(), camera))
+    planner.integrate(frame)
+    assert planner.voxel_map.bbox is not None and len(planner.cloud) > 100
+    eye = cell.initial_pose().translation
+    assert float(np.linalg.norm(eye - np.array([0.0, 0.0, 0.1]))) == pytest.approx(0.35)
