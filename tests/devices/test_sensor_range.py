@@ -10,7 +10,13 @@ import pytest
 
 from devices.builtins import make_builtin
 from devices.config import CameraConfig, CellConfig
-from devices.planner_noise import FIRST_VIEW_RANGE_FRACTION, cell_config_for, planner_config_for
+from devices.planner_noise import (
+    FIRST_VIEW_RANGE_FRACTION,
+    cell_config_for,
+    per_move_pose_error,
+    planner_config_for,
+    registration_resolves_nothing,
+)
 from devices.sim import make_sim_cell
 from planner import Planner, PlannerConfig
 
@@ -48,3 +54,22 @@ def test_d405_first_frame_sees_the_object() -> None:
     assert planner.voxel_map.bbox is not None and len(planner.cloud) > 100
     eye = cell.initial_pose().translation
     assert float(np.linalg.norm(eye - np.array([0.0, 0.0, 0.1]))) == pytest.approx(0.35)
+
+
+@pytest.mark.parametrize(
+    ("camera", "icp"),
+    [
+        (CameraConfig(), True),  # the paper's method
+        (CameraConfig(calibration="poor"), True),  # a perfect depth: ICP resolves the arm's error
+        (CameraConfig(sensor="realsense-d435", calibration="typical"), False),
+        (CameraConfig(sensor="realsense-d435", calibration="poor"), False),  # 0.4 mm per move < 1.3 mm noise
+        (CameraConfig(sensor="structured-light", calibration="typical"), False),
+        (CameraConfig(sensor="structured-light", calibration="poor"), True),  # 0.4 mm > 0.13 mm noise
+        (CameraConfig(depth_noise_std=0.002), False),
+        (CameraConfig(depth_noise_std=0.002, pose_noise_translation=0.002), True),
+    ],
+)
+def test_icp_only_where_the_pose_error_exceeds_the_noise(camera: CameraConfig, icp: bool) -> None:
+    assert planner_config_for(PlannerConfig(), camera).registration.enabled is icp
+    assert registration_resolves_nothing(camera, 0.35) is not icp
+    assert per_move_pose_error(CameraConfig(calibration="typical"), 0.5) == pytest.approx(6.7e-5, rel=0.05)
