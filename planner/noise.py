@@ -49,7 +49,7 @@ def fit_plate(points_world: NDArray[np.float64], window: float, workspace_radius
     if len(q) < MIN_PLATE_POINTS:
         return zero
     A = np.column_stack([q[:, 0], q[:, 1], np.ones(len(q))])
-    counts, edges = np.histogram(q[:, 2], bins=max(1, int(round(2 * window / 0.001))), range=(-window, window))
+    counts, edges = np.histogram(q[:, 2], bins=max(1, round(2 * window / 0.001)), range=(-window, window))
     top = int(np.argmax(counts))
     coef = np.array([0.0, 0.0, 0.5 * (edges[top] + edges[top + 1])])
     keep = np.abs(q[:, 2] - coef[2]) <= 0.002

@@ -11,7 +11,6 @@ import pytest
 from devices.builtins import make_builtin
 from devices.config import CameraConfig, CellConfig
 from devices.planner_noise import (
-    FIRST_VIEW_RANGE_FRACTION,
     cell_config_for,
     per_move_pose_error,
     planner_config_for,
@@ -23,7 +22,12 @@ from planner import Planner, PlannerConfig
 
 @pytest.mark.parametrize(
     ("sensor", "max_range", "first_view"),
-    [("ideal", 0.0, 0.55), ("realsense-d435", 3.0, 0.55), ("structured-light", 0.8, 0.55), ("realsense-d405", 0.5, 0.35)],
+    [
+        ("ideal", 0.0, 0.55),
+        ("realsense-d435", 3.0, 0.55),
+        ("structured-light", 0.8, 0.55),
+        ("realsense-d405", 0.5, 0.35),
+    ],
 )
 def test_range_follows_the_sensor(sensor: str, max_range: float, first_view: float) -> None:
     camera = CameraConfig(sensor=sensor)
@@ -37,7 +41,6 @@ def test_an_explicit_range_is_kept() -> None:
     assert planner_config_for(config, CameraConfig(sensor="realsense-d405")).candidates.max_range == 0.4
     near = dataclasses.replace(CellConfig(), initial_distance=0.3)
     assert cell_config_for(near, CameraConfig(sensor="realsense-d405")) == near
-    assert FIRST_VIEW_RANGE_FRACTION * 0.5 == pytest.approx(0.35)
 
 
 def test_d405_first_frame_sees_the_object() -> None:
