@@ -33,6 +33,7 @@ from devices.arm.sim_arm import SimulatedJointArm
 from devices.calibration_error import CellErrors, calibration_named, configuration_key
 from devices.cell import Cell, rz, wrap_angle
 from devices.config import CameraConfig, CellConfig, DeviceConfig
+from devices.planner_noise import cell_config_for
 from devices.protocols import CaptureError, DeviceError
 from devices.sensors import apply_effects, second_view_visible, sensor_named
 from planner.types import DepthFrame, Intrinsics, Pose
@@ -266,7 +267,7 @@ def make_sim_cell(
     ValueError naming the field for a bad arm (unloadable URDF, missing flange frame, ...).
     """
     camera_config = camera_config if camera_config is not None else CameraConfig()
-    cell_config = cell_config if cell_config is not None else CellConfig()
+    cell_config = cell_config_for(cell_config if cell_config is not None else CellConfig(), camera_config)
     depth_seed, pose_seed, error_seed = np.random.SeedSequence(seed).spawn(3)
     errors = CellErrors(calibration_named(camera_config.calibration), int(error_seed.generate_state(1)[0]))
     turntable = SimulatedTurntable()

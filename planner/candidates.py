@@ -62,6 +62,20 @@ def share_out(total: int, weights: NDArray[np.float64]) -> NDArray[np.int64]:
     return counts
 
 
+MIN_STANDOFF = 0.05
+"""A range-limited sensor's candidates stay at least this far outside B's enclosing sphere, metres."""
+
+
+def sphere_radius(config: CandidateConfig, half_diagonal: float) -> float:
+    """R of the candidate sphere about B's centre for B's half-diagonal ``d_b``: the paper's ``d_c + d_b``, cut
+    so that B's far corner (``R + d_b`` from the camera) stays within the sensor's ``max_range`` (a D405 ends at
+    0.5 m: from the paper's R its far side returns nothing), but never closer than ``d_b + MIN_STANDOFF``."""
+    radius = float(config.working_distance + half_diagonal)
+    if config.max_range > 0 and radius + half_diagonal > config.max_range:
+        radius = max(float(config.max_range) - half_diagonal, half_diagonal + MIN_STANDOFF)
+    return radius
+
+
 def propose_candidates(
     bbox: BoundingBox, config: CandidateConfig, partitions: PartitionConfig
 ) -> tuple[tuple[Candidate, ...], NDArray[np.float64], float]:
@@ -77,7 +91,7 @@ def propose_candidates(
     if not isinstance(partitions, PartitionConfig):
         raise ValueError(f"partitions: expected a PartitionConfig, got {type(partitions).__name__}")
     center = np.array(bbox.center, dtype=np.float64)
-    radius = float(config.working_distance + 0.5 * bbox.diagonal)
+    radius = sphere_radius(config, 0.5 * bbox.diagonal)
     elevations = parallel_elevations(config)
     counts = share_out(config.count, np.cos(elevations))
 

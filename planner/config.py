@@ -121,6 +121,10 @@ class CandidateConfig:
     """alpha, number of equidistant parallels (the paper gives no value)."""
     working_distance: float = 0.35
     """d_c, the camera's working distance, metres."""
+    max_range: float = 0.0
+    """The depth sensor's farthest return, metres (0: no limit, a perfect camera, the paper's R). When B's far corner,
+    ``R + d_b`` from the camera, would lie beyond it, R is cut to ``max(max_range - d_b, d_b + MIN_STANDOFF)``
+    (``planner.candidates.sphere_radius``; the cell fills it from its sensor, ``devices.planner_config_for``)."""
     min_elevation_deg: float = 10.0
     """Lowest parallel's elevation above B's centre, degrees."""
     max_elevation_deg: float = 85.0
@@ -136,6 +140,10 @@ class CandidateConfig:
             f"candidates.parallels: must be an integer in [1, count], got {self.parallels!r}",
         )
         require(finite(self.working_distance) and self.working_distance > 0, "candidates.working_distance: must be > 0")
+        require(
+            finite(self.max_range) and self.max_range >= 0,
+            f"candidates.max_range: must be >= 0 (0: no limit), got {self.max_range!r}",
+        )
         require(
             finite(self.min_elevation_deg, self.max_elevation_deg)
             and -90 < self.min_elevation_deg <= self.max_elevation_deg < 90,

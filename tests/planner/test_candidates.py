@@ -98,3 +98,19 @@ def test_degenerate_box_and_bad_input() -> None:
         propose_candidates(BOX, CandidateConfig(), CandidateConfig())  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="config"):
         propose_candidates(BOX, PartitionConfig(), PartitionConfig())  # type: ignore[arg-type]
+
+
+def test_a_range_limited_sensor_pulls_the_sphere_in() -> None:
+    """``max_range`` 0 is the paper's R = d_c + d_b; a 0.5 m sensor keeps B's far corner within range, and the
+    camera never comes nearer than MIN_STANDOFF outside B's sphere."""
+    from planner.candidates import MIN_STANDOFF, sphere_radius
+
+    assert sphere_radius(CandidateConfig(), 0.15) == pytest.approx(0.35 + 0.15)
+    assert sphere_radius(CandidateConfig(max_range=3.0), 0.15) == pytest.approx(0.5)  # in range: unchanged
+    assert sphere_radius(CandidateConfig(max_range=0.5), 0.15) == pytest.approx(0.35)
+    assert sphere_radius(CandidateConfig(max_range=0.5), 0.3) == pytest.approx(0.3 + MIN_STANDOFF)
+    box = BoundingBox(np.array([-0.1, -0.1, 0.0]), np.array([0.1, 0.1, 0.2]))
+    _, _, radius = propose_candidates(box, CandidateConfig(max_range=0.5), PartitionConfig())
+    assert radius + 0.5 * box.diagonal == pytest.approx(0.5)
+    with pytest.raises(ValueError, match=r"candidates\.max_range"):
+        CandidateConfig(max_range=-1.0)
