@@ -29,7 +29,9 @@ pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("heavy")]  # tests/conft
 SPECS = [("l-block", 1), ("mug", 2), ("two-boxes", 3), ("sphere", 4), ("box", 5)]
 CONFIG = {**SMALL, "termination": {"stop_without_frontier": False, "max_views": 10}}
 STEPS = 5
-BUDGET_SECONDS = 90.0
+BUDGET_SECONDS = 240.0
+"""A hang guard, not a speed goal (speed is measured in benchmarks/): the run alone took 85 s on the 2-core machine
+once every view also fuses the surface and scores its accuracy."""
 
 
 def run_session(url: str, model: str, seed: int, start: threading.Barrier | None = None) -> dict[str, Any]:
@@ -40,7 +42,8 @@ def run_session(url: str, model: str, seed: int, start: threading.Barrier | None
         r = api.post("/api/sessions", json={"model": model, "seed": seed, "config": CONFIG})
         assert r.status_code == 201, r.text
         sid = r.json()["id"]
-        assert api.post(f"/api/sessions/{sid}/capture").status_code == 200
+        r = api.post(f"/api/sessions/{sid}/capture")
+        assert r.status_code == 200, r.text
         for k in range(STEPS):
             if k % 2 == 0:
                 r = api.post(f"/api/sessions/{sid}/step")
