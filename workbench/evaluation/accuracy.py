@@ -20,6 +20,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import KDTree
 
+from workbench.evaluation.coverage import as_points
+
 TAUS_MM = (2, 5)
 """The distances at which precision, recall and F are reported, millimetres."""
 ACCURACY_COLUMNS = (
@@ -74,7 +76,7 @@ class GroundTruth:
         self._faces = np.ascontiguousarray(faces, dtype=np.uint32)
         if self._vertices.ndim != 2 or self._vertices.shape[1] != 3 or len(self._faces) == 0:
             raise ValueError("ground truth: need (V, 3) vertices and at least one face")
-        self.samples = _points("samples", samples)
+        self.samples = as_points("samples", samples)
         if len(self.samples) == 0:
             raise ValueError("samples: need at least one sample")
         self._scene = o3d.t.geometry.RaycastingScene()
@@ -89,7 +91,7 @@ class GroundTruth:
         """(N,) distance of each of ``points`` (N, 3) to the nearest point of the surface, metres."""
         import open3d as o3d
 
-        p = _points("points", points)
+        p = as_points("points", points)
         if len(p) == 0:
             return np.zeros(0)
         query = o3d.core.Tensor.from_numpy(np.ascontiguousarray(p, dtype=np.float32))
@@ -99,7 +101,7 @@ class GroundTruth:
 def accuracy(truth: GroundTruth, cloud: ArrayLike) -> Accuracy:
     """Precision, recall and F at 2 and 5 mm, distance statistics and chamfer of ``cloud`` (N, 3) against
     ``truth``. An empty cloud scores 0 (distances nan)."""
-    p = _points("cloud", cloud)
+    p = as_points("cloud", cloud)
     if len(p) == 0:
         nan = float("nan")
         return Accuracy(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, nan, nan, nan, 0)
@@ -120,14 +122,3 @@ def accuracy(truth: GroundTruth, cloud: ArrayLike) -> Accuracy:
         chamfer_mm=float((to_surface.mean() + to_cloud.mean()) / 2 * 1000),
         points=len(p),
     )
-
-
-def _points(name: str, value: ArrayLike) -> NDArray[np.float64]:
-    arr = np.asarray(value, dtype=np.float64)
-    if arr.ndim == 1 and arr.size == 0:
-        arr = arr.reshape(0, 3)
-    if arr.ndim != 2 or arr.shape[1] != 3:
-        raise ValueError(f"{name}: expected shape (N, 3), got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name}: {int(np.count_nonzero(~np.isfinite(arr)))} non-finite value(s)")
-    return arr

@@ -15,8 +15,8 @@ def coverage(surface_samples: ArrayLike, cloud: ArrayLike, radius: float = 0.005
     N = 0 gives 0.0. Returns a float in [0, 1]. Non-finite values, bad shapes and
     radius <= 0 raise ValueError.
     """
-    samples = _points("surface_samples", surface_samples)
-    points = _points("cloud", cloud)
+    samples = as_points("surface_samples", surface_samples)
+    points = as_points("cloud", cloud)
     if len(samples) == 0:
         raise ValueError("surface_samples: need at least one sample")
     if not (isinstance(radius, int | float) and np.isfinite(radius) and radius > 0):
@@ -27,7 +27,8 @@ def coverage(surface_samples: ArrayLike, cloud: ArrayLike, radius: float = 0.005
     return float(np.count_nonzero(dist <= radius)) / len(samples)
 
 
-def _points(name: str, value: ArrayLike) -> np.ndarray:
+def as_points(name: str, value: ArrayLike) -> np.ndarray:
+    """``value`` as (N, 3) float64 points; ValueError naming ``name`` for another shape or a non-finite value."""
     arr = np.asarray(value, dtype=np.float64)
     if arr.ndim == 1 and arr.size == 0:
         arr = arr.reshape(0, 3)
