@@ -1,4 +1,5 @@
 # The two commands of the set-up contract: `make run` and `make test`.
+SHELL   := /bin/bash
 PY      ?= python3.11
 VENV    := .venv
 BIN     := $(VENV)/bin
@@ -42,7 +43,13 @@ run: system-deps $(STAMP)
 
 test: system-deps $(TSTAMP)
 	$(BIN)/ruff check planner devices workbench app nbv tests
-	$(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --dist loadgroup $(PYTEST_ARGS)
+	@mkdir -p test-output
+	@# the log's summary is printed again last: native libraries print at exit after pytest's own summary
+	set -o pipefail; $(BIN)/python -m pytest -q -rfE -n $(PYTEST_WORKERS) --dist loadgroup $(PYTEST_ARGS) 2>&1 \
+	  | tee test-output/pytest.log; status=$$?; \
+	  echo "== make test: summary (test-output/pytest.log) =="; \
+	  grep -aE '^(FAILED|ERROR) |[0-9]+ (passed|failed|errors?)\b.* in [0-9.]+s' test-output/pytest.log | tail -n 60; \
+	  exit $$status
 
 lint: $(TSTAMP)
 	$(BIN)/ruff check planner devices workbench app nbv tests
