@@ -106,7 +106,9 @@ def accuracy(truth: GroundTruth, cloud: ArrayLike) -> Accuracy:
         nan = float("nan")
         return Accuracy(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, nan, nan, nan, 0)
     to_surface = truth.distance(p)
-    to_cloud, _ = KDTree(p).query(truth.samples, k=1)
+    # compact_nodes and balanced_tree off: with them, scipy's unbounded query from samples far from a partial cloud
+    # (the unseen side of an object, the second of two boxes) took 40 s for 10k samples on 100k points; 0.3 s off
+    to_cloud, _ = KDTree(p, compact_nodes=False, balanced_tree=False).query(truth.samples, k=1)
     scores: dict[str, float] = {}
     for tau_mm in TAUS_MM:
         tau = tau_mm / 1000.0
