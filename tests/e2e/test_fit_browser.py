@@ -139,4 +139,6 @@ def test_debugging_a_fit(live_server: LiveServer, browser_context: BrowserContex
     assert status["pending_plan"]["plan_id"] == plan_id and status["state"] == "planned"
     page.locator(f"#fit-back-{kind}").click()
     expect(page.locator("#chart-bic circle.fit-picked")).to_have_count(0)
-    expect(page.locator(f"#fit tbody tr[data-kind='{kind}']")).to_have_count(sum(e.kind == kind for e in plan.ellipsoids))
+    expect(page.locator(f"#fit tbody tr[data-kind='{kind}']")).to_have_count(
+        sum(e.kind == kind for e in plan.ellipsoids)
+    )
