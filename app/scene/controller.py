@@ -18,6 +18,7 @@ import math
 import threading
 import time
 from collections.abc import Callable, Collection
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -275,7 +276,7 @@ class SceneController:
         return layers
 
     @property
-    def lock(self) -> threading.RLock:
+    def lock(self) -> AbstractContextManager[Any]:
         """The scene lock (held while a viewer's drawing changes)."""
         return self._lock
 

@@ -12,16 +12,39 @@ panel show the viewer's real state, whoever changed it.
 from __future__ import annotations
 
 import logging
-from typing import TYPE_CHECKING, Any
+from contextlib import AbstractContextManager
+from typing import Any, Protocol
 
 from app.scene.clusters import PALETTES, ClustersLayer, cluster_colors
+from app.scene.drawing import SessionDrawing
 from planner.fit_quality import LOW_FILL, fit_rows, worst_filled_first
-from workbench import Conflict, Invalid, WorkbenchError
-
-if TYPE_CHECKING:
-    from app.scene.controller import SceneController, Viewer
+from workbench import Conflict, Invalid, SessionRegistry, WorkbenchError
 
 log = logging.getLogger(__name__)
+
+
+class Viewer(Protocol):
+    """What this module reads of a viewer (app/scene/controller.py ``Viewer``)."""
+
+    id: str
+    session_id: str
+    layers: dict[str, bool]
+    drawing: SessionDrawing | None
+
+
+class Viewers(Protocol):
+    """What this module asks of the SceneController."""
+
+    registry: SessionRegistry
+
+    @property
+    def lock(self) -> AbstractContextManager[Any]: ...
+
+    def viewer(self, viewer_id: str) -> Any: ...
+
+    def set_layers(self, viewer_id: str, changes: dict[str, bool]) -> dict[str, bool]: ...
+
+    def notify(self, v: Any) -> None: ...
 
 
 def viewer_message(v: Viewer) -> dict[str, Any]:
@@ -39,7 +62,7 @@ def viewer_message(v: Viewer) -> dict[str, Any]:
 class FitViews:
     """The fit-debugging actions of a SceneController's viewers."""
 
-    def __init__(self, controller: SceneController) -> None:
+    def __init__(self, controller: Viewers) -> None:
         self.controller = controller
 
     def _layer(self, viewer_id: str) -> tuple[Viewer, ClustersLayer]:
