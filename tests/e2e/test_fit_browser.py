@@ -15,15 +15,24 @@ from tests.servers import LiveServer
 from tests.viewer_buffers import decode_frame_arrays
 
 
-def _clouds(tab: Tab, start: int = 0) -> dict[str, np.ndarray]:
-    """Per kind, the colours (N, 3) of the last /clusters/<kind>/voxels point cloud received since frame ``start``."""
-    out = {}
-    for data in tab.frames[start:]:
-        for m in decode_frame_arrays(data):
-            name = m.get("name", "")
-            if name.startswith("/clusters/") and name.endswith("/voxels") and "PointCloud" in m.get("type", ""):
-                out[name.split("/")[2]] = np.asarray(m["props"]["colors"]).reshape(-1, 3)
-    return out
+class _Decoded:
+    """The tab's viewer frames decoded with their buffers, each frame once (polling re-reads only new ones)."""
+
+    def __init__(self, tab: Tab) -> None:
+        self.tab = tab
+        self.messages: list[list[dict]] = []
+
+    def clouds(self, start: int = 0) -> dict[str, np.ndarray]:
+        """Per kind, the colours (N, 3) of the last /clusters/<kind>/voxels point cloud since frame ``start``."""
+        for data in self.tab.frames[len(self.messages) :]:
+            self.messages.append(decode_frame_arrays(data))
+        out = {}
+        for frame in self.messages[start:]:
+            for m in frame:
+                name = m.get("name", "")
+                if name.startswith("/clusters/") and name.endswith("/voxels") and "PointCloud" in m.get("type", ""):
+                    out[name.split("/")[2]] = np.asarray(m["props"]["colors"]).reshape(-1, 3)
+        return out
 
 
 def _first_hit(origin: np.ndarray, direction: np.ndarray, ellipsoids: list, inflate: float = 1.0) -> list[float]:
@@ -73,10 +82,11 @@ def test_debugging_a_fit(live_server: LiveServer, browser_context: BrowserContex
 
     # the clusters layer from the layer bar: per-voxel colours = the colour of each voxel's cluster (its label)
     tab.wait(lambda: any(m.get("name") == "/candidates" for m in tab.messages()))
-    page.locator("#layers input[data-layer='clusters']").check()
-    tab.wait(lambda: len(_clouds(tab)) == 2)
+    page.locator("#layers input[data-layer='clusters']").check(timeout=60_000)  # a loaded machine: SwiftShader is slow
+    decoded = _Decoded(tab)
+    tab.wait(lambda: len(decoded.clouds()) == 2)
     fit = api.get(f"/api/scene/{viewer}/fit").json()
-    clouds = _clouds(tab)
+    clouds = decoded.clouds()
     for kind in ("occupied", "frontier"):
         labels = next(f for f in plan.fits if f.kind == kind).labels
         color_of = {r["index"]: r["color"] for r in fit["rows"] if r["kind"] == kind}
@@ -115,6 +125,12 @@ def test_debugging_a_fit(live_server: LiveServer, browser_context: BrowserContex
     expect(row).to_have_count(1)
     expect(page.locator("#fit tbody tr.focused")).to_have_count(1)
     assert api.get(f"/api/scene/{viewer}/fit").json()["focus"] == label
+    # the inspector and the Fit panel mark each other's rows: a click on an inspector row focuses that ellipsoid
+    first = page.locator("#breakdown tbody tr").first
+    other = first.locator("td").first.inner_text()
+    first.click()
+    expect(page.locator(f"#fit tbody tr.focused[data-label='{other}']")).to_have_count(1, timeout=15_000)
+    expect(page.locator(f"#breakdown tbody tr.focused[data-label='{other}']")).to_have_count(1)
 
     # a T on the BIC chart: that many ellipsoids of that kind in this tab, the plan unchanged
     chosen = max(plan.fits, key=lambda f: len(f.bic))  # the kind with the most T evaluated
