@@ -411,6 +411,7 @@ function pick(index) {
 async function onViewer(m) {
   if (m.viewer !== S.viewer) return;
   S.layers = m.layers;
+  localStorage.setItem(LAYER_KEY, JSON.stringify(m.layers));
   P.renderLayers(S.layers, toggleLayer);
   await FitPanel.onViewer(m);
 }
