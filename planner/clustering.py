@@ -92,6 +92,11 @@ def single_thread_blas() -> AbstractContextManager:
     return _controller[0].limit(limits=1, user_api="blas")
 
 
+def fit_fixed_t(points_vox: NDArray[np.float64], t: int, config: ClusterConfig) -> tuple[float, Mixture]:
+    """(BIC, mixture) of scikit-learn's seeded EM with exactly ``t`` components. points_vox: (N, 3), N >= t."""
+    return _sklearn_fits(points_vox, [t], config)[t]
+
+
 def _checked_resolution(resolution: float) -> float:
     if not np.isfinite(resolution) or resolution <= 0:
         raise ValueError(f"resolution: must be a finite number > 0, got {resolution!r}")

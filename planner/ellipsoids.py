@@ -53,6 +53,13 @@ def _directions(k: int = 56) -> NDArray[np.float64]:  # 56 + 8 = 64 directions
 _DIRS = _directions()
 
 
+def dense(labels: NDArray[np.int64]) -> NDArray[np.int32]:
+    """(N,) component indices -> (N,) int32 ranks among the components that occur (the ellipsoids' order:
+    ``_ellipsoids`` makes one per non-empty component, by component index)."""
+    _, inverse = np.unique(labels, return_inverse=True)
+    return inverse.reshape(-1).astype(np.int32)
+
+
 class EllipsoidFitter:
     """Fits ellipsoids to the voxel centres of one kind, warm-starting each BIC search from the last one.
 
@@ -120,8 +127,28 @@ class EllipsoidFitter:
         ellipsoids = self._ellipsoids(x, labels, sel.mixture)
         t2 = time.perf_counter()
         self.last_timings = {"cluster": t1 - t0, "ellipsoids": t2 - t1}
-        fit = ClusterFit(self.kind, sel.mixture.n_components, tuple(sorted(sel.evaluated.items())), n, t2 - t0)
+        fit = ClusterFit(
+            self.kind, sel.mixture.n_components, tuple(sorted(sel.evaluated.items())), n, t2 - t0, dense(labels)
+        )
         return ellipsoids, fit
+
+    def fit_at(self, points_world: ArrayLike, t: int) -> tuple[tuple[Ellipsoid, ...], ClusterFit]:
+        """Ellipsoids of ``points_world`` (N, 3), N >= 1, clustered by a GMM of exactly ``t`` components (no BIC
+        search; scikit-learn's EM, seeded, as the exhaustive search fits it). The warm start is left alone: this
+        answers "what would the fit look like at T", it is not the planner's fit. ``ClusterFit.bic`` holds
+        (t, BIC of that model)."""
+        p = checked_points("points_world", points_world, 1)
+        if isinstance(t, bool) or not isinstance(t, int | np.integer) or not 1 <= int(t) <= p.shape[0]:
+            raise ValueError(f"t: must be an integer in [1, {p.shape[0]}] (the points fitted), got {t!r}")
+        t0 = time.perf_counter()
+        x = p / self.resolution
+        with clustering.single_thread_blas():
+            bic, mix = clustering.fit_fixed_t(x, int(t), self.config)
+            labels = assign(x, mix)
+            ellipsoids = self._ellipsoids(x, labels, mix)
+        return ellipsoids, ClusterFit(
+            self.kind, int(t), ((int(t), bic),), p.shape[0], time.perf_counter() - t0, dense(labels)
+        )
 
     def _ellipsoids(self, x: NDArray[np.float64], labels: NDArray[np.int64], mix: Mixture) -> tuple[Ellipsoid, ...]:
         """One ellipsoid per non-empty cluster, ordered by component index. x: (N, 3) voxel units."""
@@ -179,6 +206,14 @@ class EllipsoidFitter:
                     n_points=int(c),
                     gmm_mean=mix.means[comp] * res,
                     gmm_covariance=mix.covariances[comp] * res**2,
+                    gmm_weight=float(mix.weights[comp]),
                 )
             )
         return tuple(out)
+
+
+def fit_at_t(
+    points_world: ArrayLike, config: ClusterConfig, resolution: float, kind: EllipsoidKind, t: int
+) -> tuple[tuple[Ellipsoid, ...], ClusterFit]:
+    """:meth:`EllipsoidFitter.fit_at` of a fresh fitter: the ellipsoids of ``points_world`` (N, 3) at exactly T."""
+    return EllipsoidFitter(config, resolution, kind).fit_at(points_world, t)

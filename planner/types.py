@@ -318,7 +318,7 @@ class Ellipsoid:
     kind: which voxel class the cluster came from.
     n_points: voxels in the cluster.
     gmm_mean, gmm_covariance: the Gaussian component the cluster came from
-    ((3,), (3, 3)), kept for debugging fits by eye.
+    ((3,), (3, 3)), kept for debugging fits by eye; gmm_weight: that component's mixture weight.
     """
 
     center: NDArray[np.float64]
@@ -328,6 +328,7 @@ class Ellipsoid:
     n_points: int = 0
     gmm_mean: NDArray[np.float64] | None = None
     gmm_covariance: NDArray[np.float64] | None = None
+    gmm_weight: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "center", checked_array("center", self.center, (3,)))
@@ -444,6 +445,9 @@ class ClusterFit:
 
     t_chosen: the number of components; bic: (T, BIC) pairs that were evaluated;
     n_points: voxels fitted; seconds: wall time of the fit.
+    labels: (n_points,) int32, the cluster of each fitted voxel (in ``VoxelSnapshot`` order of this kind) as
+    the index of its ellipsoid among this kind's ellipsoids (``PlanResult.ellipsoids`` order); None when not
+    kept.
     """
 
     kind: EllipsoidKind
@@ -451,6 +455,7 @@ class ClusterFit:
     bic: tuple[tuple[int, float], ...]
     n_points: int
     seconds: float = 0.0
+    labels: NDArray[np.int32] | None = None
 
 
 @dataclass(frozen=True, eq=False)

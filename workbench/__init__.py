@@ -24,6 +24,7 @@ from workbench.jsonable import jsonable
 from workbench.progress import Progress
 from workbench.registry.creations import resume_id
 from workbench.registry.registry import SessionRegistry
+from workbench.session.fit import Refit
 from workbench.session.session import Session
 from workbench.session.states import BUSY, Listed, State
 from workbench.session.summaries import SessionStatus, best_of, plan_summary
@@ -43,6 +44,7 @@ __all__ = [
     "Listed",
     "NotFound",
     "Progress",
+    "Refit",
     "SceneData",
     "Session",
     "SessionEvent",

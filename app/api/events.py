@@ -8,6 +8,9 @@ Messages (JSON):
 - ``{"type": "deleted"}``: this tab's session was deleted;
 - ``{"type": "progress", "progress": {...} | null}``: the session's long operation (a plan, a discard, its
   resume) moved on or ended (``ProgressOut``; at most ten a second within a stage);
+- ``{"type": "viewer", "viewer": ID, "layers": {...}, "focus": "O3" | null, "refits": {kind: T}}``: a viewer of
+  this session changed (its layers, however set, its focused ellipsoid, a fit at another T); a page keeps the
+  ones of its own viewer (app/scene/fit_view.py);
 - with ``?create=ID`` (a ``progress_id`` of ``POST /api/sessions``): ``{"type": "create", "id": ID,
   "progress": {...} | null}`` as that create goes (null: it ended).
 
@@ -108,6 +111,13 @@ async def events(ws: WebSocket, session: str | None = None, create: str | None =
         if live is not None and s.id == live.id:
             push({"type": "deleted"})
 
+    def on_viewer(session_id: str, message: dict[str, Any]) -> None:
+        if session_id == session:
+            push(message)
+
+    scene = ws.app.state.scene
+    if scene is not None:
+        scene.viewer_listeners.append(on_viewer)
     if live is not None:
         live.listeners.append(on_session)
     registry.on_create.append(on_create)
@@ -136,6 +146,9 @@ async def events(ws: WebSocket, session: str | None = None, create: str | None =
             registry.on_delete.remove(on_delete)
         with contextlib.suppress(ValueError):
             registry.creations.listeners.remove(on_create_progress)
+        if scene is not None:
+            with contextlib.suppress(ValueError):
+                scene.viewer_listeners.remove(on_viewer)
         if live is not None:
             with contextlib.suppress(ValueError):
                 live.listeners.remove(on_session)

@@ -17,7 +17,8 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Collection
+from collections.abc import Callable, Collection
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -27,6 +28,7 @@ import viser
 from app.scene.arm import ArmTarget, SessionArm
 from app.scene.camera import client_cameras
 from app.scene.drawing import SessionDrawing
+from app.scene.fit_view import FitViews, viewer_message
 from app.scene.geometry import COLORS, DEFAULT_LAYERS, SCALE_PERCENTILES, VIRIDIS, candidate_colors, outward_camera
 from app.scene.guard import install_guard
 from app.scene.robot import RobotScene
@@ -89,6 +91,10 @@ class SceneController:
         self._bound: dict[int, Ticket] = {}  # client id -> ticket, between the handshake and viser's client
         self._watched: set[str] = set()
         self._arms: dict[str, SessionArm] = {}
+        self.fit = FitViews(self)
+        """The Fit panel's actions (app/scene/fit_view.py)."""
+        self.viewer_listeners: list[Callable[[str, dict[str, Any]], None]] = []
+        """Called with (session id, ``viewer_message``) after a viewer's layers, focus or refit changed."""
         server.scene.set_up_direction("+z")
         server.scene.configure_default_lights(enabled=True, cast_shadow=False)
         server.initial_camera.position = (0.95, -0.8, 0.75)
@@ -141,6 +147,7 @@ class SceneController:
         with self._lock:
             v.client = client
             v.drawing = SessionDrawing(client, v.layers, self._selector(session), self._custom_setter(session))
+            v.drawing.on_focus = lambda label, viewer_id=v.id: self.fit.clicked(viewer_id, label)
             if session.id not in self._watched:
                 self._watched.add(session.id)
                 session.listeners.append(self._on_event)
@@ -264,7 +271,24 @@ class SceneController:
                 v.drawing.set_layers(changes)
             else:
                 v.layers.update(changes)
-            return dict(v.layers)
+            layers = dict(v.layers)
+        self.notify(v)
+        return layers
+
+    @property
+    def lock(self) -> AbstractContextManager[Any]:
+        """The scene lock (held while a viewer's drawing changes)."""
+        return self._lock
+
+    def notify(self, v: Viewer) -> None:
+        """Tell the viewer's page (``viewer_listeners``) its layers, focus and refits as they are now."""
+        with self._lock:
+            message = viewer_message(v)
+        for listener in list(self.viewer_listeners):
+            try:
+                listener(v.session_id, message)
+            except Exception:  # a listener never breaks the scene
+                log.exception("viewer listener failed")
 
     def info(self, viewer_id: str) -> dict[str, Any]:
         """The viewer's session, whether its client is connected, layers, drawn nodes and the colour bar."""

@@ -13,6 +13,7 @@ Node names (stable, per client)::
     /cloud/0, /cloud/1, ...                                  the registered cloud, one chunk per new part
     /surface                                                 the reconstructed surface (simplified, one mesh)
     /override/gizmo (+ /override/gizmo/frustum)              custom-pose transform gizmo
+    /clusters/...                                            voxels by GMM cluster, ellipsoids named (app/scene/clusters.py)
 
 What is re-sent: the plan's layers when the plan changes, only the views and cloud points that are new after
 a capture, the selection when it changes. Hidden heavy layers (``LAZY``: empty / unknown voxels, GMM
@@ -32,6 +33,7 @@ import trimesh
 import viser
 from numpy.typing import NDArray
 
+from app.scene.clusters import ClustersLayer
 from app.scene.geometry import (
     COLORS,
     GROUPS,
@@ -50,7 +52,7 @@ from workbench.surface import SurfaceMesh
 log = logging.getLogger(__name__)
 
 _MARKER = trimesh.creation.icosphere(subdivisions=1, radius=1.0)
-LAZY = ("occupied", "frontier", "unknown", "empty", "gmm", "mesh")
+LAZY = ("occupied", "frontier", "unknown", "empty", "gmm", "mesh", "clusters")
 """Layers drawn only while visible (drawn on first show, then kept)."""
 CLOUD_CELL = 0.004
 """Metres: a registered-cloud point is new (appended) when no drawn point shares its cell of this size."""
@@ -90,6 +92,9 @@ class SessionDrawing:
         for name, layer in GROUPS.items():
             visible = True if layer is None else self.layers[layer]
             self._put(name, self.scene.add_frame(name, show_axes=False, visible=visible))
+        self.on_focus: Callable[[str], None] = lambda label: None
+        """What a click on an ellipsoid of the clusters layer asks (set by the owner)."""
+        self.clusters = ClustersLayer(self.scene, self._put, self._drop, lambda label: self.on_focus(label))
 
     # ------------------------------------------------------------------ public
 
@@ -124,6 +129,7 @@ class SessionDrawing:
             for name in [n for n in self._handles if n not in GROUPS]:
                 self._drop(name)
             self._data = self._plan = None
+            self.clusters.new_plan(None)
             self._drawn_lazy.clear()
             self._views = self._cloud_chunks = 0
             self._cloud_cells.clear()
@@ -147,6 +153,15 @@ class SessionDrawing:
             if "gizmo" in changes and self._data is not None:
                 self._selection_key = None
                 self._sync_selection(self._data)
+
+    def redraw_clusters(self) -> None:
+        """Send the clusters layer again (a focus or a refit changed it) if it is shown, else when next shown."""
+        with self.client.atomic():
+            if self.layers["clusters"]:
+                self.clusters.draw()
+                self._drawn_lazy.add("clusters")
+            else:
+                self._drawn_lazy.discard("clusters")
 
     def candidate_at(self, event: viser.SceneNodePointerEvent) -> int | None:
         """The candidate index a click on /candidates hit (the instance, else the marker nearest the ray)."""
@@ -175,11 +190,12 @@ class SessionDrawing:
 
     def _draw_plan(self, data: SceneData) -> None:
         self._plan = data.plan
-        for name in ("/map", "/ellipsoids", "/gmm", "/candidates", "/context/bbox", "/context/sectors"):
+        for name in ("/map", "/ellipsoids", "/gmm", "/candidates", "/context/bbox", "/context/sectors", "/clusters"):
             self._drop(name)
-        self._drawn_lazy -= {"occupied", "frontier", "unknown", "empty", "gmm"}
+        self._drawn_lazy -= {"occupied", "frontier", "unknown", "empty", "gmm", "clusters"}
         self._selection_key = None
         plan = data.plan
+        self.clusters.new_plan(plan)
         if plan is None:
             return
         counts = {"occupied": 0, "frontier": 0}
@@ -212,6 +228,9 @@ class SessionDrawing:
         self._drawn_lazy.add(layer)
         if layer == "mesh":
             self._draw_mesh(data)
+            return
+        if layer == "clusters":
+            self.clusters.draw()
             return
         plan = data.plan
         if plan is None:

@@ -41,6 +41,7 @@ DEFAULT_LAYERS: dict[str, bool] = {
     "turntable": True,
     "mesh": False,
     "surface": False,
+    "clusters": False,
     "gizmo": False,
 }
 LAYER_NODES: dict[str, tuple[str, ...]] = {
@@ -59,6 +60,7 @@ LAYER_NODES: dict[str, tuple[str, ...]] = {
     "turntable": ("/context/turntable",),
     "mesh": ("/context/mesh",),
     "surface": ("/surface",),
+    "clusters": ("/clusters",),
     "gizmo": ("/override",),
 }
 GROUPS: dict[str, str | None] = {
@@ -69,6 +71,7 @@ GROUPS: dict[str, str | None] = {
     "/views": "views",
     "/context/sectors": "sectors",
     "/override": "gizmo",
+    "/clusters": "clusters",
 }
 """Group nodes (empty frames) and the layer that hides them (None: always shown)."""
 

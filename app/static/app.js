@@ -261,6 +261,7 @@ async function onMessage(m) {
   if (m.type === "progress") showProgress(m.progress);
   else if (m.type === "status") await onStatus(m.status, m.event);
   else if (m.type === "sessions") await loadSessions();
+  else if (m.type === "viewer") await onViewer(m);
   else if (m.type === "deleted") {
     showError(`session ${S.session} was deleted`);
     S.status = null;
@@ -283,6 +284,7 @@ async function onStatus(st, event) {
     if (st.selected !== null) P.pageOf(st.selected);
     P.renderTable(st.selected, pick);
     await loadInspector(st.selected);
+    await FitPanel.load();
   }
   const custom = st.custom_pose ? st.custom_pose.pose.position.join(",") + st.custom_pose.pose.wxyz : "";
   const armKey = `${st.iteration}/${planId}/${st.selected}/${custom}`;
@@ -294,6 +296,7 @@ async function onStatus(st, event) {
   if (key !== S.metricsKey && !["capturing", "planning", "moving", "discarding", "interrupted"].includes(st.state)) {
     S.metricsKey = key;
     P.renderCharts(await api("GET", `/api/sessions/${S.session}/metrics`));
+    FitPanel.markChart();
   }
 }
 
@@ -402,6 +405,15 @@ async function loadInspector(selected) {
 
 function pick(index) {
   return action("selecting", () => api("PUT", `/api/sessions/${S.session}/selection`, { index }));
+}
+
+// A viewer's state pushed to the page (its layers, however they were set; its Fit focus and refits).
+async function onViewer(m) {
+  if (m.viewer !== S.viewer) return;
+  S.layers = m.layers;
+  localStorage.setItem(LAYER_KEY, JSON.stringify(m.layers));
+  P.renderLayers(S.layers, toggleLayer);
+  await FitPanel.onViewer(m);
 }
 
 function toggleLayer(name, on) {

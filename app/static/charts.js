@@ -79,7 +79,7 @@ function lineChart(svg, series, opts) {
     svgEl("path", { d, fill: "none", stroke: s.color, "stroke-width": 1.8 }, svg);
     s.points.forEach((p, i) => {
       if (p[1] === null || !isFinite(p[1])) return;
-      const dot = svgEl("circle", { cx: X(p[0]), cy: Y(p[1]), r: 2.6, fill: s.color }, svg);
+      const dot = svgEl("circle", { cx: X(p[0]), cy: Y(p[1]), r: 2.6, fill: s.color, "data-x": p[0], "data-series": s.label || "" }, svg);
       svgEl("title", {}, dot).textContent = s.hover ? s.hover[i] : `${fmt(p[0])}, ${fmt(p[1])}`;
     });
     if (s.marker) {

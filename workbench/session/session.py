@@ -23,6 +23,7 @@ from workbench.journal.store import Journal
 from workbench.session.auto import AutoRunner
 from workbench.session.core import SessionCore
 from workbench.session.discard import discard_last_view
+from workbench.session.fit import Refit, refit
 from workbench.session.states import BUSY, Action
 from workbench.session.values import CustomPose, PendingPlan
 
@@ -76,6 +77,10 @@ class Session(SessionCore):
     def change_config(self, changes: dict[str, Any]) -> dict[str, Any]:
         """Change the sections the planner reads on every plan (``loop.MUTABLE_SECTIONS``); journaled."""
         return loop.change_config(self, changes)
+
+    def refit(self, kind: str, t: int) -> Refit:
+        """``kind``'s voxels of the current plan fitted at ``t`` components, in the worker; changes nothing."""
+        return refit(self, kind, t)
 
     def discard_last_view(self) -> dict[str, Any]:
         """Rebuild this session from its journal without its last view (workbench/session/discard.py)."""

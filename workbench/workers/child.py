@@ -17,7 +17,9 @@ and a fresh worker takes up the next job. Jobs:
   process rebuilds it from the journal in ``journal_dir`` first, workbench/journal/surface.py);
 - ``("rebuild", (journal, cell_config, q, angle, surface_samples))``: ``("progress", (stage, done, total))``
   messages on the way, then the ``Rebuilt`` session (a resume or a discard replays its journal here), its
-  surface rebuilt too (``Rebuilt.surface``).
+  surface rebuilt too (``Rebuilt.surface``);
+- ``("fit", (points_world, cluster_config, resolution, kind, t))``: ``(ellipsoids, ClusterFit)`` of one voxel
+  kind at exactly T components (``planner.ellipsoids.fit_at_t``: the Fit panel's "fit at another T").
 
 This module imports the planner and (on the first render) open3d; the server imports it only to name the
 target of its processes, and the forkserver preloads it so a new worker starts in milliseconds.
@@ -206,6 +208,10 @@ class _Worker:
             report = planner.integrate(frame)  # a rejected frame raises here: the surface does not see it
             self.surface = in_step(self.surface, views, journal_dir, self.truth)
             return report, planner, self.surface.add(frame, report.T_world_camera)
+        if kind == "fit":
+            from planner.ellipsoids import fit_at_t
+
+            return fit_at_t(*payload)
         if kind == "sleep":  # tests: a job that holds the worker (like a plan that never ends)
             import time
 
