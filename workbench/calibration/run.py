@@ -231,10 +231,11 @@ class CalibrationRun:
         self._notify("skipped")
         return pose
 
-    def approve(self, index: int) -> PoseState:
-        """Move to pose ``index``, capture, fit the spheres; the estimate is redone. Returns the pose's state:
-        captured, or skipped with the reason (unreachable, no sphere seen). Conflict for a captured pose or while
-        busy; DeviceFault (the pose stays pending) when a device fails or times out."""
+    def approve(self, index: int, refit: bool = True) -> PoseState:
+        """Move to pose ``index``, capture, fit the spheres; the estimate is redone (unless ``refit`` is false).
+        Returns the pose's state: captured, or skipped with the reason (unreachable, no sphere seen). Conflict for
+        a captured pose or while busy; DeviceFault (the pose stays pending) when a device fails or times out, or
+        the camera delivers a frame that is not one (NaN depths)."""
         pose = self.pose(index)
         if pose.status == CAPTURED:
             raise Conflict(f"calibration {self.id}: pose {index} ({pose.label}) is captured already")
@@ -247,7 +248,7 @@ class CalibrationRun:
             except UnreachableError as exc:  # planned but refused by the driver
                 capture = None
                 self.routine.skipped.append((pose.label, str(exc)))
-            except (DeviceError, OSError) as exc:
+            except (DeviceError, OSError, ValueError) as exc:
                 with self._lock:
                     self._moves += 1  # the arm may have moved part of the way
                     pose.reason = f"device fault: {exc}"
@@ -263,7 +264,8 @@ class CalibrationRun:
                     pose.status, pose.reason = CAPTURED, None
                     pose.spheres = int(capture.seen.sum())
                     pose.fit_rms_mm = [None if math.isnan(r) else round(float(r) * 1000, 4) for r in capture.fit_rms]
-            self._refit()
+            if refit:
+                self._refit()
         finally:
             self._release()
         self._notify("captured" if pose.status == CAPTURED else "skipped")
@@ -273,11 +275,20 @@ class CalibrationRun:
         """Approve every pending pose in order (the headless path of the page's "approve all"). A device fault
         stops the loop (DeviceFault, the captures so far kept)."""
         done = []
-        for pose in list(self._poses):
-            if pose.status == PENDING:
-                done.append(self.approve(pose.index))
-                if progress is not None:
-                    progress(done[-1])
+        try:
+            for pose in list(self._poses):
+                if pose.status == PENDING:
+                    done.append(self.approve(pose.index, refit=False))
+                    if progress is not None:
+                        progress(done[-1])
+        finally:
+            if done:
+                self._claim("estimating")
+                try:
+                    self._refit()
+                finally:
+                    self._release()
+                self._notify("estimate")
         return done
 
     def estimate(self, angle_sigma_deg: float | None = None) -> CalibrationResult:
