@@ -179,8 +179,10 @@ def test_writing_the_cell_file_keeps_a_backup_and_round_trips(tmp_path: Path) ->
     assert np.allclose(cell.arm_base.translation, [-0.85 - 0.0015, 0.002, 0.0], atol=1e-9)
     text = path.read_text()
     assert "# the lab's cell" in text and "[planner]\nresolution = 0.01" in text  # the rest is kept
-    assert "turntable axis tilt 0.286 deg" in text  # the tilt, reported
-    assert text.count("[devices.hand_eye]") == 1 and text.count("[devices.arm_base]") == 1
+    assert "tilt 0.286 deg" in text  # the tilt, reported, and written as data
+    assert np.allclose(cell.turntable_axis, _result().axis_direction_base, atol=1e-7)
+    sections = ("[devices.hand_eye]", "[devices.arm_base]", "[devices.turntable_axis]")
+    assert all(text.count(name) == 1 for name in sections)
     # writing again round-trips: the same values, a second backup
     again = write_calibration(path, _result())
     assert again.exists() and np.allclose(load_cell_file(path).hand_eye.matrix, X_TRUE.matrix, atol=1e-6)
