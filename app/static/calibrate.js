@@ -5,7 +5,7 @@
 "use strict";
 
 window.Calibrate = (() => {
-  const C = { id: null, status: null, running: false, stop: false };
+  const C = { id: null, status: null, running: false, stop: false, viewer: null };
   const $ = (id) => document.getElementById(id);
   const fmt = (v, d = 2) => (v === null || v === undefined ? "–" : Number(v).toFixed(d));
   const esc = (s) => String(s).replace(/[&<>"]/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;" })[c]);
@@ -102,6 +102,7 @@ window.Calibrate = (() => {
     render(st);
     try {
       const v = await api("POST", `/api/calibrations/${st.id}/viewer`);
+      C.viewer = v.viewer; // this tab's viewer id (/api/scene/ID/camera moves its camera)
       $("viewer").hidden = false;
       $("viewer").src = v.url;
     } catch (e) { showError("3D viewer unavailable: " + e.message); }

@@ -107,6 +107,63 @@ def initial_hand_eye(captures: Sequence[Capture], target: SphereTarget) -> Pose:
     return Pose(u @ vt, np.asarray(t, dtype=np.float64).reshape(3))
 
 
+COVARIANCE = "ls"
+"""How the uncertainty is computed: see :func:`covariance`."""
+
+
+def covariance(
+    J: NDArray[np.float64], r: NDArray[np.float64], clusters: NDArray[np.int_], method: str = "ls"
+) -> NDArray[np.float64]:
+    """The parameters' covariance at a least-squares solution. J: (M, P) the residuals' Jacobian; r: (M,) the
+    residuals; clusters: (M,) which capture each residual belongs to. 'ls': ``s^2 (J^T J)^-1`` with ``s^2`` the
+    residual variance (the reduced chi-square: residuals taken as independent). 'cluster': the cluster-robust
+    sandwich ``H^-1 (sum_c g_c g_c^T) H^-1 C/(C-1)`` with ``g_c = J_c^T r_c`` the capture's score: the residuals
+    of one capture share its flange-pose and plate-angle errors, which 'ls' counts as independent noise."""
+    H_inv = np.linalg.pinv(J.T @ J)
+    if method == "ls":
+        dof = max(len(r) - J.shape[1], 1)
+        return H_inv * float(r @ r) / dof
+    if method != "cluster":
+        raise ValueError(f"covariance: 'ls' or 'cluster', got {method!r}")
+    ids = np.unique(clusters)
+    scores = np.stack([J[clusters == c].T @ r[clusters == c] for c in ids])  # (C, P)
+    meat = scores.T @ scores * (len(ids) / max(len(ids) - 1, 1))
+    return H_inv @ meat @ H_inv
+
+
+REPEATABILITY = (0.0003, 0.01)
+
+
+def arm_covariance(
+    J: NDArray[np.float64],
+    r: NDArray[np.float64],
+    capture_of: NDArray[np.int_],
+    pred_camera: NDArray[np.float64],
+    repeatability: tuple[float, float],
+) -> NDArray[np.float64]:
+    """'ls' plus the arm's repeatability: each capture's camera is off by a small displacement (``repeatability``:
+    metres and degrees, one sigma per axis) shared by all its sphere centres. capture_of: (S,) the capture of each
+    sighting; pred_camera: (S, 3) the predicted centres (camera frame). A sighting moves by ``-dt + pred x dr``."""
+    H_inv = np.linalg.pinv(J.T @ J)
+    dof = max(len(r) - J.shape[1], 1)
+    s2 = float(r @ r) / dof
+    st2, sr2 = repeatability[0] ** 2, math.radians(repeatability[1]) ** 2
+    meat = s2 * (J.T @ J)
+    S = len(capture_of)
+    Jd = J[: 3 * S]
+    for c in np.unique(capture_of):
+        rows = np.nonzero(capture_of == c)[0]
+        B = np.zeros((3 * len(rows), 6))
+        for n, k in enumerate(rows):
+            x, y, z = pred_camera[k]
+            B[3 * n : 3 * n + 3, :3] = -np.eye(3)
+            B[3 * n : 3 * n + 3, 3:] = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+        Jc = Jd[(3 * rows[:, None] + np.arange(3)).ravel()]
+        W = B @ np.diag([st2, st2, st2, sr2, sr2, sr2]) @ B.T
+        meat += Jc.T @ W @ Jc
+    return H_inv @ meat @ H_inv
+
+
 def estimate(captures: Sequence[Capture], target: SphereTarget, angle_sigma_deg: float = 0.1) -> CalibrationResult:
     """The hand-eye transform and the turntable axis from ``captures`` of ``target`` (see the module docstring).
     angle_sigma_deg: the plate angle's expected error per move (0: angles taken as exact). CalibrationError when
@@ -154,10 +211,12 @@ def estimate(captures: Sequence[Capture], target: SphereTarget, angle_sigma_deg:
         raise CalibrationError(f"calibration: the least-squares fit did not converge ({solution.message})")
     X, A, P, _ = unpack(solution.x)
     data = solution.fun[: 3 * len(ci)]
-    dof = max(len(solution.fun) - len(x0), 1)
-    s2 = float(solution.fun @ solution.fun) / dof
-    J = solution.jac
-    cov = np.linalg.pinv(J.T @ J) * s2
+    clusters = np.concatenate([np.repeat(ci, 3), np.arange(C) if free_angles else np.zeros(0, dtype=int)])
+    if COVARIANCE == "arm":
+        pred = obs_seen - data.reshape(-1, 3)
+        cov = arm_covariance(solution.jac, solution.fun, ci, pred, REPEATABILITY)
+    else:
+        cov = covariance(solution.jac, solution.fun, clusters, COVARIANCE)
     per_capture = np.array([math.sqrt(float(np.mean(data.reshape(-1, 3)[ci == i] ** 2)) * 3) * 1000 for i in range(C)])
     return CalibrationResult(
         T_flange_camera=X,

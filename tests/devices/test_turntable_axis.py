@@ -35,7 +35,7 @@ def test_the_axis_is_read_as_a_unit_vector_and_defaults_to_the_vertical() -> Non
     ],
 )
 def test_a_bad_axis_is_refused_naming_the_field(axis: str, message: str) -> None:
-    with pytest.raises(ValueError, match="devices.turntable_axis") as info:
+    with pytest.raises(ValueError, match=r"devices\.turntable_axis") as info:
         parse_cell(_cell(axis))
     assert message in str(info.value)
 

@@ -50,7 +50,10 @@ def test_calibrate_mode_previews_approves_and_shows_residuals_and_the_estimate(
     expect(page.locator("#cal-poses tbody tr[data-status=captured]")).to_have_count(8, timeout=25_000)
 
     # residuals per capture and the estimate with its uncertainty and its check against the truth
-    residuals = [t.strip() for t in page.locator("#cal-poses tbody tr[data-status=captured] [data-testid=residual]").all_inner_texts()]
+    residuals = [
+        t.strip()
+        for t in page.locator("#cal-poses tbody tr[data-status=captured] [data-testid=residual]").all_inner_texts()
+    ]
     assert len(residuals) == 8 and all(0.0 < float(r) < 3.0 for r in residuals), residuals
     estimate = page.get_by_test_id("cal-estimate")
     expect(estimate).to_contain_text("hand-eye translation")

@@ -43,7 +43,11 @@ def test_calibrate_mode_on_the_fake_rig_approves_each_pose_and_writes_the_cell_f
         fake.path.write_text(cell_toml(fake.grbl.port, k, arm_speed=fast + "max_joint_acceleration_deg = 360"))
         before = fake.path.read_text()
         settings = AppSettings(
-            viser_port=0, scene=False, data_dir=tmp_path / "data", cell=str(fake.path), devices=DeviceConfig(camera=CAMERA)
+            viser_port=0,
+            scene=False,
+            data_dir=tmp_path / "data",
+            cell=str(fake.path),
+            devices=DeviceConfig(camera=CAMERA),
         )
         with TestClient(create_app(settings), base_url="http://127.0.0.1") as client:
             created = client.post("/api/calibrations", json={"plate_angles_deg": list(ANGLES)})

@@ -8,6 +8,7 @@ refuses a cell file it cannot write, leaving it as it was, and otherwise writes 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -17,14 +18,14 @@ from devices.calibration import DEFAULT_TARGET, Calibration, CalibrationPose, ca
 from devices.calibration.poses import VIEWS
 from devices.cellfile import load_cell_file
 from devices.faults import FaultConfig, FaultInjector, with_faults
-from planner.types import Pose
+from planner.types import Intrinsics, Pose
 from workbench import CalibrationRun, Calibrations, Conflict, DeviceFault, Invalid, NotFound, WorkbenchSettings
 
 ANGLES = [0.0, 120.0, -120.0]
 
 
 @pytest.fixture(scope="module")
-def poor(tmp_path_factory: pytest.TempPathFactory) -> CalibrationRun:
+def poor(tmp_path_factory: pytest.TempPathFactory) -> Iterator[CalibrationRun]:
     """The routine's 36 poses on a 'poor' simulated cell (seed 3), every one approved."""
     book = Calibrations(WorkbenchSettings(data_dir=tmp_path_factory.mktemp("data")))
     run = book.create({"kind": "sim", "calibration": "poor", "seed": 3})
@@ -74,8 +75,8 @@ def _small_run(cell_file: str | None = None, extra: list[CalibrationPose] | None
 def test_an_unreachable_pose_and_one_without_the_target_are_skipped_and_the_calibration_goes_on() -> None:
     toward = np.array([-1.0, 0.0, 0.0])  # the arm's side of the plate
     far = CalibrationPose("far", 0.0, Pose.look_at(np.array([3.0, 0.0, 1.0]), np.array([0.0, 0.0, 0.1])))
-    eye = 0.5 * toward + [0, 0, 0.3]
-    away = CalibrationPose("away", 0.0, Pose.look_at(eye, eye + [0, 0, 1.0]))
+    eye = 0.5 * toward + np.array([0.0, 0.0, 0.3])
+    away = CalibrationPose("away", 0.0, Pose.look_at(eye, eye + np.array([0.0, 0.0, 1.0])))
     run = _small_run(extra=[far, away])
     preview = run.preview(0)
     assert preview.motion is None and "no_ik" in (preview.reason or "")
@@ -133,10 +134,12 @@ def test_write_refuses_a_bad_cell_file_and_loses_nothing_then_writes_the_estimat
     mm, deg = pose_error(cell.hand_eye, result.T_flange_camera)
     assert mm < 1e-3 and deg < 1e-4  # written as the estimate, to the file's precision
     shift = result.axis_point_base[:2]
-    assert np.allclose(cell.arm_base.translation[:2], load_cell_file(backup).arm_base.translation[:2] - shift, atol=1e-6)
+    assert np.allclose(
+        cell.arm_base.translation[:2], load_cell_file(backup).arm_base.translation[:2] - shift, atol=1e-6
+    )
 
 
-def _intrinsics() -> object:
+def _intrinsics() -> Intrinsics:
     from devices.config import CameraConfig
 
     return CameraConfig(width=160, height=120, fx=140.0, fy=140.0, cx=79.5, cy=59.5).intrinsics

@@ -1,6 +1,6 @@
 """The calibrations a server runs: each on its own cell, simulated or the server's hardware (its cell file).
 
-A create request (``POST /api/calibrations``) is one of:
+A create request is one of:
 
 - ``{"kind": "sim", "sensor": "realsense-d435", "calibration": "poor", "seed": 0}``: a simulated cell with the
   target on its plate and the calibration error model named (drawn from the seed); its status compares the

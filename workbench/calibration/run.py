@@ -349,4 +349,3 @@ class CalibrationRun:
     def close(self) -> None:
         """Release the cell's devices."""
         self.cell.close()
-
