@@ -77,8 +77,9 @@ class PoseOut(BaseModel):
 
 
 class EstimateOut(BaseModel):
-    """The estimate (devices/calibration/result.py ``CalibrationResult.to_json``); *_std: one sigma, scaled by the
-    residuals' reduced chi-square."""
+    """The estimate (devices/calibration/result.py ``CalibrationResult.to_json``); *_std: one sigma, the residuals'
+    (scaled by their reduced chi-square) plus the error budget's (the arm's repeatability, a centre bias); *_bound95:
+    the error's norm stays below it in 95 % of calibrations."""
 
     T_flange_camera: list[list[float]]
     hand_eye_translation: list[float]
@@ -90,6 +91,10 @@ class EstimateOut(BaseModel):
     hand_eye_std_deg: float
     axis_std_mm: float
     axis_std_deg: float
+    hand_eye_bound95_mm: float
+    hand_eye_bound95_deg: float
+    axis_bound95_mm: float
+    axis_bound95_deg: float
     rms_mm: float
     residuals_mm: dict[str, float]
 

@@ -141,11 +141,12 @@ window.Calibrate = (() => {
           ${fmt(st.truth.nominal_error.hand_eye_deg, 2)}°; ${fmt(st.truth.nominal_error.axis_mm, 2)} mm, ${fmt(st.truth.nominal_error.axis_deg, 2)}°)</td></tr>`;
       }
       $("cal-estimate").innerHTML = `<table class="kv">
-        <tr><th>hand-eye translation</th><td>[${t}] mm ± ${fmt(e.hand_eye_std_mm, 3)} mm</td></tr>
-        <tr><th>hand-eye rotation (xyz)</th><td>[${r}]° ± ${fmt(e.hand_eye_std_deg, 4)}°</td></tr>
-        <tr><th>turntable axis</th><td>through [${p}] mm ± ${fmt(e.axis_std_mm, 3)} mm, tilt ${fmt(e.axis_tilt_deg, 3)}° ± ${fmt(e.axis_std_deg, 4)}°</td></tr>
+        <tr><th>hand-eye translation</th><td>[${t}] mm ± ${fmt(e.hand_eye_std_mm, 3)} mm (95 %: ${fmt(e.hand_eye_bound95_mm, 3)})</td></tr>
+        <tr><th>hand-eye rotation (xyz)</th><td>[${r}]° ± ${fmt(e.hand_eye_std_deg, 4)}° (95 %: ${fmt(e.hand_eye_bound95_deg, 4)})</td></tr>
+        <tr><th>turntable axis</th><td>through [${p}] mm ± ${fmt(e.axis_std_mm, 3)} mm (95 %: ${fmt(e.axis_bound95_mm, 3)}),
+          tilt ${fmt(e.axis_tilt_deg, 3)}° ± ${fmt(e.axis_std_deg, 4)}° (95 %: ${fmt(e.axis_bound95_deg, 4)})</td></tr>
         <tr><th>residual</th><td>${fmt(e.rms_mm, 3)} mm rms over ${Object.keys(e.residuals_mm).length} captures</td></tr>${truth}</table>
-        <div class="muted">± one sigma · ${esc(st.note)}</div>`;
+        <div class="muted">± one sigma; 95 %: the bound of the error norm · ${esc(st.note)}</div>`;
     }
     $("cal-write").disabled = !e || !st.writable || !!st.busy || C.running;
     $("cal-write").title = st.writable ? "write into the cell file (the old file is kept as a backup)"
