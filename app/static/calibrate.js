@@ -56,8 +56,8 @@ window.Calibrate = (() => {
     const right = document.createElement("section");
     right.id = "cal-poses-box";
     right.innerHTML = `<h2>Poses</h2>
-      <table id="cal-poses" data-testid="cal-poses"><thead><tr><th>#</th><th>pose</th><th>plate °</th>
-        <th>status</th><th title="spheres fitted">sph.</th><th title="RMS of this capture's sphere centres under the estimate, mm">resid. mm</th><th></th></tr></thead><tbody></tbody></table>`;
+      <table id="cal-poses" data-testid="cal-poses"><thead><tr><th>#</th><th title="plate angle, azimuth offset, elevation, roll (degrees)">pose</th>
+        <th title="hover a status: the spheres fitted and their fit RMS, or why the pose was skipped">status</th><th title="RMS of this capture's sphere centres under the estimate, mm">resid. mm</th><th></th></tr></thead><tbody></tbody></table>`;
     $("right").appendChild(right);
     $("cal-start").onclick = start;
     $("cal-approve-all").onclick = approveAll;
@@ -118,13 +118,15 @@ window.Calibrate = (() => {
       `${n.captured} captured, ${n.skipped} skipped, ${n.pending} pending of ${st.poses.length}`;
     const rows = st.poses.map((p) => {
       const sel = st.selected === p.index ? " class=\"selected\"" : "";
-      const why = p.reason ? ` title="${esc(p.reason)}"` : "";
+      const fits = p.fit_rms_mm.map((r) => (r === null ? "–" : fmt(r, 2))).join(", ");
+      const tip = p.reason || (p.status === "captured" ? `${p.spheres} spheres fitted, fit rms [${fits}] mm` : "");
+      const why = tip ? ` title="${esc(tip)}"` : "";
       const buttons = p.status === "captured" ? `<button data-act="skip" data-index="${p.index}" title="drop this capture">drop</button>`
         : `<button data-act="preview" data-index="${p.index}">preview</button><button data-act="approve" data-index="${p.index}" class="go">approve</button>` +
           (p.status === "pending" ? `<button data-act="skip" data-index="${p.index}">skip</button>` : "");
       return `<tr data-index="${p.index}" data-status="${p.status}"${sel}><td>${p.index}</td><td class="small">${esc(p.label)}</td>` +
-        `<td>${fmt(p.plate_angle_deg, 0)}</td><td class="st-${p.status}"${why}>${p.status}${p.reason ? " ⓘ" : ""}</td>` +
-        `<td>${p.status === "captured" ? p.spheres : "–"}</td><td data-testid="residual">${fmt(p.residual_mm, 3)}</td><td class="acts">${buttons}</td></tr>`;
+        `<td class="st-${p.status}"${why}>${p.status}${p.reason ? " ⓘ" : ""}</td>` +
+        `<td data-testid="residual">${fmt(p.residual_mm, 3)}</td><td class="acts">${buttons}</td></tr>`;
     });
     $("cal-poses").querySelector("tbody").innerHTML = rows.join("");
     const e = st.estimate;

@@ -39,9 +39,7 @@ def main(out: str = "docs/calibration-view.png", width: int = 1500, height: int 
             rows.nth(16).locator("button[data-act=preview]").click()
             expect(rows.nth(16)).to_have_class("selected")
             viewer = page.evaluate("window.Calibrate.state.viewer")
-            api.post(
-                f"/api/scene/{viewer}/camera", json={"position": [0.75, -0.75, 0.55], "look_at": [-0.15, 0.05, 0.15]}
-            )
+            api.post(f"/api/scene/{viewer}/camera", json={"position": [0.55, -1.5, 1.1], "look_at": [-0.3, 0.0, 0.15]})
             close = page.frame_locator("#viewer").locator("button.mantine-Notification-closeButton")
             if close.count():
                 close.first.dispatch_event("click")
