@@ -31,11 +31,12 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from app.api import router
 from app.docs_ui import install_docs
 from app.errors import status_of
+from app.scene.calibration import CalibrationViews
 from app.scene.controller import SceneController
 from app.security import SecurityMiddleware, install_log_redaction, openapi_security
 from app.serialize import SafeJSONResponse
 from app.settings import AppSettings, check_exposure, viewer_host
-from workbench import SessionRegistry, WorkbenchError
+from workbench import Calibrations, SessionRegistry, WorkbenchError
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 log = logging.getLogger(__name__)
@@ -77,9 +78,12 @@ def create_app(settings: AppSettings | None = None) -> FastAPI:
         app.state.registry = registry
         app.state.viser = server
         app.state.scene = scene
+        app.state.calibrations = calibrations = Calibrations(settings)  # issue 27: app/api/calibration.py
+        app.state.calibration_views = None if scene is None else CalibrationViews(scene, calibrations)
         try:
             yield
         finally:
+            calibrations.close_all()
             registry.close()
             if server is not None:
                 server.stop()

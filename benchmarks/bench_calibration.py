@@ -5,7 +5,9 @@ Run: ``.venv/bin/python benchmarks/bench_calibration.py [--seeds 10] [--calibrat
 Per seed (one random draw of the cell's errors at ``--calibration``): the errors of the recovered hand-eye
 transform (mm, degrees) and axis (mm at the plate top, degrees), the nominal errors before calibration, the
 reported one-sigma uncertainty, captures and seconds; then the median and max of each. Goal (issue 27): hand-eye
-and axis within 1 mm and 0.2 degrees at 'poor'.
+and axis within 1 mm and 0.2 degrees at 'poor'. Then how honest the reported uncertainty is: per quantity, in how
+many draws the true error lies within the reported 95 % bound (``*_bound95_*``: ~95 % of the draws should), and
+the RMS of error / one-sigma (1 for an exact sigma).
 """
 
 from __future__ import annotations
@@ -55,6 +57,13 @@ def main() -> None:
         for row in rows
     )
     print(f"goal (every seed within 1 mm and 0.2 deg): {'met' if ok else 'NOT met'}")
+    print("uncertainty (draws with the error within the reported 95 % bound; rms of error / one sigma):")
+    for quantity in ("hand_eye_mm", "hand_eye_deg", "axis_mm", "axis_deg"):
+        what, unit = quantity.rsplit("_", 1)
+        inside = sum(row[f"{what}_error_{unit}"] <= row["recovered"][f"{what}_bound95_{unit}"] for row in rows)
+        ratio = [row[f"{what}_error_{unit}"] / row["recovered"][f"{what}_std_{unit}"] for row in rows]
+        rms = statistics.fmean(r * r for r in ratio) ** 0.5
+        print(f"  {quantity:14s} within the 95 % bound in {inside} of {len(rows)} draws; error / sigma rms {rms:.2f}")
 
 
 if __name__ == "__main__":

@@ -29,6 +29,9 @@ One TOML file (other top-level tables, e.g. the planner's, are left to their rea
     translation = [-0.45, 0.0, 0.0]
     rotation_deg = [0.0, 0.0, 0.0]
 
+    [devices.turntable_axis]      # optional: the plate's measured axis (nbv calibrate --write), base frame
+    direction = [0.0012, -0.0008, 1.0]
+
 Each device section's ``driver`` picks a driver of :mod:`devices.drivers.registry`; its other keys are
 that driver's config fields (documented at the field). Rotations are extrinsic x-y-z angles (roll, pitch,
 yaw about the fixed axes), degrees, or ``quaternion_wxyz``. Relative file paths are taken from the
@@ -45,6 +48,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from devices.drivers.registry import KINDS, REGISTRY, Kind, driver_names, resolve_paths
@@ -52,7 +56,9 @@ from planner.types import Pose
 from planner.validate import finite
 
 POSE_SECTIONS = ("hand_eye", "arm_base")
-TOP_KEYS = (*KINDS, *POSE_SECTIONS, "allow_auto")
+TOP_KEYS = (*KINDS, *POSE_SECTIONS, "turntable_axis", "allow_auto")
+MAX_AXIS_TILT_DEG = 5.0
+"""A turntable axis tilted more than this from the base frame's vertical is refused (level the turntable)."""
 
 
 @dataclass(frozen=True)
@@ -71,6 +77,10 @@ class CellFile:
     camera, arm, turntable: the configured devices (None when the section is absent).
     hand_eye: ``T_flange_camera``, the camera (OpenCV axes) in the arm's flange frame.
     arm_base: ``T_base_armbase``, the arm's base frame in the cell's base frame (plate centre, z up).
+    turntable_axis: the plate's axis direction in the cell's base frame (unit, up; ``[devices.turntable_axis]
+    direction``, written by ``nbv calibrate --write``); the axis passes through the base frame's origin (the
+    calibration moves ``arm_base`` so that it does). A real cell places its frames with it
+    (devices/hwcell.py, :func:`T_table_base`).
     allow_auto: whether auto mode may move these devices without a person approving each view.
     source: the file it was read from ("" when built from a dict).
     """
@@ -80,6 +90,7 @@ class CellFile:
     turntable: DeviceSpec | None = None
     hand_eye: Pose = dataclasses.field(default_factory=Pose.identity)
     arm_base: Pose = dataclasses.field(default_factory=Pose.identity)
+    turntable_axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
     allow_auto: bool = False
     source: str = ""
 
@@ -174,6 +185,30 @@ def _pose(name: str, section: Any) -> Pose:
     return Pose(Rotation.from_euler("xyz", rpy, degrees=True).as_matrix(), np.array(t))
 
 
+def _axis(section: Any) -> tuple[float, float, float]:
+    where = "devices.turntable_axis"
+    if not isinstance(section, dict) or set(section) - {"direction"}:
+        raise ValueError(f"{where}: expected a table with only direction = [x, y, z]")
+    d = np.array(_numbers(section.get("direction", [0.0, 0.0, 1.0]), 3, f"{where}.direction", "a unit vector"))
+    norm = float(np.linalg.norm(d))
+    if norm < 1e-9:
+        raise ValueError(f"{where}.direction: must not be zero")
+    d /= norm
+    tilt = math.degrees(math.acos(max(-1.0, min(1.0, float(d[2])))))
+    if tilt > MAX_AXIS_TILT_DEG:
+        raise ValueError(
+            f"{where}.direction: tilted {tilt:.2f} deg from the vertical (at most {MAX_AXIS_TILT_DEG:g}); level the turntable"
+        )
+    return (float(d[0]), float(d[1]), float(d[2]))
+
+
+def T_table_base(theta: float, axis: tuple[float, float, float] | NDArray[np.float64] = (0.0, 0.0, 1.0)) -> Pose:
+    """The cell's base frame in the plate (table) frame with the plate at ``theta`` (rad): a rotation by ``-theta``
+    about the axis (unit, through the origin); ``Rz(-theta)`` for a vertical axis. The table frame is the base
+    frame at ``theta = 0``."""
+    return Pose(Rotation.from_rotvec(-theta * np.asarray(axis, dtype=np.float64)).as_matrix(), np.zeros(3))
+
+
 def parse_cell(data: dict[str, Any], folder: str | Path = ".", source: str = "") -> CellFile:
     """A CellFile from the parsed TOML (the whole document; only ``[devices]`` is read)."""
     devices = data.get("devices")
@@ -194,6 +229,7 @@ def parse_cell(data: dict[str, Any], folder: str | Path = ".", source: str = "")
         turntable=specs.get("turntable"),
         hand_eye=poses.get("hand_eye", Pose.identity()),
         arm_base=poses.get("arm_base", Pose.identity()),
+        turntable_axis=_axis(devices["turntable_axis"]) if "turntable_axis" in devices else (0.0, 0.0, 1.0),
         allow_auto=allow_auto,
         source=source,
     )

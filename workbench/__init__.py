@@ -8,6 +8,7 @@ These names are the public API the web layer (app/), the command line (nbv/) and
 ``workbench.evaluation`` and ``workbench.journal`` list their own. docs/architecture.md shows the tree.
 """
 
+from workbench.calibration import CalibrationRun, Calibrations, PosePreview
 from workbench.errors import (
     AtCapacity,
     Conflict,
@@ -37,12 +38,15 @@ from workbench.sources.parts import list_recordings
 __all__ = [
     "BUSY",
     "AtCapacity",
+    "CalibrationRun",
+    "Calibrations",
     "Conflict",
     "DeviceFault",
     "Gone",
     "Invalid",
     "Listed",
     "NotFound",
+    "PosePreview",
     "Progress",
     "Refit",
     "SceneData",

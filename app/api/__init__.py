@@ -13,10 +13,10 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from app.api import arm, candidates, events, fit, loop, models, scene, sessions, viewer
+from app.api import arm, calibration, candidates, events, fit, loop, models, scene, sessions, viewer
 from app.schemas import ERROR_RESPONSES
 
 router = APIRouter(prefix="/api", responses=ERROR_RESPONSES)
-for module in (viewer, models, sessions, loop, candidates, scene, fit, events, arm):
+for module in (viewer, models, sessions, loop, candidates, scene, fit, events, arm, calibration):
     for resource in module.routers:  # each with its prefix and tags
         router.include_router(resource)

@@ -7,6 +7,7 @@ from typing import Any
 from fastapi import APIRouter, Request
 
 from app.api.deps import Registry, Scene, Settings
+from app.scene.controller import SceneController
 from app.scene.guard import viewer_url
 from app.schemas import HealthOut, ViewerOut, ViewerRequest, ViewerTicketOut
 from app.settings import AppSettings, is_loopback, viewer_host
@@ -50,12 +51,16 @@ def open_viewer(
 ) -> dict[str, Any]:
     """A viewer of ``session`` for one tab: its URL carries a single-use, short-lived ticket that binds the
     viewer's websocket to this session (the viewer's Origin is checked too)."""
-    session = registry.get(body.session)
+    return viewer_ticket(request, settings, scene, registry.get(body.session).id)
+
+
+def viewer_ticket(request: Request, settings: AppSettings, scene: SceneController, key: str) -> dict[str, Any]:
+    """A new viewer of ``key`` (a session's id, or a calibration's) as the routes answer it."""
     host, port, note = _where(request, settings)
-    ticket = scene.open_viewer(session)
+    ticket = scene.open_viewer_of(key)
     return {
         "viewer": ticket.viewer,
-        "session": session.id,
+        "session": key,
         "url": viewer_url(request.url.scheme, host, port, ticket.secret),
         "port": port,
         "ttl": scene.tickets.ttl,

@@ -95,6 +95,9 @@ class SceneController:
         """The Fit panel's actions (app/scene/fit_view.py)."""
         self.viewer_listeners: list[Callable[[str, dict[str, Any]], None]] = []
         """Called with (session id, ``viewer_message``) after a viewer's layers, focus or refit changed."""
+        self.other_viewers: list[Callable[[viser.ClientHandle, str], bool]] = []
+        """Viewers of something else than a session (a calibration: app/scene/calibration.py): each is asked with
+        a newly connected client and its viewer's key, and returns True when it draws it."""
         server.scene.set_up_direction("+z")
         server.scene.configure_default_lights(enabled=True, cast_shadow=False)
         server.initial_camera.position = (0.95, -0.8, 0.75)
@@ -111,12 +114,16 @@ class SceneController:
 
     def open_viewer(self, session: Session) -> Ticket:
         """A ticket for a new viewer of ``session`` (the viewer exists from now on, drawn once it connects)."""
-        ticket = self.tickets.issue(session.id)
+        return self.open_viewer_of(session.id)
+
+    def open_viewer_of(self, key: str) -> Ticket:
+        """A ticket for a new viewer of ``key``: a session's id, or what one of ``other_viewers`` draws."""
+        ticket = self.tickets.issue(key)
         now = time.monotonic()
         with self._lock:
-            for key in [k for k, v in self._viewers.items() if v.client is None and v.expires < now]:
-                del self._viewers[key]
-            self._viewers[ticket.viewer] = Viewer(ticket.viewer, session.id, expires=ticket.expires + 5.0)
+            for k in [k for k, v in self._viewers.items() if v.client is None and v.expires < now]:
+                del self._viewers[k]
+            self._viewers[ticket.viewer] = Viewer(ticket.viewer, key, expires=ticket.expires + 5.0)
         return ticket
 
     def viewer(self, viewer_id: str) -> Viewer:
@@ -140,6 +147,10 @@ class SceneController:
             v = None if ticket is None else self._viewers.get(ticket.viewer)
         if v is None:
             return  # unbound: the empty shared scene only
+        if any(draw(client, v.session_id) for draw in self.other_viewers):
+            with self._lock:
+                v.client = client
+            return
         try:
             session = self.registry.get(v.session_id)
         except WorkbenchError:

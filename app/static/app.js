@@ -569,7 +569,10 @@ async function init() {
   await Promise.all([loadModels(), loadPlanners(), loadSensors()]);
   await loadSessions();
   const compare = QUERY.get("compare");
-  if (compare) {
+  $("calibrate-open").href = pageUrl({ calibrate: "new" });
+  if (QUERY.has("calibrate")) {
+    await window.Calibrate.open(QUERY.get("calibrate")); // calibrate.js: commissioning a cell
+  } else if (compare) {
     $("health").textContent = "compare";
     await showCompare(compare.split(",").filter(Boolean));
   } else if (S.session) {

@@ -5,7 +5,7 @@ cell").
 - ``target``   SphereTarget, DEFAULT_TARGET: the spheres, their mesh and box
 - ``spheres``  fit_sphere, find_spheres, SphereFit: least-squares sphere fits in a frame
 - ``poses``    CalibrationPose, calibration_poses: the poses a person approves
-- ``fit``      estimate, check_captures: OpenCV hand-eye start, scipy least-squares refinement, covariance
+- ``fit``      estimate, check_captures, ErrorBudget: OpenCV hand-eye start, scipy least-squares refinement, covariance
 - ``result``   Capture, CalibrationResult, CalibrationError, pose_error, axis_error
 - ``routine``  Calibration: pose list, preview, capture step, estimate on a cell
 - ``cellwrite`` write_calibration: the result into the cell file, the old one kept as a backup
@@ -13,7 +13,7 @@ cell").
 """
 
 from devices.calibration.cellwrite import calibrated_cell_text, write_calibration
-from devices.calibration.fit import check_captures, estimate
+from devices.calibration.fit import ErrorBudget, check_captures, estimate
 from devices.calibration.poses import CalibrationPose, calibration_poses
 from devices.calibration.result import CalibrationError, CalibrationResult, Capture, axis_error, pose_error
 from devices.calibration.routine import Calibration
@@ -28,6 +28,7 @@ __all__ = [
     "CalibrationPose",
     "CalibrationResult",
     "Capture",
+    "ErrorBudget",
     "SimTruth",
     "SphereFit",
     "SphereTarget",

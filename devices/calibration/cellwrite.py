@@ -1,12 +1,14 @@
-"""Write a calibration into the cell file: ``[devices.hand_eye]`` and ``[devices.arm_base]``, the old file kept.
+"""Write a calibration into the cell file: ``[devices.hand_eye]``, ``[devices.arm_base]`` and
+``[devices.turntable_axis]``, the old file kept.
 
 The hand-eye section gets the estimated ``T_flange_camera``. The plate-centre (base) frame is defined by the
 turntable axis, so the arm base is moved by the measured axis offset: the new base origin is where the axis crosses
-the plate top (``arm_base.translation -= axis_point``). The cell model turns the plate about a vertical axis, so the
-axis' tilt cannot be applied; it is written as a comment (a tilt of more than about 0.2 degrees is worth levelling
-the turntable for). Only the two sections change; every other line (and comment) of the file stays. The new text is
-parsed as a cell file before anything is written; the old file is copied to ``<name>.<UTC time>.bak`` first and
-the new one replaces it atomically.
+the plate top (``arm_base.translation -= axis_point``). The axis' direction goes into ``[devices.turntable_axis]``
+as data: a real cell places its frames about it (devices/hwcell.py, ``HardwareCell.pose``); the arm's planner keeps
+a vertical axis (a tilt of more than about 0.2 degrees is still worth levelling the turntable for; more than
+``MAX_AXIS_TILT_DEG`` is refused). Only these sections change; every other line (and comment) of the file stays.
+The new text is parsed as a cell file before anything is written; the old file is copied to
+``<name>.<UTC time>.bak`` first and the new one replaces it atomically.
 """
 
 from __future__ import annotations
@@ -69,13 +71,18 @@ def calibrated_cell_text(text: str, result: CalibrationResult, arm_base: Pose, s
         [
             f"calibrated{when}: moved by the turntable axis offset {_numbers(-shift[:2] * 1000, 2)} mm "
             f"(+-{result.axis_std_mm:.2f} mm)",
-            f"turntable axis tilt {result.axis_tilt_deg:.3f} deg (+-{result.axis_std_deg:.3f}), direction "
-            f"{_numbers(result.axis_direction_base, 5)}: not applied (the cell model's axis is vertical)",
         ],
     )
+    axis = [
+        "[devices.turntable_axis]",
+        f"# calibrated{when}: tilt {result.axis_tilt_deg:.3f} deg (+-{result.axis_std_deg:.3f}) from the vertical",
+        f"direction = {_numbers(result.axis_direction_base, 7)}",
+        "",
+    ]
     lines = text.splitlines()
     lines = _replace_section(lines, "hand_eye", hand_eye)
     lines = _replace_section(lines, "arm_base", base)
+    lines = _replace_section(lines, "turntable_axis", axis)
     return "\n".join(lines).rstrip("\n") + "\n"
 
 

@@ -42,8 +42,8 @@ class CalibrationResult:
     """The estimate. T_flange_camera: the hand-eye transform. axis_point_base: (3,) where the turntable axis
     crosses the plate-top plane z = 0, base frame. axis_direction_base: (3,) its unit direction (up).
     centres_table: (K, 3) the sphere centres in the plate frame. *_std: one standard deviation from the
-    least-squares covariance (hand-eye: position in mm, rotation in degrees, as the norm of the per-axis
-    deviations; axis: point in mm, direction in degrees). residuals_mm: (C,) RMS of each capture's centre residuals,
+    covariance (devices/calibration/fit.py: the residuals' plus the error budget's; hand-eye: position in mm,
+    rotation in degrees, as the norm of the per-axis deviations; axis: point in mm, direction in degrees). residuals_mm: (C,) RMS of each capture's centre residuals,
     mm. rms_mm: over all. T_flange_camera_initial: what OpenCV's ``calibrateHandEye`` gave before the refinement."""
 
     T_flange_camera: Pose
@@ -58,6 +58,12 @@ class CalibrationResult:
     rms_mm: float
     labels: tuple[str, ...]
     T_flange_camera_initial: Pose
+    hand_eye_bound95_mm: float = math.nan
+    """95 % of such calibrations' hand-eye position errors are below this, mm (the quantile of the error's norm
+    under the estimate's covariance); likewise the rotation's (degrees) and the axis' (mm, degrees)."""
+    hand_eye_bound95_deg: float = math.nan
+    axis_bound95_mm: float = math.nan
+    axis_bound95_deg: float = math.nan
 
     @property
     def axis_tilt_deg(self) -> float:
@@ -78,6 +84,10 @@ class CalibrationResult:
             "hand_eye_std_deg": self.hand_eye_std_deg,
             "axis_std_mm": self.axis_std_mm,
             "axis_std_deg": self.axis_std_deg,
+            "hand_eye_bound95_mm": self.hand_eye_bound95_mm,
+            "hand_eye_bound95_deg": self.hand_eye_bound95_deg,
+            "axis_bound95_mm": self.axis_bound95_mm,
+            "axis_bound95_deg": self.axis_bound95_deg,
             "rms_mm": self.rms_mm,
             "residuals_mm": {label: float(r) for label, r in zip(self.labels, self.residuals_mm, strict=True)},
         }

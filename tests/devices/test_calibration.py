@@ -14,6 +14,7 @@ from devices.calibration import (
     DEFAULT_TARGET,
     CalibrationError,
     Capture,
+    ErrorBudget,
     axis_error,
     calibrated_cell_text,
     estimate,
@@ -89,7 +90,28 @@ def test_hand_eye_and_axis_from_exact_poses_to_a_micrometre() -> None:
     assert axis_mm < 1e-3 and axis_deg < 1e-4
     assert np.abs(result.centres_table - DEFAULT_TARGET.centres_table).max() < 1e-6
     assert result.rms_mm < 1e-3 and result.residuals_mm.shape == (12,)
-    assert result.hand_eye_std_mm < 1e-3  # exact data: no spread
+    # exact data: no spread of its own; what is left is the error budget (a centre bias moves the hand-eye
+    # translation one to one: at least its 0.2 mm per axis, about 0.35 mm as a norm of three)
+    assert 0.3 < result.hand_eye_std_mm < 1.0 and result.hand_eye_bound95_mm > result.hand_eye_std_mm
+    bare = estimate(
+        _synthetic(X_TRUE, A_TRUE, rotvecs, angles, DEFAULT_TARGET.centres_table),
+        DEFAULT_TARGET,
+        budget=ErrorBudget(0.0, 0.0, 0.0),
+    )
+    assert bare.hand_eye_std_mm < 1e-3 and bare.axis_std_mm < 1e-3
+
+
+def test_the_error_budget_adds_the_arm_repeatability_and_the_centre_bias() -> None:
+    rotvecs, angles = _varied(12)
+    captures = _synthetic(X_TRUE, A_TRUE, rotvecs, angles, DEFAULT_TARGET.centres_table)
+    bias = estimate(captures, DEFAULT_TARGET, budget=ErrorBudget(0.0, 0.0, 0.001))
+    # a bias common to every centre is a hand-eye translation: 1 mm per axis, sqrt(3) mm as a norm
+    assert bias.hand_eye_std_mm == pytest.approx(math.sqrt(3), rel=0.02)
+    arm = estimate(captures, DEFAULT_TARGET, budget=ErrorBudget(0.001, 0.0, 0.0))
+    # a random displacement per capture averages down somewhat over the 12 captures, and reaches the axis too
+    assert 0.1 < arm.hand_eye_std_mm < bias.hand_eye_std_mm and arm.axis_std_mm > 0.05
+    # the 95 % bound of a 2D error's norm: 1.73 sigma-norms (isotropic) to 1.96 (all along one axis)
+    assert 1.7 < arm.axis_bound95_mm / arm.axis_std_mm < 2.0
 
 
 def test_too_few_captures_is_a_clear_error() -> None:
@@ -179,8 +201,10 @@ def test_writing_the_cell_file_keeps_a_backup_and_round_trips(tmp_path: Path) ->
     assert np.allclose(cell.arm_base.translation, [-0.85 - 0.0015, 0.002, 0.0], atol=1e-9)
     text = path.read_text()
     assert "# the lab's cell" in text and "[planner]\nresolution = 0.01" in text  # the rest is kept
-    assert "turntable axis tilt 0.286 deg" in text  # the tilt, reported
-    assert text.count("[devices.hand_eye]") == 1 and text.count("[devices.arm_base]") == 1
+    assert "tilt 0.286 deg" in text  # the tilt, reported, and written as data
+    assert np.allclose(cell.turntable_axis, _result().axis_direction_base, atol=1e-7)
+    sections = ("[devices.hand_eye]", "[devices.arm_base]", "[devices.turntable_axis]")
+    assert all(text.count(name) == 1 for name in sections)
     # writing again round-trips: the same values, a second backup
     again = write_calibration(path, _result())
     assert again.exists() and np.allclose(load_cell_file(path).hand_eye.matrix, X_TRUE.matrix, atol=1e-6)

@@ -82,15 +82,16 @@ def hardware_cell(
     camera: CameraConfig,
     base: CellConfig,
     seed: int,
+    label: str = "a live session",
 ) -> HardwareCell:
     """The cell of a ``hardware`` source (from :func:`hardware_source`). A dry run simulates ``mesh`` with
     ``camera``; otherwise the cell file's devices are opened (409 when another session holds them, 503 when
-    a device cannot be opened, 422 for a bad cell file)."""
+    a device cannot be opened, 422 for a bad cell file). label: who holds the devices (named to a second holder)."""
     cellfile = read_cell_file(source["cell"])
     try:
         if source["dry_run"]:
             return dry_run_cell(cellfile, base, mesh, camera, seed)
-        return open_hardware_cell(cellfile, base, "a live session")
+        return open_hardware_cell(cellfile, base, label)
     except ValueError as exc:
         raise _invalid(exc) from None
     except DevicesInUse as exc:
