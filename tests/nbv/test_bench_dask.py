@@ -3,11 +3,14 @@ and two workers started as separate processes on loopback; a failed task keeps t
 
 from __future__ import annotations
 
+import atexit
 import csv
 import os
+import shutil
 import socket
 import subprocess
 import sys
+import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -34,8 +37,13 @@ def rows(out: Path) -> Rows:
         return sorted(tuple((k, v) for k, v in r.items() if k not in TIMINGS) for r in csv.DictReader(f))
 
 
+CEILINGS = Path(tempfile.mkdtemp(prefix="nbv-dask-ceilings-"))
+atexit.register(shutil.rmtree, CEILINGS, True)
+"""One ceiling cache for the module: the executors are compared, the ceilings are computed once."""
+
+
 def bench(out: Path, *extra: str, grid: list[str] = GRID) -> int:
-    return main(["bench", *grid, "--out", str(out), "--ceiling-cache", str(out.parent.parent / "ceilings"), *extra])
+    return main(["bench", *grid, "--out", str(out), "--ceiling-cache", str(CEILINGS), *extra])
 
 
 @pytest.fixture(scope="module")

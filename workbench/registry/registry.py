@@ -10,7 +10,6 @@ import secrets
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -26,11 +25,9 @@ from workbench.journal.rebuild import REPLAY_STAGE, Rebuilt
 from workbench.journal.store import JournalBusyError, JournalWriter, in_use, list_journals, read_journal, sessions_dir
 from workbench.journal.trash import move_to_trash, prune
 from workbench.registry.creations import Creation, Creations, resume_id
+from workbench.registry.dormant import DormantSession, read_dormant, unreadable
 from workbench.registry.idle import IdleSweeper
-from workbench.session.record import SessionRecord
 from workbench.session.session import Session
-from workbench.session.states import Listed
-from workbench.session.summaries import session_status
 from workbench.session.values import SessionEvent
 from workbench.settings import WorkbenchSettings
 from workbench.sources.camera_models import check_camera_models
@@ -43,73 +40,11 @@ __all__ = ["SURFACE_SAMPLES", "DormantSession", "SessionRegistry"]
 log = logging.getLogger(__name__)
 
 
-@dataclass
-class DormantSession:
-    """A journaled session of an earlier server process (not loaded): what the session list shows of it.
-
-    ``damage`` (a line of the journal is not an event) lists it as ``damaged`` with the reason; resume then
-    recovers everything before the damage and says what was dropped."""
-
-    id: str
-    directory: Path
-    record: SessionRecord
-    """Derived from the journal's events (no frame is read)."""
-    stopped: float
-    planner: str = "projection"
-    """The header's planner (journals without one: projection)."""
-    damage: str | None = None
-    asleep: bool = False
-    """Put to sleep by this server (idle, or to make room): any request for it wakes it (resumes it)."""
-
-    def status(self) -> dict[str, Any]:
-        if self.asleep:
-            state = Listed.INTERRUPTED
-            error = "asleep (idle; its memory was freed): the next request for it wakes it from its journal"
-        elif self.damage is not None:
-            state = Listed.DAMAGED
-            error = f"damaged journal: {self.damage}; a resume of {self.id} recovers what comes before the damage"
-        else:
-            state = Listed.INTERRUPTED
-            error = f"the server stopped during this session; resume {self.id} to continue it"
-        return session_status(self.record, state=state, planner=self.planner, source="journal", error=error)
-
-
 def _release(parts: SessionParts) -> None:
     """Close the devices of parts no session took (a hardware cell holds its devices until closed)."""
     close = getattr(parts.cell, "close", None)
     if callable(close):
         close()
-
-
-def _dormant(directory: Path) -> DormantSession | None:
-    """The dormant session of a journal folder (None when deleted). ValueError when not even the header reads."""
-    journal = read_journal(directory)
-    if journal.deleted:
-        return None
-    record = SessionRecord.from_header(journal.header)
-    damage = journal.damage
-    applied = 0
-    for event in journal.events:
-        try:
-            record.apply(event)
-        except (KeyError, TypeError, ValueError) as exc:  # an event of the right shape with wrong contents
-            damage = f"event {event.get('seq')} ({event.get('kind')}) cannot be read: {exc!r}"
-            break
-        applied += 1
-    if damage is not None and journal.damage is not None:
-        damage = f"{damage}; {journal.dropped_lines} line(s) from there on are not read"
-    stopped = journal.events[applied - 1]["time"] if applied else journal.header["time"]
-    planner = str(journal.header.get("planner", "projection"))
-    return DormantSession(journal.session_id, directory, record, float(stopped), planner, damage)
-
-
-def _unreadable(directory: Path, reason: str) -> DormantSession:
-    """A journal whose header cannot be read: listed as damaged, so it does not vanish."""
-    header = {"id": directory.name, "model": {"name": "?"}, "config": {}, "seed": 0, "time": 0.0}
-    with contextlib.suppress(OSError):
-        header["time"] = (directory / "journal.jsonl").stat().st_mtime
-    record = SessionRecord.from_header(header)
-    return DormantSession(directory.name, directory, record, float(header["time"]), damage=f"unreadable: {reason}")
 
 
 class SessionRegistry:
@@ -142,10 +77,10 @@ class SessionRegistry:
                 if in_use(directory):  # live in another server on the same data directory
                     continue
                 try:
-                    dormant = _dormant(directory)
+                    dormant = read_dormant(directory)
                 except (ValueError, KeyError, TypeError) as exc:
                     log.warning("journal %s is damaged: %s", directory, exc)
-                    dormant = _unreadable(directory, str(exc))
+                    dormant = unreadable(directory, str(exc))
                 if dormant is not None:
                     self._dormant[dormant.id] = dormant
                 else:  # deleted by an earlier server that kept deleted journals in place
@@ -251,7 +186,7 @@ class SessionRegistry:
         with self._lock:
             session_id = self._new_id()
             self._resuming.add(session_id)  # reserved while the journal is created outside the lock
-        wb = None
+        session = None
         try:
             journal = None
             if self.settings.journal:
@@ -268,20 +203,20 @@ class SessionRegistry:
                     journal = JournalWriter.create(self.settings.data_dir, session_id, header)
                 except OSError as exc:
                     raise StorageFault(f"cannot journal the session in the data directory ({exc.strerror})") from None
-            wb = self._session(session_id, parts, planner_config, devices, seed, journal, planner)
+            session = self._session(session_id, parts, planner_config, devices, seed, journal, planner)
             with self._lock:
-                self._sessions[session_id] = wb
+                self._sessions[session_id] = session
                 self._used[session_id] = time.monotonic()
         except BaseException:
-            if wb is None:
+            if session is None:
                 _release(parts)
             raise
         finally:
             with self._lock:
                 self._resuming.discard(session_id)
         for hook in list(self.on_create):
-            hook(wb)
-        return wb
+            hook(session)
+        return session
 
     def _session(
         self,
@@ -332,21 +267,21 @@ class SessionRegistry:
         """The live session (a sleeping one is woken first); 409 for an interrupted one (resume it first), 404
         for an unknown id."""
         with self._lock:
-            wb = self._sessions.get(session_id)
-            if wb is not None:
+            session = self._sessions.get(session_id)
+            if session is not None:
                 self._used[session_id] = time.monotonic()
-            asleep = wb is None and session_id in self._dormant and self._dormant[session_id].asleep
+            asleep = session is None and session_id in self._dormant and self._dormant[session_id].asleep
             dormant = session_id in self._dormant
             rebuilding = session_id in self._rebuilding
         if asleep:
             return self.wake(session_id)
-        if wb is None:
+        if session is None:
             if rebuilding:
                 raise Conflict(f"session {session_id!r} is being resumed; it is live in a moment")
             if dormant:
                 raise Conflict(f"session {session_id!r} was interrupted (the server stopped); resume it first")
             raise NotFound(f"session {session_id!r}: unknown")
-        return wb
+        return session
 
     def status(self, session_id: str) -> dict[str, Any]:
         with self._lock:
@@ -364,7 +299,7 @@ class SessionRegistry:
         with self._lock:
             dormant = sorted([*self._dormant.values(), *self._rebuilding.values()], key=lambda d: d.stopped)
             live = list(self._sessions.values())
-        return [d.status() for d in dormant] + [wb.status() for wb in live]
+        return [d.status() for d in dormant] + [session.status() for session in live]
 
     # ------------------------------------------------------------------ resume
 
@@ -389,7 +324,7 @@ class SessionRegistry:
             self._rebuilding[session_id] = dormant  # still listed while it is rebuilt
         try:
             with self.creations.run(resume_id(session_id), "resume", [REPLAY_STAGE], stoppable=False) as creation:
-                wb, rebuilt = self._rebuild(dormant, creation.tracker.stage)
+                session, rebuilt = self._rebuild(dormant, creation.tracker.stage)
         except BaseException:
             with self._lock:
                 self._dormant[session_id] = dormant
@@ -397,13 +332,13 @@ class SessionRegistry:
                 del self._rebuilding[session_id]
             raise
         with self._lock:  # live and no longer rebuilding in one step: never unknown in between
-            self._sessions[session_id] = wb
+            self._sessions[session_id] = session
             self._used[session_id] = time.monotonic()
             self._resuming.discard(session_id)
             del self._rebuilding[session_id]
         for hook in list(self.on_create):
-            hook(wb)
-        return wb, rebuilt
+            hook(session)
+        return session, rebuilt
 
     def _rebuild(
         self, dormant: DormantSession, progress: Callable[[str, int, int], None] | None = None
@@ -423,19 +358,19 @@ class SessionRegistry:
             _release(parts)
             raise Conflict(str(exc)) from None
         planner = str(header.get("planner", "projection"))
-        wb = self._session(dormant.id, parts, config, devices, seed, writer, planner)  # journaled from the start
+        session = self._session(dormant.id, parts, config, devices, seed, writer, planner)  # journaled from the start
         try:
-            rebuilt = wb.replay(journal, progress)
+            rebuilt = session.replay(journal, progress)
         except (ValueError, KeyError, TypeError, JobKilled) as exc:
             writer.close()
-            if wb.worker is not None:
-                wb.worker.close()
+            if session.worker is not None:
+                session.worker.close()
             _release(parts)
             raise Invalid(f"session {dormant.id}: cannot resume: {exc}") from None
         if rebuilt.kept < len(journal.events):  # a damaged event or frame: the journal goes on from before it
             journal.cut(rebuilt.kept)
             writer.cut_to(journal)
-        wb.restore(rebuilt)
+        session.restore(rebuilt)
         try:
             writer.append(
                 "resume",
@@ -445,13 +380,13 @@ class SessionRegistry:
                 dropped=rebuilt.dropped,
             )
         except OSError as exc:  # a full disk: it stays interrupted (nothing it did could be journaled)
-            wb.close()
+            session.close()
             raise StorageFault(f"session {dormant.id}: cannot resume: {exc.strerror or exc}") from None
         if rebuilt.dropped:
             log.warning("session %s resumed up to the damage; dropped: %s", dormant.id, "; ".join(rebuilt.dropped))
         if rebuilt.mismatches:
             log.warning("session %s resumed with differences: %s", dormant.id, "; ".join(rebuilt.mismatches))
-        return wb, rebuilt
+        return session, rebuilt
 
     # ------------------------------------------------------------------ sleep and wake
 
@@ -461,37 +396,37 @@ class SessionRegistry:
             gate = self._waking.setdefault(session_id, threading.Lock())
         with gate:
             with self._lock:
-                wb = self._sessions.get(session_id)
-            if wb is not None:  # another request woke it meanwhile
-                return wb
+                session = self._sessions.get(session_id)
+            if session is not None:  # another request woke it meanwhile
+                return session
             try:
-                wb, _ = self.resume(session_id)
+                session, _ = self.resume(session_id)
             finally:
                 with self._lock:
                     self._waking.pop(session_id, None)
             log.info("session %s woke up", session_id)
-            return wb
+            return session
 
     def sleep(self, session_id: str) -> bool:
         """Put a live, idle, journaled session to sleep: closed (its worker and memory freed), listed from its
         journal, woken by the next request for it. False when it is busy, unjournaled or not live."""
         with self._lock:
-            wb = self._sessions.get(session_id)
-        if wb is None or wb.journal is None:
+            session = self._sessions.get(session_id)
+        if session is None or session.journal is None:
             return False
-        if not wb.close_state():  # fenced: an action that gets the object now is refused (state closed)
+        if not session.close_state():  # fenced: an action that gets the object now is refused (state closed)
             return False
-        directory = wb.journal.directory
-        wb.close()
+        directory = session.journal.directory
+        session.close()
         try:
-            dormant = _dormant(directory)
+            dormant = read_dormant(directory)
         except (ValueError, KeyError, TypeError) as exc:
-            dormant = _unreadable(directory, str(exc))
+            dormant = unreadable(directory, str(exc))
         if dormant is None:
             return False
         dormant.asleep = True
         with self._lock:
-            if self._sessions.get(session_id) is wb:
+            if self._sessions.get(session_id) is session:
                 del self._sessions[session_id]
                 self._used.pop(session_id, None)
                 self._dormant[session_id] = dormant
@@ -530,21 +465,21 @@ class SessionRegistry:
         """Forget a session (live, interrupted or damaged): its running job is killed, its journal marked deleted
         and its folder moved to the trash (workbench/journal/trash.py), which keeps it until its age or size limit."""
         with self._lock:
-            wb = self._sessions.pop(session_id, None)
+            session = self._sessions.pop(session_id, None)
             self._used.pop(session_id, None)
-            dormant = self._dormant.pop(session_id, None) if wb is None else None
-        if wb is None and dormant is None:
+            dormant = self._dormant.pop(session_id, None) if session is None else None
+        if session is None and dormant is None:
             raise NotFound(f"session {session_id!r}: unknown")
         directory = None
-        if wb is not None:
-            wb.deleted = True  # a request this cuts off answers Gone (410), not "retry"
-            if wb.journal is not None:
-                directory = wb.journal.directory
+        if session is not None:
+            session.deleted = True  # a request this cuts off answers Gone (410), not "retry"
+            if session.journal is not None:
+                directory = session.journal.directory
                 with contextlib.suppress(OSError):
-                    wb.journal.append("deleted")
-            wb.close()
+                    session.journal.append("deleted")
+            session.close()
             for hook in list(self.on_delete):
-                hook(wb)
+                hook(session)
         elif dormant is not None:
             directory = dormant.directory
             try:
@@ -578,11 +513,11 @@ class SessionRegistry:
         if self._sweeper is not None:
             self._sweeper.close()
         sessions = self.list()
-        for wb in sessions:  # first kill every worker: nothing waits on a long job below
-            if wb.worker is not None:
-                wb.worker.close()
-        for wb in sessions:
-            wb.close(timeout=3.0)
+        for session in sessions:  # first kill every worker: nothing waits on a long job below
+            if session.worker is not None:
+                session.worker.close()
+        for session in sessions:
+            session.close(timeout=3.0)
         if self.engine is not None:
             self.engine.close()
         self.ceilings.close()
