@@ -8,8 +8,12 @@ TSTAMP  := $(VENV)/.installed-test
 HOST    ?= 127.0.0.1
 PORT    ?= 8000
 PYTEST_ARGS ?=
-# 0: one process (two xdist workers on 2 cores starved the 10-session load test into a capture timeout)
-PYTEST_WORKERS ?= 0
+# two processes on the 2-core machine (tests/conftest.py: a file's tests share one worker)
+PYTEST_WORKERS ?= 2
+# Plugins by name, not every installed one: pytest rewrites the asserts of every module of a package that has
+# a plugin entry point (dash, 673 files, imported by open3d), on each run when bytecode is not written.
+PYTEST_PLUGINS ?= xdist.plugin,pytest_timeout,_hypothesis_pytestplugin,schemathesis.pytest.plugin
+export PYTEST_PLUGINS
 
 .PHONY: run test lint bench bench-agreement install system-deps clean
 
@@ -45,7 +49,7 @@ test: system-deps $(TSTAMP)
 	$(BIN)/ruff check planner devices workbench app nbv tests
 	@mkdir -p test-output
 	@# the log's summary is printed again last: native libraries print at exit after pytest's own summary
-	set -o pipefail; $(BIN)/python -m pytest -q -rfE -n $(PYTEST_WORKERS) --dist loadgroup $(PYTEST_ARGS) 2>&1 \
+	set -o pipefail; PYTEST_DISABLE_PLUGIN_AUTOLOAD=1 $(BIN)/python -m pytest -q -rfE -n $(PYTEST_WORKERS) --dist loadgroup $(PYTEST_ARGS) 2>&1 \
 	  | tee test-output/pytest.log; status=$$?; \
 	  echo "== make test: summary (test-output/pytest.log) =="; \
 	  grep -aE '^(FAILED|ERROR) |[0-9]+ (passed|failed|errors?)\b.* in [0-9.]+s' test-output/pytest.log | tail -n 60; \
