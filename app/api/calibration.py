@@ -14,11 +14,11 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Request, Response
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictInt, StrictStr
 
 from app.api.deps import Scene, Settings
 from app.api.viewer import viewer_ticket
-from app.schemas import ViewerTicketOut
+from app.schemas import Number, ViewerTicketOut
 from workbench import CalibrationRun, Calibrations, Conflict
 
 router = APIRouter(prefix="/calibrations", tags=["calibration"])
@@ -48,18 +48,18 @@ class CalibrationRequest(BaseModel):
     choose fewer poses than the routine's 36."""
 
     model_config = ConfigDict(extra="forbid")
-    kind: str | None = None
-    sensor: str | None = None
-    calibration: str | None = None
-    seed: int = Field(0, ge=0)
-    dry_run: bool | None = None
-    plate_angles_deg: list[float] | None = Field(None, min_length=1, max_length=12)
-    views: int | None = Field(None, ge=1, le=6)
+    kind: StrictStr | None = None
+    sensor: StrictStr | None = None
+    calibration: StrictStr | None = None
+    seed: StrictInt = Field(0, ge=0)
+    dry_run: StrictBool | None = None
+    plate_angles_deg: list[Number] | None = Field(None, min_length=1, max_length=12)
+    views: StrictInt | None = Field(None, ge=1, le=6)
 
 
 class EstimateRequest(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    angle_sigma_deg: float | None = Field(None, ge=0.0, le=5.0)
+    angle_sigma_deg: Number | None = Field(None, ge=0.0, le=5.0)
 
 
 class PoseOut(BaseModel):
