@@ -8,7 +8,8 @@ for the browser, export to PLY / OBJ / GLB; its accuracy against the ground-trut
 - :func:`simplify` ``(surface, max_triangles)``, :func:`layer_bytes`, :func:`export_bytes` ``(surface, fmt)``;
 - :func:`surface_accuracy`, :func:`cloud_accuracy`: the shared ``workbench.evaluation.Accuracy`` (F at 2 and 5 mm,
   chamfer) of the surface's points (:func:`surface_points`) or a cloud; :func:`ground_truth` builds the truth once;
-- :func:`surface_block`: the ``surface`` block of a scan's metrics.json.
+- :func:`surface_block`: the ``surface`` block of a scan's metrics.json; :class:`ViewSurfaces`: the surface after
+  each view, for its per-view F-score.
 """
 
 from workbench.surface.config import SurfaceConfig, SurfaceMethod
@@ -23,7 +24,7 @@ from workbench.surface.export import (
 )
 from workbench.surface.integrator import SurfaceIntegrator, reconstruct
 from workbench.surface.mesh import SurfaceError, SurfaceMesh
-from workbench.surface.report import surface_block
+from workbench.surface.report import ViewSurfaces, surface_block
 from workbench.surface.scoring import (
     GROUND_TRUTH_SAMPLES,
     cloud_accuracy,
@@ -43,6 +44,7 @@ __all__ = [
     "SurfaceIntegrator",
     "SurfaceMesh",
     "SurfaceMethod",
+    "ViewSurfaces",
     "cloud_accuracy",
     "export_bytes",
     "ground_truth",
