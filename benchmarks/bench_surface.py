@@ -35,12 +35,14 @@ import time
 from pathlib import Path
 from typing import Any
 
+from devices.config import CameraConfig
 from devices.mesh import sample_surface
 from planner import DepthFrame, PlannerConfig
 from workbench.evaluation import simulate
 from workbench.surface import (
     GROUND_TRUTH_SAMPLES,
     LAYER_TRIANGLES,
+    SurfaceConfig,
     SurfaceError,
     SurfaceIntegrator,
     cloud_accuracy,
@@ -48,6 +50,7 @@ from workbench.surface import (
     reconstruct,
     simplify,
     surface_accuracy,
+    surface_config_for,
 )
 
 MESH_SUFFIXES = (".obj", ".ply", ".off")
@@ -67,11 +70,11 @@ def rss_bytes() -> tuple[int, int]:
     return int(fields["VmRSS"].split()[0]) * 1024, int(fields["VmHWM"].split()[0]) * 1024
 
 
-def rebuild_memory(frames: list[DepthFrame], live: Any) -> dict[str, Any]:
+def rebuild_memory(frames: list[DepthFrame], live: Any, config: SurfaceConfig) -> dict[str, Any]:
     """Peak extra RSS of a rebuild of the surface (and its layer) from ``frames``; whether it equals ``live``."""
     Path("/proc/self/clear_refs").write_text("5")  # reset the high-water mark to the current RSS
     before, _ = rss_bytes()
-    rebuilt = reconstruct(frames)
+    rebuilt = reconstruct(frames, config)
     simplify(rebuilt)
     _, peak = rss_bytes()
     return {"peak_extra_mb": (peak - before) / 2**20, "rebuild_equal": bool(rebuilt == live)}
@@ -81,7 +84,9 @@ def run_one(
     path: Path, seed: int, views: int, depth_noise: float = 0.0, sensor: str = "ideal", calibration: str = "none"
 ) -> dict[str, Any]:
     config = PlannerConfig.from_dict({"termination": {"max_views": views}})
-    integrator = SurfaceIntegrator()
+    camera = CameraConfig(depth_noise_std=depth_noise, sensor=sensor, calibration=calibration)
+    surface_config = surface_config_for(camera)  # a real sensor fuses with a shorter truncation
+    integrator = SurfaceIntegrator(surface_config)
     updates: list[float] = []
     updates_cpu: list[float] = []
     keep_frames = path.stem == MEMORY_MODEL and seed == 0
@@ -133,7 +138,7 @@ def run_one(
         "scan_s": scan_seconds,
     }
     if keep_frames:
-        row |= rebuild_memory(frames, surface)
+        row |= rebuild_memory(frames, surface, surface_config)
     return row
 
 

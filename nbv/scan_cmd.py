@@ -129,11 +129,13 @@ def _surface_summary(block: dict[str, Any]) -> str:
 
 def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
     """The body of ``nbv scan`` / ``nbv profile``; returns the JSON written."""
+    from devices.config import CameraConfig
     from devices.ply import write_ply
-    from workbench.surface import SurfaceIntegrator, ViewSurfaces, export_bytes, surface_block
+    from workbench.surface import SurfaceIntegrator, ViewSurfaces, export_bytes, surface_block, surface_config_for
 
     config = planner_config_from_args(args)
-    integrator = SurfaceIntegrator()
+    camera = CameraConfig(depth_noise_std=args.depth_noise, sensor=args.sensor, calibration=args.calibration)
+    integrator = SurfaceIntegrator(surface_config_for(camera))
     per_view = ViewSurfaces(integrator)
     console = Console(highlight=False)
     out: Path = args.out

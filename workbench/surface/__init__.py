@@ -2,6 +2,7 @@
 the plate cut away; a watertight option (screened Poisson, the bottom closed on the plate plane); simplification
 for the browser, export to PLY / OBJ / GLB; its accuracy against the ground-truth mesh.
 
+- :class:`SurfaceConfig`, :func:`surface_config_for` ``(camera)``: the settings, a real sensor's;
 - :class:`SurfaceIntegrator` ``(config, box)``: ``integrate(frame)`` after each capture, ``mesh()`` extracts;
   :func:`reconstruct` ``(frames, config, box)`` at once (a rebuild: the same frames give the same surface);
 - :class:`SurfaceMesh`: the value (vertices, faces in canonical order; area, volume, watertight);
@@ -12,7 +13,7 @@ for the browser, export to PLY / OBJ / GLB; its accuracy against the ground-trut
   each view, for its per-view F-score.
 """
 
-from workbench.surface.config import SurfaceConfig, SurfaceMethod
+from workbench.surface.config import SurfaceConfig, SurfaceMethod, surface_config_for
 from workbench.surface.export import (
     EXPORT_FORMATS,
     LAYER_TRIANGLES,
@@ -54,6 +55,7 @@ __all__ = [
     "simplify",
     "surface_accuracy",
     "surface_block",
+    "surface_config_for",
     "surface_points",
     "watertight",
 ]
