@@ -9,7 +9,8 @@ each view the session's worker fused the registered frame and extracted the surf
 (``workbench/surface/live.py``). Printed per view:
 
 - ``update s``: the worker's surface update (integrate + extract + simplify; ``SurfaceUpdate.seconds``, measured
-  in the worker; scoring against the ground truth is left out), goal <= 0.3 s on the bunny;
+  in the worker; scoring against the ground truth is left out), goal <= 0.3 s on the bunny; ``cpu s``: its CPU
+  time (``SurfaceUpdate.cpu_seconds``, every thread of the worker), which the machine's load does not inflate;
 - ``approve s``: the whole approve (move, render, integrate the map and the surface, journal) for context;
 - ``layer kB``: what the page's ``/surface`` node sends to one tab: float32 vertices + uint32 faces of the
   simplified layer (the buffers viser ships; its zstd framing only shrinks them), goal <= 300 kB;
@@ -76,12 +77,15 @@ def main(argv: list[str] | None = None) -> int:
                         0 if update.layer is None else update.layer.triangles,
                         update.fscore_5mm,
                         update.error,
+                        update.cpu_seconds,
+                        os.getloadavg()[0],
                     )
                 )
                 r = rows[-1]
                 f = "-" if r[7] is None else f"{r[7]:.4f}"
                 print(
-                    f"view {r[0]:2d}  update {r[1]:.3f} s  approve {r[2]:.2f} s  layer {r[3]:.0f} kB  "
+                    f"view {r[0]:2d}  update {r[1]:.3f} s (cpu {r[9]:.3f} s, load {r[10]:.1f})  approve {r[2]:.2f} s  "
+                    f"layer {r[3]:.0f} kB  "
                     f"to server {r[4]:.0f} kB  triangles {r[5]} (layer {r[6]})  F@5mm {f}"
                     + ("" if r[8] is None else f"  error: {r[8]}"),
                     flush=True,
@@ -89,10 +93,11 @@ def main(argv: list[str] | None = None) -> int:
         finally:
             registry.close()
     if rows:
-        updates = [r[1] for r in rows]
+        updates, cpu = [r[1] for r in rows], [r[9] for r in rows]
         print(
             f"\n{args.model.stem}, {len(rows)} views: update median {statistics.median(updates):.3f} s, "
-            f"max {max(updates):.3f} s (goal <= 0.3 s); layer max {max(r[3] for r in rows):.0f} kB (goal <= 300 kB); "
+            f"max {max(updates):.3f} s (goal <= 0.3 s); cpu median {statistics.median(cpu):.3f} s, "
+            f"max {max(cpu):.3f} s; layer max {max(r[3] for r in rows):.0f} kB (goal <= 300 kB); "
             f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores"
         )
     return 0

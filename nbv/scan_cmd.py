@@ -129,11 +129,14 @@ def _surface_summary(block: dict[str, Any]) -> str:
 
 def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
     """The body of ``nbv scan`` / ``nbv profile``; returns the JSON written."""
+    from devices.config import CameraConfig
     from devices.ply import write_ply
-    from workbench.surface import SurfaceIntegrator, export_bytes, surface_block
+    from workbench.surface import SurfaceIntegrator, ViewSurfaces, export_bytes, surface_block, surface_config_for
 
     config = planner_config_from_args(args)
-    integrator = SurfaceIntegrator()
+    camera = CameraConfig(depth_noise_std=args.depth_noise, sensor=args.sensor, calibration=args.calibration)
+    integrator = SurfaceIntegrator(surface_config_for(camera))
+    per_view = ViewSurfaces(integrator)
     console = Console(highlight=False)
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
@@ -157,7 +160,7 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
         on_start=start,
         on_iteration=lambda record, plan: console.print(_row(record), highlight=False),
         arm=args.arm,
-        on_frame=integrator.integrate,
+        on_frame=per_view.add,
         sensor=args.sensor,
         calibration=args.calibration,
     )
@@ -165,6 +168,8 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
         console.print(f"reachable coverage {scan.reachable_coverage:.4f} ({scan.ceiling_seconds:.1f} s)")
     doc = metrics_json(scan, args.planner)
     surface, doc["surface"] = surface_block(integrator, scan.mesh)
+    for row, fscore in zip(doc["iterations"], per_view.fscores(scan.mesh), strict=True):
+        row["surface_fscore_5mm"] = fscore
     (out / "metrics.json").write_text(json.dumps(doc, indent=2))
     write_ply(out / "cloud.ply", scan.planner.cloud)
     if surface is not None:

@@ -300,9 +300,10 @@ class SessionDrawing:
             return
         name = f"/cloud/{self._cloud_chunks}"
         self._cloud_chunks += 1
+        # shown: the /cloud group hides and shows every chunk (a chunk's own flag would stay as it was drawn)
         self._put(name, self.scene.add_point_cloud(
             name, new.astype(np.float16), COLORS["cloud"], point_size=0.002, precision="float16",
-            point_shading="flat", visible=self.layers["cloud"],
+            point_shading="flat",
         ))  # fmt: skip
 
     def _draw_turntable(self, data: SceneData) -> None:
@@ -326,7 +327,7 @@ class SessionDrawing:
         self.surface_sends += 1
         self._put("/surface", self.scene.add_mesh_simple(
             "/surface", data.surface.vertices.astype(np.float32), data.surface.faces.astype(np.uint32),
-            color=COLORS["surface"], flat_shading=True, side="double", cast_shadow=False, receive_shadow=False,
+            color=COLORS["surface"], flat_shading=False, side="double", cast_shadow=False, receive_shadow=False,
         ))  # fmt: skip
 
     def _draw_mesh(self, data: SceneData) -> None:

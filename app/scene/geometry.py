@@ -69,6 +69,7 @@ GROUPS: dict[str, str | None] = {
     "/ellipsoids": "ellipsoids",
     "/gmm": "gmm",
     "/views": "views",
+    "/cloud": "cloud",
     "/context/sectors": "sectors",
     "/override": "gizmo",
     "/clusters": "clusters",

@@ -56,6 +56,11 @@ def assert_surface_written(out: Path, doc: dict, coverage: float) -> None:
     # 8 points of the walls' feet next to the plate cut: measured 0.76 against 0.84).
     assert coverage - 0.1 < block["recall_5mm"] <= coverage + 0.05
     assert block["fscore_2mm"] <= block["fscore_5mm"] <= 1.0
+    assert 0.0 <= block["chamfer_mm"] < 10.0 and block["seconds"] < 60.0
+    # the surface after each view, scored against the same samples: the last is the block's, it grows with views
+    per_view = [it["surface_fscore_5mm"] for it in doc["iterations"]]
+    assert per_view[-1] == block["fscore_5mm"]
+    assert all(0.05 < f <= 1.0 for f in per_view) and per_view[-1] > per_view[0]
 
 
 def write(path: Path, text: str) -> Path:

@@ -66,13 +66,16 @@ def execute(task: RunTask, mesh: MeshPayload | None = None) -> RunOutcome:
 
 
 def _execute(task: RunTask, mesh: MeshPayload | None, t0: float) -> RunOutcome:
+    from devices.config import CameraConfig
     from workbench.evaluation.accuracy import ACCURACY_COLUMNS
     from workbench.evaluation.scan import icp_rejections
     from workbench.evaluation.simulate import simulate
+    from workbench.surface.config import surface_config_for
     from workbench.surface.integrator import SurfaceIntegrator
     from workbench.surface.report import surface_block
 
-    surface = SurfaceIntegrator()
+    camera = CameraConfig(depth_noise_std=task.depth_noise, sensor=task.sensor, calibration=task.calibration)
+    surface = SurfaceIntegrator(surface_config_for(camera))
 
     scan = simulate(
         task.model if mesh is None else task.label,

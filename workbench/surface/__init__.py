@@ -2,16 +2,18 @@
 the plate cut away; a watertight option (screened Poisson, the bottom closed on the plate plane); simplification
 for the browser, export to PLY / OBJ / GLB; its accuracy against the ground-truth mesh.
 
+- :class:`SurfaceConfig`, :func:`surface_config_for` ``(camera)``: the settings, a real sensor's;
 - :class:`SurfaceIntegrator` ``(config, box)``: ``integrate(frame)`` after each capture, ``mesh()`` extracts;
   :func:`reconstruct` ``(frames, config, box)`` at once (a rebuild: the same frames give the same surface);
 - :class:`SurfaceMesh`: the value (vertices, faces in canonical order; area, volume, watertight);
 - :func:`simplify` ``(surface, max_triangles)``, :func:`layer_bytes`, :func:`export_bytes` ``(surface, fmt)``;
 - :func:`surface_accuracy`, :func:`cloud_accuracy`: the shared ``workbench.evaluation.Accuracy`` (F at 2 and 5 mm,
   chamfer) of the surface's points (:func:`surface_points`) or a cloud; :func:`ground_truth` builds the truth once;
-- :func:`surface_block`: the ``surface`` block of a scan's metrics.json.
+- :func:`surface_block`: the ``surface`` block of a scan's metrics.json; :class:`ViewSurfaces`: the surface after
+  each view, for its per-view F-score.
 """
 
-from workbench.surface.config import SurfaceConfig, SurfaceMethod
+from workbench.surface.config import SurfaceConfig, SurfaceMethod, surface_config_for
 from workbench.surface.export import (
     EXPORT_FORMATS,
     LAYER_TRIANGLES,
@@ -23,7 +25,7 @@ from workbench.surface.export import (
 )
 from workbench.surface.integrator import SurfaceIntegrator, reconstruct
 from workbench.surface.mesh import SurfaceError, SurfaceMesh
-from workbench.surface.report import surface_block
+from workbench.surface.report import ViewSurfaces, surface_block
 from workbench.surface.scoring import (
     GROUND_TRUTH_SAMPLES,
     cloud_accuracy,
@@ -43,6 +45,7 @@ __all__ = [
     "SurfaceIntegrator",
     "SurfaceMesh",
     "SurfaceMethod",
+    "ViewSurfaces",
     "cloud_accuracy",
     "export_bytes",
     "ground_truth",
@@ -52,6 +55,7 @@ __all__ = [
     "simplify",
     "surface_accuracy",
     "surface_block",
+    "surface_config_for",
     "surface_points",
     "watertight",
 ]

@@ -39,6 +39,8 @@ class SurfaceUpdate:
     """Wall time of the last update (integrate, extract, simplify), in the process that ran it."""
     accuracy: Accuracy | None = None
     """The surface against the ground truth (simulated sessions), the shared metric; None without either."""
+    cpu_seconds: float = 0.0
+    """CPU time of the same update (every thread of the process): what the machine's load does not inflate."""
 
     @property
     def fscore_5mm(self) -> float | None:
@@ -77,7 +79,7 @@ class LiveSurface:
         """Fuse ``frame`` at its registered pose ``T_world_camera``; with ``extract`` the surface and its layer
         are extracted (a rebuild extracts once, after its last frame). Never raises: a failure is the update's
         ``error`` (and a logged warning)."""
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         self.views += 1
         error: str | None = None
         try:
@@ -86,13 +88,14 @@ class LiveSurface:
             error = f"view {self.views} not fused: {type(exc).__name__}: {exc}"
             log.warning("surface: %s", error)
         if extract:
-            self.extract(time.perf_counter() - t0, error)
+            self.extract(time.perf_counter() - t0, error, time.process_time() - c0)
         return self.update
 
-    def extract(self, seconds: float = 0.0, error: str | None = None) -> SurfaceUpdate:
+    def extract(self, seconds: float = 0.0, error: str | None = None, cpu_seconds: float = 0.0) -> SurfaceUpdate:
         """Extract the surface and its layer now, scored when there is a ground truth (the update; ``error``
-        noted when nothing else went wrong). ``seconds`` (the update's time) leaves the scoring out."""
-        t0 = time.perf_counter()
+        noted when nothing else went wrong). ``seconds``, ``cpu_seconds`` (the update's wall and CPU time so far,
+        the fusion's) grow by the extraction's; they leave the scoring out."""
+        t0, c0 = time.perf_counter(), time.process_time()
         mesh = layer = None
         try:
             mesh = self.integrator.mesh()
@@ -101,13 +104,14 @@ class LiveSurface:
             mesh, layer = None, None
             error = f"{type(exc).__name__}: {exc}" if error is None else error
         seconds += time.perf_counter() - t0
+        cpu_seconds += time.process_time() - c0
         accuracy = None
         if mesh is not None and self.truth is not None:
             try:
                 accuracy = surface_accuracy(mesh, self.truth)
             except Exception as exc:
                 log.warning("surface: not scored: %s", exc)
-        self.update = SurfaceUpdate(self.views, mesh, layer, error, seconds, accuracy)
+        self.update = SurfaceUpdate(self.views, mesh, layer, error, seconds, accuracy, cpu_seconds)
         return self.update
 
 

@@ -60,8 +60,16 @@ class SurfaceMesh:
         shift = np.argmin(f, axis=1)
         rows = np.arange(len(f))[:, None]
         f = f[rows, (shift[:, None] + np.arange(3)[None, :]) % 3]
-        f = f[np.lexsort((f[:, 2], f[:, 1], f[:, 0]))]
+        n = len(v)
+        if n < 2**21:  # three indices packed in one int64 key sort in a tenth of a lexsort's time
+            f = f[np.argsort((f[:, 0] * n + f[:, 1]) * n + f[:, 2], kind="stable")]
+        else:
+            f = f[np.lexsort((f[:, 2], f[:, 1], f[:, 0]))]
         return SurfaceMesh(v, f)
+
+    def __reduce__(self) -> tuple[type[SurfaceMesh], tuple[NDArray[np.float64], NDArray[np.int64]]]:
+        """Pickled as its two arrays: not the trimesh (and its caches) :attr:`area` builds, five times the bytes."""
+        return (SurfaceMesh, (self.vertices, self.faces))
 
     @staticmethod
     def from_trimesh(mesh: trimesh.Trimesh) -> SurfaceMesh:

@@ -1,4 +1,5 @@
-"""The ``surface`` block of a scan's metrics.json: the final surface's accuracy, size and time."""
+"""The ``surface`` block of a scan's metrics.json: the final surface's accuracy, size and time; and the surface
+after each view (:class:`ViewSurfaces`), scored once the ground truth is known (:meth:`ViewSurfaces.fscores`)."""
 
 from __future__ import annotations
 
@@ -8,9 +9,10 @@ from typing import Any
 import trimesh
 from numpy.typing import ArrayLike
 
+from planner import DepthFrame
 from workbench.surface.integrator import SurfaceIntegrator
 from workbench.surface.mesh import SurfaceError, SurfaceMesh
-from workbench.surface.scoring import surface_accuracy
+from workbench.surface.scoring import ground_truth, surface_accuracy
 
 SCORES = ("fscore_2mm", "fscore_5mm", "precision_5mm", "recall_5mm", "chamfer_mm")
 """The accuracy fields of the block (None without a ground truth)."""
@@ -41,3 +43,25 @@ def surface_block(
         accuracy = surface_accuracy(surface, ground_truth, ground_truth_samples)
         block |= {key: getattr(accuracy, key) for key in SCORES}
     return surface, block | {"triangles": surface.triangles, "seconds": seconds}
+
+
+class ViewSurfaces:
+    """The surface after each view of a scan: :meth:`add` fuses a registered frame into ``integrator`` and keeps the
+    surface extracted then (None while no view saw the object), for the per-view score of metrics.json."""
+
+    def __init__(self, integrator: SurfaceIntegrator) -> None:
+        self.integrator = integrator
+        self.meshes: list[SurfaceMesh | None] = []
+
+    def add(self, frame: DepthFrame) -> None:
+        self.integrator.integrate(frame)
+        try:
+            self.meshes.append(self.integrator.mesh())
+        except SurfaceError:
+            self.meshes.append(None)
+
+    def fscores(self, truth: trimesh.Trimesh, samples: ArrayLike | None = None) -> list[float | None]:
+        """F@5mm of each view's surface against ``truth`` (with its ``samples``, default those of
+        :func:`surface_block`: the last equals the block's ``fscore_5mm``), None for a view with no surface."""
+        reference = ground_truth(truth, samples)
+        return [None if m is None else surface_accuracy(m, reference).fscore_5mm for m in self.meshes]
