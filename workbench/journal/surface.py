@@ -8,24 +8,38 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import Any
 
+from devices.config import DeviceConfig
 from planner import Pose
+from planner.config import from_dict
 from workbench.evaluation.accuracy import GroundTruth
 from workbench.journal.discard import without_discarded
 from workbench.journal.store import Journal, read_journal
-from workbench.surface.config import SurfaceConfig
+from workbench.surface.config import SurfaceConfig, surface_config_for
 from workbench.surface.live import LiveSurface, SurfaceUpdate
 
 log = logging.getLogger(__name__)
+
+
+def header_surface_config(header: dict[str, Any]) -> SurfaceConfig:
+    """The surface settings of a session from its journal header: ``surface_config_for`` its camera (a real
+    sensor's noise fuses with a tighter truncation, like ``nbv scan`` and ``nbv bench``); a header without a
+    readable camera: the defaults."""
+    try:
+        devices = from_dict(DeviceConfig, header["devices"])
+    except (KeyError, TypeError, ValueError):
+        return SurfaceConfig()
+    return surface_config_for(devices.camera)
 
 
 def surface_of_journal(
     journal: Journal, truth: GroundTruth | None = None, config: SurfaceConfig | None = None
 ) -> LiveSurface:
     """The :class:`LiveSurface` of ``journal``'s kept captures (extracted once, at the end; scored against
-    ``truth`` when given). A frame that cannot be read is noted in the update's ``error`` like any surface
-    failure, never raised."""
-    live = LiveSurface(config, truth=truth)
+    ``truth`` when given), with ``config`` (default: :func:`header_surface_config`). A frame that cannot be
+    read is noted in the update's ``error`` like any surface failure, never raised."""
+    live = LiveSurface(config if config is not None else header_surface_config(journal.header), truth=truth)
     captures = [ev for ev in without_discarded(journal.events) if ev.get("kind") == "capture"]
     error = None
     for ev in captures:
