@@ -76,6 +76,7 @@ def test_debugging_a_fit(live_server: LiveServer, browser_context: BrowserContex
     tab = Tab(browser_context, f"{live_server.url}/?session={sid}")
     page = tab.page
     _state(tab, "planned")
+    page.wait_for_function("() => Boolean(S.viewer)", timeout=60_000)  # the page opens its viewer after the state
     viewer = page.evaluate("S.viewer")
     tab.wait(lambda: api.get(f"/api/scene/{viewer}").json()["connected"])
     plan = live_server.registry.get(sid).plan_for().plan
