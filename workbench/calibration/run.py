@@ -283,12 +283,7 @@ class CalibrationRun:
                         progress(done[-1])
         finally:
             if done:
-                self._claim("estimating")
-                try:
-                    self._refit()
-                finally:
-                    self._release()
-                self._notify("estimate")
+                self._estimate_now()
         return done
 
     def estimate(self, angle_sigma_deg: float | None = None) -> CalibrationResult:
@@ -297,15 +292,19 @@ class CalibrationRun:
             if not (math.isfinite(angle_sigma_deg) and 0 <= angle_sigma_deg <= 5):
                 raise Invalid(f"angle_sigma_deg: in [0, 5], got {angle_sigma_deg!r}")
             self.angle_sigma_deg = angle_sigma_deg
+        self._estimate_now()
+        if self._result is None:
+            raise Invalid(self._note)
+        return self._result
+
+    def _estimate_now(self) -> None:
+        """Refit the estimate under the ``estimating`` claim and tell the listeners."""
         self._claim("estimating")
         try:
             self._refit()
         finally:
             self._release()
         self._notify("estimate")
-        if self._result is None:
-            raise Invalid(self._note)
-        return self._result
 
     def _refit(self) -> None:
         """Redo the estimate from the kept captures (under the caller's claim)."""
