@@ -6,6 +6,7 @@ from __future__ import annotations
 import shutil
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -31,6 +32,17 @@ def chromium_path() -> str:
         if path:
             return path
     raise RuntimeError("Debian's chromium is needed for the browser tests (make system-deps installs it)")
+
+
+def save_screenshot(page: Any, out: str, settle_ms: int) -> None:
+    """Save ``page`` as the PNG ``out`` (its folder made): the viewer's headless-only notification closed first (it
+    lies under the page's layer bar), then ``settle_ms`` for SwiftShader to render the scene."""
+    close = page.frame_locator("#viewer").locator("button.mantine-Notification-closeButton")
+    if close.count():
+        close.first.dispatch_event("click")
+    page.wait_for_timeout(settle_ms)
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=out)
 
 
 OUTPUT_DIR = Path(__file__).resolve().parents[2] / "test-output" / "e2e"

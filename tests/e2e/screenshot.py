@@ -16,7 +16,7 @@ from pathlib import Path
 import httpx
 
 from app.settings import AppSettings
-from tests.e2e.conftest import CHROMIUM_ARGS, chromium_path, free_port, running_server
+from tests.e2e.conftest import CHROMIUM_ARGS, chromium_path, free_port, running_server, save_screenshot
 
 SURFACE_LAYERS = {
     "surface": True,
@@ -58,12 +58,7 @@ def main(
                     box = page.locator(f"#layers input[data-layer='{name}']")
                     if box.is_checked() != on:
                         box.click()
-            close = page.frame_locator("#viewer").locator("button.mantine-Notification-closeButton")
-            if close.count():
-                close.first.dispatch_event("click")  # under the page's layer bar (a headless-only warning)
-            page.wait_for_timeout(5000)  # SwiftShader: let the scene render
-            Path(out).parent.mkdir(parents=True, exist_ok=True)
-            page.screenshot(path=out)
+            save_screenshot(page, out, 5000)  # SwiftShader: the scene loads and renders
             browser.close()
     print(f"saved {out}")
 

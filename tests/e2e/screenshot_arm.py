@@ -14,7 +14,7 @@ from pathlib import Path
 import httpx
 
 from app.settings import AppSettings
-from tests.e2e.conftest import CHROMIUM_ARGS, chromium_path, free_port, running_server
+from tests.e2e.conftest import CHROMIUM_ARGS, chromium_path, free_port, running_server, save_screenshot
 
 
 def main(out: str = "docs/workbench-arm.png", width: int = 1600, height: int = 1000, steps: int = 2) -> None:
@@ -41,12 +41,7 @@ def main(out: str = "docs/workbench-arm.png", width: int = 1600, height: int = 1
             api.post(
                 f"/api/scene/{viewer}/camera", json={"position": [0.3, -0.95, 0.62], "look_at": [-0.22, 0.02, 0.17]}
             )
-            close = page.frame_locator("#viewer").locator("button.mantine-Notification-closeButton")
-            if close.count():
-                close.first.dispatch_event("click")  # under the page's layer bar (a headless-only warning)
-            page.wait_for_timeout(12000)  # SwiftShader: the arm's meshes load and render
-            Path(out).parent.mkdir(parents=True, exist_ok=True)
-            page.screenshot(path=out)
+            save_screenshot(page, out, 12000)  # SwiftShader: the scene loads and renders
             browser.close()
     print(f"saved {out}")
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import httpx
 
 from app.settings import AppSettings
-from tests.e2e.conftest import CHROMIUM_ARGS, chromium_path, free_port, running_server
+from tests.e2e.conftest import CHROMIUM_ARGS, chromium_path, free_port, running_server, save_screenshot
 
 
 def main(out: str = "docs/calibration-view.png", width: int = 1500, height: int = 950) -> None:
@@ -40,12 +40,7 @@ def main(out: str = "docs/calibration-view.png", width: int = 1500, height: int 
             expect(rows.nth(16)).to_have_class("selected")
             viewer = page.evaluate("window.Calibrate.state.viewer")
             api.post(f"/api/scene/{viewer}/camera", json={"position": [0.55, -1.5, 1.1], "look_at": [-0.3, 0.0, 0.15]})
-            close = page.frame_locator("#viewer").locator("button.mantine-Notification-closeButton")
-            if close.count():
-                close.first.dispatch_event("click")
-            page.wait_for_timeout(12000)  # SwiftShader: the arm's meshes load and render
-            Path(out).parent.mkdir(parents=True, exist_ok=True)
-            page.screenshot(path=out)
+            save_screenshot(page, out, 12000)  # SwiftShader: the scene loads and renders
             browser.close()
     print(f"saved {out}")
 

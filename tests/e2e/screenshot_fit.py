@@ -15,9 +15,10 @@ from pathlib import Path
 import httpx
 
 from app.settings import AppSettings
-from tests.e2e.conftest import CHROMIUM_ARGS, chromium_path, free_port, running_server
+from tests.e2e.conftest import CHROMIUM_ARGS, chromium_path, free_port, running_server, save_screenshot
+from workbench.settings import default_models_dir
 
-MODELS = Path("/work/shared/models")
+MODELS = default_models_dir()  # ../shared/models beside the clone
 SHOWN = {
     "clusters": True,
     **dict.fromkeys(("occupied", "frontier", "unknown", "ellipsoids", "candidates", "cloud", "nbv", "views", "bbox",
@@ -58,12 +59,7 @@ def main(out: str, width: int = 1600, height: int = 1000, model: str = "bunny.ob
                 print(f"{r['label']:>4} {r['kind']:9} voxels {r['voxels']:5d} fill {100 * r['fill']:5.1f} %{flag}")
             api.post(f"/api/scene/{viewer}/camera", json={"position": [0.2, -0.17, 0.16], "look_at": [0.0, 0.0, 0.06]})
             page.locator("#fit-box").scroll_into_view_if_needed()
-            close = page.frame_locator("#viewer").locator("button.mantine-Notification-closeButton")
-            if close.count():
-                close.first.dispatch_event("click")
-            page.wait_for_timeout(5000)  # SwiftShader: let the scene render
-            Path(out).parent.mkdir(parents=True, exist_ok=True)
-            page.screenshot(path=out)
+            save_screenshot(page, out, 5000)  # SwiftShader: the scene loads and renders
             browser.close()
     print(f"saved {out}")
 
