@@ -5,7 +5,6 @@ must be the true one; the approved poses move the (fake) arm and plate, and --wr
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
@@ -13,17 +12,12 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from devices.arm.config import DEFAULT_T_FLANGE_CAMERA
-from devices.calibration import DEFAULT_TARGET, calibration_poses, pose_error
+from devices.calibration import pose_error
 from devices.cellfile import load_cell_file
-from devices.config import CameraConfig
-from devices.sim import SimulatedCamera
 from nbv.cli import main
 from planner.types import Pose
-from tests.devices.drivers.rigfixtures import cell_toml, fake_hardware_cell
-from tests.devices.drivers.rsfixtures import DEPTH_UNIT
+from tests.hardware_session.calibration_rig import calibration_rig
 
-CAMERA = CameraConfig(width=320, height=240, fx=280.0, fy=280.0, cx=159.5, cy=119.5, min_depth=0.05, max_depth=3.0)
-ANGLES = (0.0, 120.0, -120.0)
 E = Pose(Rotation.from_rotvec([0.006, -0.009, 0.004]).as_matrix(), np.array([0.002, -0.003, 0.0015]))
 """The cell file's hand-eye error: the true camera is at ``T_flange_camera_file @ E``."""
 
@@ -32,13 +26,7 @@ E = Pose(Rotation.from_rotvec([0.006, -0.009, 0.004]).as_matrix(), np.array([0.0
 def test_calibrate_on_the_fake_rig_moves_through_the_approved_poses_and_writes_the_cell_file(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    poses = calibration_poses(DEFAULT_TARGET, math.pi, plate_angles_deg=ANGLES)
-    camera = SimulatedCamera(DEFAULT_TARGET.mesh(), CAMERA, plate_radius=0.2)
-    depths = [camera.render(p.T_table_camera @ E) for p in poses]
-    k = CAMERA.intrinsics
-    with fake_hardware_cell(tmp_path, depths, k, depth_unit=DEPTH_UNIT) as fake:
-        fast = "max_joint_speed_deg = 90\nspeed_fraction = 1.0\nacceleration_fraction = 1.0\n"
-        fake.path.write_text(cell_toml(fake.grbl.port, k, arm_speed=fast + "max_joint_acceleration_deg = 360"))
+    with calibration_rig(tmp_path, E) as (fake, poses):
         before = fake.path.read_text()
         args = ["calibrate", "--cell", str(fake.path), "--yes", "--write", "--plate-angles", "0,120,-120"]
         assert main(args) == 0

@@ -6,7 +6,6 @@ estimate is written into the cell file: the backup holds the old file and the ne
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
@@ -17,30 +16,19 @@ from scipy.spatial.transform import Rotation
 from app.main import create_app
 from app.settings import AppSettings
 from devices.arm.config import DEFAULT_T_FLANGE_CAMERA
-from devices.calibration import DEFAULT_TARGET, calibration_poses, pose_error
-from devices.calibration.poses import VIEWS
+from devices.calibration import pose_error
 from devices.cellfile import load_cell_file
-from devices.config import CameraConfig, DeviceConfig
-from devices.sim import SimulatedCamera
+from devices.config import DeviceConfig
 from planner.types import Pose
-from tests.devices.drivers.rigfixtures import cell_toml, fake_hardware_cell
-from tests.devices.drivers.rsfixtures import DEPTH_UNIT
+from tests.hardware_session.calibration_rig import ANGLES, CAMERA, calibration_rig
 
-CAMERA = CameraConfig(width=320, height=240, fx=280.0, fy=280.0, cx=159.5, cy=119.5, min_depth=0.05, max_depth=3.0)
-ANGLES = (0.0, 120.0, -120.0)
 E = Pose(Rotation.from_rotvec([-0.007, 0.005, 0.006]).as_matrix(), np.array([-0.0025, 0.002, 0.001]))
 """The cell file's hand-eye error: the true camera is at ``T_flange_camera_file @ E``."""
 
 
 @pytest.mark.timeout(300)
 def test_calibrate_mode_on_the_fake_rig_approves_each_pose_and_writes_the_cell_file(tmp_path: Path) -> None:
-    poses = calibration_poses(DEFAULT_TARGET, math.pi, plate_angles_deg=ANGLES, views=VIEWS)
-    camera = SimulatedCamera(DEFAULT_TARGET.mesh(), CAMERA, plate_radius=0.2)
-    depths = [camera.render(p.T_table_camera @ E) for p in poses]
-    k = CAMERA.intrinsics
-    with fake_hardware_cell(tmp_path, depths, k, depth_unit=DEPTH_UNIT) as fake:
-        fast = "max_joint_speed_deg = 90\nspeed_fraction = 1.0\nacceleration_fraction = 1.0\n"
-        fake.path.write_text(cell_toml(fake.grbl.port, k, arm_speed=fast + "max_joint_acceleration_deg = 360"))
+    with calibration_rig(tmp_path, E) as (fake, poses):
         before = fake.path.read_text()
         settings = AppSettings(
             viser_port=0,
