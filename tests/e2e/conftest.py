@@ -26,6 +26,38 @@ CHROMIUM_ARGS = [
 ]
 
 
+HOLD_VIEWER_FRAMES = """
+(() => {
+  if (window === window.top) return;  // the 3D viewer's iframe only; the page's own panels draw as always
+  const raf = window.requestAnimationFrame.bind(window);
+  const caf = window.cancelAnimationFrame.bind(window);
+  const held = new Map();
+  let next = 1e9, live = false;
+  window.requestAnimationFrame = (cb) => {
+    if (live) return raf(cb);
+    held.set(++next, cb);
+    return next;
+  };
+  window.cancelAnimationFrame = (id) => (held.delete(id) ? undefined : caf(id));
+  window.__nbvDraw = (on) => {
+    live = on;
+    if (on) { const cbs = [...held.values()]; held.clear(); cbs.forEach((cb) => raf(cb)); }
+  };
+})();
+"""
+"""The browser tests hold the viewer's render loop (``requestAnimationFrame`` in its iframe): SwiftShader spends
+0.3 core-s per frame of a session's scene, 0.6-0.7 of a core per open tab, on frames no test looks at. The scene
+graph still follows every message (React commits without animation frames) and the tests read the websocket
+frames, the page and the scene; a test that looks at pixels or picks in the 3D view calls :func:`draw_viewer`."""
+
+
+def draw_viewer(page: Any, on: bool = True) -> None:
+    """Let the viewer of ``page`` draw frames again (or hold them, ``on=False``)."""
+    for frame in page.frames:
+        if frame is not page.main_frame:
+            frame.evaluate("(on) => window.__nbvDraw && window.__nbvDraw(on)", on)
+
+
 def chromium_path() -> str:
     for name in ("chromium", "chromium-browser"):
         path = shutil.which(name)
@@ -69,6 +101,7 @@ def browser_page() -> Iterator:
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=chromium_path(), args=CHROMIUM_ARGS)
         page = browser.new_page(viewport={"width": 1500, "height": 950}, device_scale_factor=1)
+        page.add_init_script(HOLD_VIEWER_FRAMES)
         try:
             yield page
         finally:
@@ -83,6 +116,7 @@ def browser_context() -> Iterator:
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=chromium_path(), args=CHROMIUM_ARGS)
         context = browser.new_context(viewport={"width": 1024, "height": 700}, device_scale_factor=1)
+        context.add_init_script(HOLD_VIEWER_FRAMES)
         try:
             yield context
         finally:

@@ -9,6 +9,7 @@ import httpx
 import numpy as np
 from playwright.sync_api import BrowserContext, expect
 
+from tests.e2e.conftest import draw_viewer
 from tests.e2e.test_workbench_browser import Tab, _state
 from tests.helpers import SMALL
 from tests.servers import LiveServer
@@ -105,7 +106,8 @@ def test_debugging_a_fit(live_server: LiveServer, browser_context: BrowserContex
             box = page.locator(f"#layers input[data-layer='{name}']")
             (expect(box).to_be_checked() if on else expect(box).not_to_be_checked())
 
-    # a click on an ellipsoid in the 3D view selects its Fit row
+    # a click on an ellipsoid in the 3D view selects its Fit row (picking needs drawn frames)
+    draw_viewer(page)
     label, eye, look_at = _camera_on_one(plan)
     api.post(f"/api/scene/{viewer}/camera", json={"position": eye.tolist(), "look_at": look_at.tolist()})
     close = page.frame_locator("#viewer").locator("button.mantine-Notification-closeButton")

@@ -22,7 +22,7 @@ from workbench.evaluation.executors import run_dask
 from workbench.evaluation.runs import MeshPayload, RunOutcome, RunTask
 
 TINY = ["--views", "2", "--candidates", "40", "--resolution", "0.02", "--t-min", "2", "--t-max", "6"]
-GRID = ["--models", "l-block", "box", "--planners", "projection,random", "--seeds", "2", *TINY]
+GRID = ["--models", "l-block", "box", "--planners", "projection,random", "--seeds", "1", *TINY]
 TIMINGS = {"plan_seconds", "eval_seconds", "fit_seconds", "robot_seconds"}  # robot time includes measured planning
 
 pytestmark = pytest.mark.slow
@@ -57,7 +57,7 @@ def test_dask_local_cluster_gives_the_same_rows(tmp_path: Path, local_rows: list
     out = tmp_path / "a" / "dask"
     assert bench(out, "--executor", "dask", "--workers", "2") == 0
     got = rows(out)
-    assert len(got) == 2 * 2 * 2 * 2  # models x planners x seeds x views
+    assert len(got) == 2 * 2 * 1 * 2  # models x planners x seeds x views
     assert got == local_rows
     assert {dict(r)["reachable_coverage"] for r in got} != {""}
     assert "Executor: dask (LocalCluster, 2 workers)" in (out / "summary.md").read_text()

@@ -68,10 +68,30 @@ def write(path: Path, text: str) -> Path:
     return path
 
 
+def nbv_in_process(argv: list[str], capfd: pytest.CaptureFixture[str]) -> tuple[int, str]:
+    """(exit code, stderr) of ``nbv argv`` run in this process; stderr read at the file descriptor, so what
+    native libraries print is seen too (the real process is run once per kind of input, below)."""
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse's own errors
+        code = int(exc.code or 0)
+    return code, capfd.readouterr().err
+
+
+def nbv_process(argv: list[str]) -> tuple[int, str]:
+    """(exit code, stderr) of ``python -m nbv.cli argv`` in a new process (interpreter start and exit included)."""
+    proc = subprocess.run([sys.executable, "-m", "nbv.cli", *argv], capture_output=True, text=True, timeout=120)
+    return proc.returncode, proc.stderr
+
+
+BAD_INPUT_IN_A_PROCESS = ["--model", "no/such/file.obj"]
+BAD_MESH_IN_A_PROCESS = "garbage.obj"
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--model", "no/such/file.obj"], "no/such/file.obj"),
+        (BAD_INPUT_IN_A_PROCESS, "no/such/file.obj"),
         (["--model", "no-such-builtin"], "no-such-builtin"),
         (["--resolution", "0"], "voxel.resolution: must be > 0"),
         (["--resolution", "-1"], "voxel.resolution"),
@@ -82,36 +102,34 @@ def write(path: Path, text: str) -> Path:
         (["--yaw", "nan"], "--yaw"),
     ],
 )
-def test_bad_input_is_one_line_and_exit_2(args: list[str], message: str, tmp_path: Path) -> None:
+def test_bad_input_is_one_line_and_exit_2(
+    args: list[str], message: str, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
     full = ["scan", *(["--model", "l-block"] if "--model" not in args else []), *args, "--out", str(tmp_path)]
-    proc = subprocess.run([sys.executable, "-m", "nbv.cli", *full], capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 2
-    lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("nbv: error:"), proc.stderr
+    code, stderr = nbv_process(full) if args == BAD_INPUT_IN_A_PROCESS else nbv_in_process(full, capfd)
+    assert code == 2
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("nbv: error:"), stderr
     assert message in lines[0]
-    assert "Traceback" not in proc.stderr
+    assert "Traceback" not in stderr
 
 
 @pytest.mark.parametrize(
     ("name", "content", "message"),
     [
-        ("garbage.obj", "this is not a mesh\n", "garbage.obj"),
+        (BAD_MESH_IN_A_PROCESS, "this is not a mesh\n", "garbage.obj"),
         ("empty.obj", "", "empty.obj"),
         ("nan.obj", "v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n", "non-finite"),
         ("binary.stl", "\x00\x01garbage", "binary.stl"),
     ],
 )
-def test_bad_meshes(name: str, content: str, message: str, tmp_path: Path) -> None:
+def test_bad_meshes(name: str, content: str, message: str, tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
     path = write(tmp_path / name, content)
-    proc = subprocess.run(
-        [sys.executable, "-m", "nbv.cli", "scan", "--model", str(path), "--out", str(tmp_path / "o")],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert proc.returncode == 2, proc.stderr
-    lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and message in lines[0], proc.stderr
+    argv = ["scan", "--model", str(path), "--out", str(tmp_path / "o")]
+    code, stderr = nbv_process(argv) if name == BAD_MESH_IN_A_PROCESS else nbv_in_process(argv, capfd)
+    assert code == 2, stderr
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0], stderr
 
 
 def test_scan_is_reproducible(tmp_path: Path) -> None:
