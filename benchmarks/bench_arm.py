@@ -1,6 +1,6 @@
 """What the arm costs: IK + collision checks per plan, trajectory planning per view, and its share of plan_seconds.
 
-Run: ``.venv/bin/python benchmarks/bench_arm.py [--model ../shared/models/bunny.obj] [--views 10]``.
+Run: ``PYTHONPATH=. .venv/bin/python benchmarks/bench_arm.py [--model ../shared/models/bunny.obj] [--views 10]``.
 
 One scan of the model with the UR5 (the default cell) and one with the reach-sphere cell, same seed. Prints:
 
@@ -56,10 +56,10 @@ def timed_scan(model: str, views: int, kinematics: str, seed: int) -> dict[str, 
             reach_seconds[-1] += time.perf_counter() - t
             reach_cpu[-1] += time.thread_time() - c
 
-    def timed_motion(pose: Any) -> Any:
+    def timed_motion(*args: Any, **kwargs: Any) -> Any:
         t, c = time.perf_counter(), time.thread_time()
         try:
-            return plan_motion(pose)
+            return plan_motion(*args, **kwargs)
         finally:
             motion_seconds.append(time.perf_counter() - t)
             motion_cpu.append(time.thread_time() - c)
