@@ -15,6 +15,9 @@ One scan of the model with the UR5 (the default cell) and one with the reach-sph
 
 4. every ``plan_path`` of the scan (the approved moves, the retracts, and the refused ones), by method:
    how many were a straight line and how many needed RRT-Connect, with their wall time;
+5. moves that need RRT-Connect (two moves of the UR5 around a box of 5, 8 and 12 cm on the straight line, three
+   seeds, each query twice): ``plan_path`` wall and CPU time, the move durations, and whether each repeat gave
+   the same waypoints (it must: the planner is deterministic);
 
 and the share of the first hemisphere the arm reaches, with the reasons for the rest.
 """
@@ -28,7 +31,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 import devices.arm.kinematics as arm_kinematics
+from devices.arm.config import ArmConfig
+from devices.arm.motion import NoPathError, plan_path, time_path
 from devices.builtins import resolve_model
 from devices.config import CameraConfig, CellConfig
 from devices.sim import make_sim_cell
@@ -116,6 +123,37 @@ def timed_scan(model: str, views: int, kinematics: str, seed: int) -> dict[str, 
     }
 
 
+def rrt_moves() -> dict[str, Any]:
+    """plan_path around an obstacle on the straight line (moves that need RRT-Connect), each query twice."""
+    kin = arm_kinematics.ArmKinematics(ArmConfig(), plate_radius=0.2, plate_thickness=0.02)
+    q_a = np.radians([0.0, -90.0, 90.0, -90.0, -90.0, 0.0])
+    out: dict[str, Any] = {"wall": [], "cpu": [], "durations": [], "differ": 0, "queries": 0, "refused": 0}
+    for dq in ([1.2, 0.35, -0.5, 0.2, 0.0, 0.3], [-1.0, 0.3, -0.4, 0.0, 0.4, 0.0]):
+        q_b = q_a + np.array(dq)
+        middle = kin.camera_pose(0.5 * (q_a + q_b)).translation
+        for size in (0.05, 0.08, 0.12):
+            kin.set_object_box(middle - size, middle + size)
+            if kin.world.collision(q_a, 0.0) is not None or kin.world.collision(q_b, 0.0) is not None:
+                continue
+            for seed in range(3):
+                paths = []
+                for _ in range(2):
+                    t, c = time.perf_counter(), time.thread_time()
+                    try:
+                        paths.append(plan_path(kin.world, q_a, q_b, 0.0, seed=seed).waypoints)
+                    except NoPathError:
+                        out["refused"] += 1
+                        paths.append(None)
+                    out["wall"].append(time.perf_counter() - t)
+                    out["cpu"].append(time.thread_time() - c)
+                    if paths[-1] is not None:
+                        out["durations"].append(time_path(kin.model, paths[-1]).duration)
+                out["queries"] += 1
+                same = paths[0] is not None and paths[1] is not None and np.array_equal(paths[0], paths[1])
+                out["differ"] += 0 if same else 1
+    return out
+
+
 def stats(values: list[float]) -> str:
     if not values:
         return "-"
@@ -145,6 +183,13 @@ def main() -> int:
     parts = ", ".join(f"{k} {v}" for k, v in arm["reasons"].most_common())
     print(f"first hemisphere: {arm['reasons']['reachable']}/{total} reachable by the UR5 ({parts})")
     print("4. plan_path per method: " + "; ".join(f"{m} {stats(v)}" for m, v in sorted(arm["paths"].items())))
+    rrt = rrt_moves()
+    print(f"5. moves that need RRT-Connect: plan_path {stats(rrt['wall'])}; CPU {stats(rrt['cpu'])}")
+    d = rrt["durations"]
+    print(
+        f"   move durations {min(d):.2f}-{max(d):.2f} s (median {statistics.median(d):.2f} s); "
+        f"{rrt['differ']} of {rrt['queries']} repeated queries gave other waypoints, {rrt['refused']} refused"
+    )
     print(f"robot time of the scan: arm {arm['robot_seconds']:.1f} s, reach sphere {sphere['robot_seconds']:.1f} s")
     print(f"   the arm's move durations (no wall-clock part): {arm['move_seconds']:.6f} s")
     return 0

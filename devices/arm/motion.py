@@ -81,14 +81,14 @@ def plan_path(
         if search.timed_out:
             budget = f"its wall-clock guard of {cfg.planning_time:g} s ({search.checks} collision checks)"
         raise NoPathError(f"no_path: RRT-Connect found no collision-free path within {budget}")
-    waypoints = shortcut(world, raw, plate_angle, resolution)
+    waypoints = _shortcut(world, raw, plate_angle, resolution)
     for a, b in itertools.pairwise(waypoints):  # every edge was checked; the dense check of the result decides
         if world.path_collision(a, b, plate_angle, resolution) is not None:  # pragma: no cover - defensive
             raise NoPathError("no_path: the shortened path touches an obstacle between its checked states")
     return PathPlan(waypoints, "rrt_connect", time.perf_counter() - t0, search.checks)
 
 
-def shortcut(
+def _shortcut(
     world: CollisionWorld, waypoints: NDArray[np.float64], plate_angle: float, resolution: float
 ) -> NDArray[np.float64]:
     """(K, n) -> (K', n), K' <= K: from each kept waypoint, straight to the farthest later waypoint whose segment
