@@ -1,6 +1,6 @@
 """What the arm costs: IK + collision checks per plan, trajectory planning per view, and its share of plan_seconds.
 
-Run: ``.venv/bin/python benchmarks/bench_arm.py [--model ../shared/models/bunny.obj] [--views 10]``.
+Run: ``PYTHONPATH=. .venv/bin/python benchmarks/bench_arm.py [--model ../shared/models/bunny.obj] [--views 10]``.
 
 One scan of the model with the UR5 (the default cell) and one with the reach-sphere cell, same seed. Prints:
 
@@ -12,6 +12,12 @@ One scan of the model with the UR5 (the default cell) and one with the reach-sph
    runs inside the planner's "select" stage);
 
 (1 and 2 also as the thread's CPU time: on a loaded machine the wall time includes waiting for a core,)
+
+4. every ``plan_path`` of the scan (the approved moves, the retracts, and the refused ones), by method:
+   how many were a straight line and how many needed RRT-Connect, with their wall time;
+5. moves that need RRT-Connect (two moves of the UR5 around a box of 5, 8 and 12 cm on the straight line, three
+   seeds, each query twice): ``plan_path`` wall and CPU time, the move durations, and whether each repeat gave
+   the same waypoints (it must: the planner is deterministic);
 
 and the share of the first hemisphere the arm reaches, with the reasons for the rest.
 """
@@ -25,6 +31,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+import devices.arm.kinematics as arm_kinematics
+from devices.arm.config import ArmConfig
+from devices.arm.motion import NoPathError, plan_path, time_path
 from devices.builtins import resolve_model
 from devices.config import CameraConfig, CellConfig
 from devices.sim import make_sim_cell
@@ -52,14 +63,28 @@ def timed_scan(model: str, views: int, kinematics: str, seed: int) -> dict[str, 
             reach_seconds[-1] += time.perf_counter() - t
             reach_cpu[-1] += time.thread_time() - c
 
-    def timed_motion(pose: Any) -> Any:
+    def timed_motion(*args: Any, **kwargs: Any) -> Any:
         t, c = time.perf_counter(), time.thread_time()
         try:
-            return plan_motion(pose)
+            return plan_motion(*args, **kwargs)
         finally:
             motion_seconds.append(time.perf_counter() - t)
             motion_cpu.append(time.thread_time() - c)
 
+    paths: dict[str, list[float]] = collections.defaultdict(list)
+    plan_path = arm_kinematics.plan_path
+
+    def timed_path(*args: Any, **kwargs: Any) -> Any:
+        t = time.perf_counter()
+        try:
+            path = plan_path(*args, **kwargs)
+        except arm_kinematics.NoPathError:
+            paths["no_path"].append(time.perf_counter() - t)
+            raise
+        paths[path.method].append(time.perf_counter() - t)
+        return path
+
+    arm_kinematics.plan_path = timed_path  # type: ignore[assignment]
     cell.is_reachable = timed_reachable  # type: ignore[method-assign]
     cell.plan_motion = timed_motion  # type: ignore[method-assign]
     per_plan: list[float] = []
@@ -75,7 +100,10 @@ def timed_scan(model: str, views: int, kinematics: str, seed: int) -> dict[str, 
             first_plan.append(plan)
 
     config = PlannerConfig.from_dict({"termination": {"max_views": views}, "cluster": {"seed": seed}})
-    result = run_scan(Planner(config), cell, on_iteration=done)
+    try:
+        result = run_scan(Planner(config), cell, on_iteration=done)
+    finally:
+        arm_kinematics.plan_path = plan_path  # type: ignore[assignment]
     reasons: collections.Counter[str] = collections.Counter()
     if first_plan:
         for ok, reason in cell.reachability_many([c.T_world_camera for c in first_plan[0].candidates]):
@@ -89,8 +117,41 @@ def timed_scan(model: str, views: int, kinematics: str, seed: int) -> dict[str, 
         "motion_cpu": motion_cpu[1:],
         "plan_seconds": [r.plan_seconds for r in result.records],
         "robot_seconds": result.robot_seconds,
+        "move_seconds": sum(float((r.move or {}).get("move_duration") or 0.0) for r in result.records),
+        "paths": dict(paths),
         "reasons": reasons,
     }
+
+
+def rrt_moves() -> dict[str, Any]:
+    """plan_path around an obstacle on the straight line (moves that need RRT-Connect), each query twice."""
+    kin = arm_kinematics.ArmKinematics(ArmConfig(), plate_radius=0.2, plate_thickness=0.02)
+    q_a = np.radians([0.0, -90.0, 90.0, -90.0, -90.0, 0.0])
+    out: dict[str, Any] = {"wall": [], "cpu": [], "durations": [], "differ": 0, "queries": 0, "refused": 0}
+    for dq in ([1.2, 0.35, -0.5, 0.2, 0.0, 0.3], [-1.0, 0.3, -0.4, 0.0, 0.4, 0.0]):
+        q_b = q_a + np.array(dq)
+        middle = kin.camera_pose(0.5 * (q_a + q_b)).translation
+        for size in (0.05, 0.08, 0.12):
+            kin.set_object_box(middle - size, middle + size)
+            if kin.world.collision(q_a, 0.0) is not None or kin.world.collision(q_b, 0.0) is not None:
+                continue
+            for seed in range(3):
+                paths = []
+                for _ in range(2):
+                    t, c = time.perf_counter(), time.thread_time()
+                    try:
+                        paths.append(plan_path(kin.world, q_a, q_b, 0.0, seed=seed).waypoints)
+                    except NoPathError:
+                        out["refused"] += 1
+                        paths.append(None)
+                    out["wall"].append(time.perf_counter() - t)
+                    out["cpu"].append(time.thread_time() - c)
+                    if paths[-1] is not None:
+                        out["durations"].append(time_path(kin.model, paths[-1]).duration)
+                out["queries"] += 1
+                same = paths[0] is not None and paths[1] is not None and np.array_equal(paths[0], paths[1])
+                out["differ"] += 0 if same else 1
+    return out
 
 
 def stats(values: list[float]) -> str:
@@ -121,7 +182,16 @@ def main() -> int:
     total = sum(arm["reasons"].values())
     parts = ", ".join(f"{k} {v}" for k, v in arm["reasons"].most_common())
     print(f"first hemisphere: {arm['reasons']['reachable']}/{total} reachable by the UR5 ({parts})")
+    print("4. plan_path per method: " + "; ".join(f"{m} {stats(v)}" for m, v in sorted(arm["paths"].items())))
+    rrt = rrt_moves()
+    print(f"5. moves that need RRT-Connect: plan_path {stats(rrt['wall'])}; CPU {stats(rrt['cpu'])}")
+    d = rrt["durations"]
+    print(
+        f"   move durations {min(d):.2f}-{max(d):.2f} s (median {statistics.median(d):.2f} s); "
+        f"{rrt['differ']} of {rrt['queries']} repeated queries gave other waypoints, {rrt['refused']} refused"
+    )
     print(f"robot time of the scan: arm {arm['robot_seconds']:.1f} s, reach sphere {sphere['robot_seconds']:.1f} s")
+    print(f"   the arm's move durations (no wall-clock part): {arm['move_seconds']:.6f} s")
     return 0
 
 

@@ -1,16 +1,16 @@
-"""The robot arm of the cell: a URDF model (Pinocchio), IK, collision checks (coal), joint-space motion (OMPL,
-ruckig), and a simulated joint arm.
+"""The robot arm of the cell: a URDF model (Pinocchio), IK, collision checks (coal), joint-space motion (our
+seeded RRT-Connect, ruckig), and a simulated joint arm.
 
 - ``config``      ArmConfig (URDF, flange, hand-eye, mount, limits, planning settings)
 - ``model``       load_arm -> ArmModel (Pinocchio model with the mount and the camera frame); check_arm for start-up
 - ``collision``   CollisionWorld (links vs plate, table, object box, themselves)
 - ``ik``          damped least squares IK with joint limits
 - ``reach``       ArmReach: plate angle + IK + collisions per view, with the reason
-- ``motion``      plan_path (straight or RRT-Connect), time_path (ruckig)
+- ``motion``      plan_path (straight or a deterministic RRT-Connect + shortcut), time_path (ruckig)
 - ``kinematics``  ArmKinematics: all of it for the Cell
 - ``sim_arm``     SimulatedJointArm (a JointArm)
 
-Importing ``devices.arm`` loads no Pinocchio, coal, OMPL or ruckig (the modules do when used).
+Importing ``devices.arm`` loads no Pinocchio, coal or ruckig (the modules do when used).
 """
 
 from devices.arm.config import ArmConfig

@@ -94,8 +94,13 @@ class ArmConfig:
     """IK converged when the position error is below this (metres) and the rotation error below 10x (radians)."""
     path_resolution_deg: float = 2.0
     """Largest joint step between collision checks along a path, degrees."""
-    planning_time: float = 1.0
-    """Time limit of one OMPL RRT-Connect query, seconds (the view is then unreachable, 'no_path')."""
+    planning_checks: int = 20000
+    """Budget of one RRT-Connect query (a move whose straight line is blocked): at most this many collision
+    checks of configurations, then the move is refused ('no_path'). A count, not a time, so the result does
+    not depend on the machine's load (about 40 us of CPU per check on the UR5: 20000 = about 0.8 s)."""
+    planning_time: float = 30.0
+    """Hang guard of one RRT-Connect query, wall-clock seconds: the query gives up ('no_path') if it runs this
+    long before its ``planning_checks`` are spent. Keep it generous: when it decides, results depend on load."""
 
     def __post_init__(self) -> None:
         require(isinstance(self.urdf, str) and self.urdf.strip() != "", f"arm.urdf: 'ur5' or a path, got {self.urdf!r}")
@@ -155,7 +160,7 @@ class ArmConfig:
             finite(self.object_padding) and self.object_padding >= 0,
             f"arm.object_padding: must be >= 0, got {self.object_padding!r}",
         )
-        for name in ("ik_iterations", "ik_seeds"):
+        for name in ("ik_iterations", "ik_seeds", "planning_checks"):
             v = getattr(self, name)
             require(integer(v) and v >= 1, f"arm.{name}: must be an integer >= 1, got {v!r}")
 

@@ -124,6 +124,8 @@ def test_base_inside_the_plate_is_refused() -> None:
         ({"velocity_scale": 0.0}, "arm.velocity_scale"),
         ({"velocity_scale": 1.5}, "arm.velocity_scale"),
         ({"planning_time": 0.0}, "arm.planning_time"),
+        ({"planning_checks": 0}, "arm.planning_checks"),
+        ({"planning_checks": 2.5}, "arm.planning_checks"),
         ({"plate_offsets_deg": ()}, "arm.plate_offsets_deg"),
         ({"table_height": 0.1}, "arm.table_height"),
         ({"ik_seeds": 0}, "arm.ik_seeds"),

@@ -1,13 +1,17 @@
-"""Joint paths and their timing: the straight line when free, RRT-Connect around an obstacle, ruckig's limits."""
+"""Joint paths and their timing: the straight line when free, RRT-Connect around an obstacle (reproducible, within
+a collision-check budget, on any machine load), ruckig's limits."""
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
+import time
 
 import numpy as np
 import pytest
 
+from devices.arm import motion
 from devices.arm.config import ArmConfig
 from devices.arm.kinematics import ArmKinematics
 from devices.arm.motion import NoPathError, plan_path, time_path
@@ -19,7 +23,7 @@ Q_B = Q_A + np.array([1.2, 0.35, -0.5, 0.2, 0.0, 0.3])
 
 @pytest.fixture()
 def kin() -> ArmKinematics:
-    return ArmKinematics(ArmConfig(planning_time=2.0), plate_radius=0.2, plate_thickness=0.02)
+    return ArmKinematics(ArmConfig(), plate_radius=0.2, plate_thickness=0.02)
 
 
 def block_the_middle(kin: ArmKinematics, size: float = 0.05) -> None:
@@ -54,11 +58,78 @@ def test_an_obstacle_on_the_line_makes_rrt_connect_go_around(kin: ArmKinematics)
     assert all(kin.model.within_limits(q) for q in path.waypoints)
 
 
-def test_no_path_in_the_time_limit_is_an_error_not_a_hang() -> None:
-    kin = ArmKinematics(ArmConfig(planning_time=1e-4), plate_radius=0.2, plate_thickness=0.02)
+def assert_identical(a: motion.PathPlan, b: motion.PathPlan) -> None:
+    assert a.method == b.method == "rrt_connect" and a.checks == b.checks
+    np.testing.assert_array_equal(a.waypoints, b.waypoints)  # bit for bit
+
+
+def test_rrt_connect_gives_the_same_path_every_time(kin: ArmKinematics) -> None:
+    block_the_middle(kin, size=0.08)
+    first = plan_path(kin.world, Q_A, Q_B, 0.0)
+    np.random.seed(7)  # the process's other random state does not enter
+    np.random.uniform(size=100)
+    other = plan_path(kin.world, Q_A, Q_B, 0.0, seed=2)  # nor does the planner's history
+    again = plan_path(kin.world, Q_A, Q_B, 0.0)
+    assert_identical(first, again)
+    assert time_path(kin.model, first.waypoints).duration == time_path(kin.model, again.waypoints).duration
+    assert not np.array_equal(first.waypoints, other.waypoints)  # the seed (and the inputs) choose the samples
+    # A fresh cell (a new process builds one) plans the same path.
+    fresh = ArmKinematics(ArmConfig(), plate_radius=0.2, plate_thickness=0.02)
+    block_the_middle(fresh, size=0.08)
+    assert_identical(first, plan_path(fresh.world, Q_A, Q_B, 0.0))
+
+
+def test_the_shortcut_leaves_no_waypoint_that_could_be_skipped(kin: ArmKinematics) -> None:
     block_the_middle(kin, size=0.12)
-    with pytest.raises(NoPathError, match=r"^no_path"):
+    resolution = math.radians(kin.config.path_resolution_deg)
+    for seed in range(3):
+        waypoints = plan_path(kin.world, Q_A, Q_B, 0.0, seed=seed).waypoints
+        assert_free(kin, waypoints)
+        for a, b in zip(waypoints[:-2], waypoints[2:], strict=True):  # greedy: the next but one is not in sight
+            assert kin.world.path_collision(a, b, 0.0, resolution) is not None
+
+
+def slow_checks(kin: ArmKinematics, monkeypatch: pytest.MonkeyPatch, delay: float) -> list[int]:
+    """Every collision check of ``kin`` sleeps ``delay`` seconds (a loaded machine); returns the call counter."""
+    calls = [0]
+    collision = kin.world.collision
+
+    def slow(q: np.ndarray, angle: float) -> str | None:
+        calls[0] += 1
+        time.sleep(delay)
+        return collision(q, angle)
+
+    monkeypatch.setattr(kin.world, "collision", slow)
+    return calls
+
+
+def test_a_slow_machine_plans_the_same_path(kin: ArmKinematics, monkeypatch: pytest.MonkeyPatch) -> None:
+    block_the_middle(kin, size=0.08)
+    fast = plan_path(kin.world, Q_A, Q_B, 0.0)
+    slow_checks(kin, monkeypatch, 2e-4)
+    slow = plan_path(kin.world, Q_A, Q_B, 0.0)
+    assert_identical(fast, slow)
+    assert slow.seconds > fast.checks * 2e-4  # it did run slowly
+    # Only the hang guard looks at the clock: far too short for this machine, it refuses the move.
+    guard = dataclasses.replace(kin.config, planning_time=fast.checks * 2e-4 / 4)
+    monkeypatch.setattr(kin.world, "arm", dataclasses.replace(kin.world.arm, config=guard))
+    with pytest.raises(NoPathError, match=r"^no_path: .* within its wall-clock guard"):
         plan_path(kin.world, Q_A, Q_B, 0.0)
+
+
+def test_an_impossible_move_is_no_path_after_the_check_budget(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Only the base joint may move (the others held within a degree), and the object blocks its only way.
+    q_to = Q_A + np.array([1.2, 0.0, 0.0, 0.0, 0.0, 0.0])
+    lower, upper = np.degrees(np.minimum(Q_A, q_to)) - 1.0, np.degrees(np.maximum(Q_A, q_to)) + 1.0
+    config = ArmConfig(planning_checks=1000, joint_lower_deg=tuple(lower), joint_upper_deg=tuple(upper))
+    kin = ArmKinematics(config, plate_radius=0.2, plate_thickness=0.02)
+    middle = kin.camera_pose(0.5 * (Q_A + q_to)).translation
+    kin.set_object_box(middle - 0.05, middle + 0.05)
+    calls = slow_checks(kin, monkeypatch, 0.0)
+    with pytest.raises(NoPathError, match=r"^no_path: RRT-Connect found no collision-free path within 1000 collision"):
+        plan_path(kin.world, Q_A, q_to, 0.0)
+    straight = math.ceil(1.2 / math.radians(kin.config.path_resolution_deg)) + 1
+    assert 1000 < calls[0] <= 2 + straight + 1000  # start, goal, the straight line (up to its hit), the budget
 
 
 def test_a_start_in_collision_is_no_path(kin: ArmKinematics) -> None:
