@@ -43,9 +43,18 @@ def worker_context() -> Any:
     with _context_lock:
         if _context is None:
             ctx = multiprocessing.get_context("forkserver")
-            # open3d is imported (no thread started by it) but no scene built: a worker builds its own after the fork
+            # open3d and pinocchio are imported here, once (1-2 s of CPU each time a worker imported them itself:
+            # devices.sim and devices.arm.kinematics import them lazily), no thread started by them and no scene
+            # built: a worker builds its own after the fork
             ctx.set_forkserver_preload(
-                ["workbench.workers.child", "devices.sim", "devices.arm.kinematics", "workbench.sources.mesh_loader"]
+                [
+                    "open3d",
+                    "pinocchio",
+                    "workbench.workers.child",
+                    "devices.sim",
+                    "devices.arm.kinematics",
+                    "workbench.sources.mesh_loader",
+                ]
             )
             _context = ctx
         return _context
