@@ -461,6 +461,47 @@ class ViewerCameraOut(BaseModel):
     timestamp: float
 
 
+class TimelineDecisionOut(BaseModel):
+    """The decision taken on a timeline step's plan (the journal's ``decision`` event)."""
+
+    kind: str = Field(description="approve, override, step, auto")
+    plan_id: str | None
+    index: int | None = Field(description="the candidate taken (None for a custom pose)")
+    best_index: int | None = Field(description="the planner's choice of that plan")
+    custom: bool
+    pose: PoseModel
+
+
+class TimelineStepOut(BaseModel):
+    """The session as it was after view ``view`` (rebuilt from its journal)."""
+
+    view: int = Field(description="1-based view index")
+    plan_id: str | None = Field(description="the plan made from this view (the one a decision answered)")
+    best: BestView | None = Field(description="that plan's best view (the planner's choice)")
+    approved: int | None = Field(description="the candidate the decision took (None: none yet, or a custom pose)")
+    decision: TimelineDecisionOut | None
+    voxels: dict[str, int] = Field(description="voxel counts by class after this view")
+    points: int
+    coverage: float | None
+    n_candidates: int | None
+    n_eligible: int | None
+    terminated: str | None
+
+
+class TimelineOut(BaseModel):
+    """Every step of a session's timeline."""
+
+    views: int
+    steps: list[TimelineStepOut]
+
+
+class TimelineRequest(BaseModel):
+    """Which view of the timeline a viewer shows; ``null``: the session now."""
+
+    model_config = ConfigDict(extra="forbid")
+    view: Annotated[StrictInt, Field(ge=1)] | None
+
+
 class SceneInfoOut(BaseModel):
     viewer: str
     session: str
@@ -471,6 +512,7 @@ class SceneInfoOut(BaseModel):
     score_range: list[float]
     colors: dict[str, list[float]]
     scale: str
+    timeline: TimelineStepOut | None = Field(None, description="the timeline's step shown, None: the session now")
 
 
 class ClientsOut(BaseModel):

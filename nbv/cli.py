@@ -87,7 +87,7 @@ def build_parser() -> argparse.ArgumentParser:
     calibrate_cmd.add_arguments(p)
     p.set_defaults(func=calibrate_cmd.run)
 
-    for name in ("bench", "replay"):
+    for name in ("bench", "replay", "record"):
         try:
             module = __import__(f"nbv.{name}", fromlist=["add_arguments", "run"])
         except ImportError:

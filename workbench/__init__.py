@@ -21,6 +21,7 @@ from workbench.errors import (
     Unreachable,
     WorkbenchError,
 )
+from workbench.journal.timeline import TimelineStep, timeline_of
 from workbench.jsonable import jsonable
 from workbench.progress import Progress
 from workbench.registry.creations import resume_id
@@ -56,6 +57,7 @@ __all__ = [
     "SessionStatus",
     "State",
     "StorageFault",
+    "TimelineStep",
     "TooLarge",
     "Unreachable",
     "WorkbenchError",
@@ -68,4 +70,5 @@ __all__ = [
     "plan_summary",
     "resume_id",
     "save_upload",
+    "timeline_of",
 ]

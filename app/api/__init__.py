@@ -13,10 +13,23 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from app.api import arm, calibration, candidates, events, fit, loop, models, scene, sessions, viewer
+from app.api import (
+    arm,
+    calibration,
+    candidates,
+    events,
+    fit,
+    loop,
+    models,
+    recording,
+    scene,
+    sessions,
+    timeline,
+    viewer,
+)
 from app.schemas import ERROR_RESPONSES
 
 router = APIRouter(prefix="/api", responses=ERROR_RESPONSES)
-for module in (viewer, models, sessions, loop, candidates, scene, fit, events, arm, calibration):
+for module in (viewer, models, sessions, loop, candidates, timeline, recording, scene, fit, events, arm, calibration):
     for resource in module.routers:  # each with its prefix and tags
         router.include_router(resource)

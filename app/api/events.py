@@ -5,10 +5,12 @@ Messages (JSON):
 - ``{"type": "status", "event": "state"|"planned"|"captured"|"selection"|"custom_pose", "status": {...}}``:
   the session's status (the shape of ``GET /api/sessions/{id}``) after each change, first on connect;
 - ``{"type": "sessions", "change": "created"|"deleted", "id": ...}``: the session list changed;
+- ``{"type": "sessions", "change": "state", "id": ..., "session": {...}}``: a session of the list changed its
+  state or took a view (``session``: its status, the shape of the list's entries), so a picker stays current;
 - ``{"type": "deleted"}``: this tab's session was deleted;
 - ``{"type": "progress", "progress": {...} | null}``: the session's long operation (a plan, a discard, its
   resume) moved on or ended (``ProgressOut``; at most ten a second within a stage);
-- ``{"type": "viewer", "viewer": ID, "layers": {...}, "focus": "O3" | null, "refits": {kind: T}}``: a viewer of
+- ``{"type": "viewer", "viewer": ID, "layers": {...}, "focus": "O3" | null, "refits": {kind: T}, "view": j | null}``: a viewer of
   this session changed (its layers, however set, its focused ellipsoid, a fit at another T); a page keeps the
   ones of its own viewer (app/scene/fit_view.py);
 - with ``?create=ID`` (a ``progress_id`` of ``POST /api/sessions``): ``{"type": "create", "id": ID,
@@ -35,6 +37,8 @@ from app.settings import AppSettings
 from workbench import Conflict, Progress, Session, SessionEvent, WorkbenchError, jsonable, resume_id
 
 router = APIRouter(prefix="/events", tags=["events"])
+LIST_EVENTS = frozenset({SessionEvent.STATE, SessionEvent.CAPTURED})
+"""A session's events that change its entry in the session list (state, views, coverage)."""
 log = logging.getLogger(__name__)
 
 
@@ -98,8 +102,13 @@ async def events(ws: WebSocket, session: str | None = None, create: str | None =
         elif session is not None and progress_id == resume_id(session):  # this tab's session being resumed
             push({"type": "progress", "progress": value})
 
+    def on_listed(s: Session, event: SessionEvent) -> None:
+        if event in LIST_EVENTS:
+            push({"type": "sessions", "change": "state", "id": s.id, "session": s.status()})
+
     def on_create(s: Session) -> None:
         nonlocal live
+        s.listeners.append(on_listed)
         push({"type": "sessions", "change": "created", "id": s.id})
         if s.id == session and live is not s:  # resumed or woken: follow it from now on
             live = s
@@ -120,6 +129,9 @@ async def events(ws: WebSocket, session: str | None = None, create: str | None =
         scene.viewer_listeners.append(on_viewer)
     if live is not None:
         live.listeners.append(on_session)
+    listed = registry.list()
+    for s in listed:
+        s.listeners.append(on_listed)
     registry.on_create.append(on_create)
     registry.on_delete.append(on_delete)
     registry.creations.listeners.append(on_create_progress)
@@ -152,6 +164,9 @@ async def events(ws: WebSocket, session: str | None = None, create: str | None =
         if live is not None:
             with contextlib.suppress(ValueError):
                 live.listeners.remove(on_session)
+        for s in registry.list() + listed:
+            with contextlib.suppress(ValueError):
+                s.listeners.remove(on_listed)
 
 
 async def _drain(ws: WebSocket) -> None:

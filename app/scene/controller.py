@@ -13,6 +13,7 @@ GUI callbacks (a click on a candidate, a gizmo release) call the bound session, 
 
 from __future__ import annotations
 
+import io
 import logging
 import math
 import threading
@@ -42,11 +43,14 @@ from workbench import (
     SessionEvent,
     SessionRegistry,
     State,
+    TimelineStep,
     Unreachable,
     WorkbenchError,
 )
 
 log = logging.getLogger(__name__)
+PICTURE_MAX = 2560
+"""Pixels: the longer side of a picture of a viewer (``picture``) at most."""
 
 REDRAW_EVENTS = frozenset(
     {SessionEvent.PLANNED, SessionEvent.CAPTURED, SessionEvent.SELECTION, SessionEvent.CUSTOM_POSE}
@@ -67,6 +71,8 @@ class Viewer:
     drawing: SessionDrawing | None = None
     robot: RobotScene | None = None
     """The arm in this viewer's scene (``/robot/...``), when the session's cell has an arm model."""
+    step: TimelineStep | None = None
+    """The timeline's view this viewer shows (the session after that view), None: the session now."""
 
 
 class SceneController:
@@ -157,7 +163,7 @@ class SceneController:
             return
         with self._lock:
             v.client = client
-            v.drawing = SessionDrawing(client, v.layers, self._selector(session), self._custom_setter(session))
+            v.drawing = SessionDrawing(client, v.layers, self._selector(session, v), self._custom_setter(session, v))
             v.drawing.on_focus = lambda label, viewer_id=v.id: self.fit.clicked(viewer_id, label)
             if session.id not in self._watched:
                 self._watched.add(session.id)
@@ -189,10 +195,10 @@ class SceneController:
         data = session.scene_data()
         with self._lock:
             for v in self._viewers.values():
-                if v.session_id == session.id and v.drawing is not None:
-                    v.drawing.update(data)
+                if v.session_id == session.id and v.drawing is not None and v.step is None:
+                    v.drawing.update(data)  # a viewer on the timeline keeps showing the past
         arm = self.arm_of(session)
-        robots = self._robots_of(session.id)
+        robots = self._robots_of(session.id, live_only=True)
         if arm is None or not robots:
             return  # no tab shows this session's arm: plan no move for it
         # in auto mode the next move starts at once: no ghost (the arm animates each executed move)
@@ -228,9 +234,14 @@ class SceneController:
                 arm = self._arms[session.id] = SessionArm(session)
             return arm
 
-    def _robots_of(self, session_id: str) -> list[RobotScene]:
+    def _robots_of(self, session_id: str, live_only: bool = False) -> list[RobotScene]:
+        """The arms of the viewers of ``session_id`` (``live_only``: of those not on the timeline)."""
         with self._lock:
-            return [v.robot for v in self._viewers.values() if v.session_id == session_id and v.robot is not None]
+            return [
+                v.robot
+                for v in self._viewers.values()
+                if v.session_id == session_id and v.robot is not None and not (live_only and v.step is not None)
+            ]
 
     def preview(self, session: Session, speed: float = 1.0) -> tuple[ArmTarget, int]:
         """Animate the move to ``session``'s selected target on the ghost in every tab showing ``session``; returns the
@@ -243,14 +254,17 @@ class SceneController:
             raise Conflict(f"session {session.id}: no pending plan to preview a move of (plan first)")
         if target.motion is None or target.motion.trajectory is None:
             raise Unreachable(f"preview: the selected target is unreachable ({target.reason})")
-        robots = self._robots_of(session.id)
+        robots = self._robots_of(session.id, live_only=True)
         for robot in robots:
             robot.animate(target.motion.trajectory, target.motion.angle, ghost=True, speed=speed)
         return target, len(robots)
 
     @staticmethod
-    def _selector(session: Session) -> Any:
+    def _selector(session: Session, v: Viewer) -> Any:
         def select(index: int) -> None:
+            if v.step is not None:  # the past is looked at, not changed
+                log.info("click on candidate %s ignored: the viewer shows view %d of the timeline", index, v.step.view)
+                return
             try:
                 session.select(index)
             except WorkbenchError as exc:
@@ -259,14 +273,49 @@ class SceneController:
         return select
 
     @staticmethod
-    def _custom_setter(session: Session) -> Any:
+    def _custom_setter(session: Session, v: Viewer) -> Any:
         def set_custom(pose: Pose) -> None:
+            if v.step is not None:
+                log.info("gizmo pose ignored: the viewer shows view %d of the timeline", v.step.view)
+                return
             try:
                 session.set_custom(pose)
             except (WorkbenchError, ValueError) as exc:
                 log.info("gizmo pose ignored: %s", exc)
 
         return set_custom
+
+    # ------------------------------------------------------------------ the timeline
+
+    def show_step(self, viewer_id: str, view: int | None) -> TimelineStep | None:
+        """Show the session after view ``view`` in this viewer (None: the session now again); returns the step.
+
+        The step comes from the session's journal (``Session.history``, rebuilt in its worker, cached); the
+        session itself is not changed, and its events redraw this viewer only once it shows now again. NotFound
+        for a view the session has not taken, Conflict without a journal."""
+        v = self.viewer(viewer_id)
+        session = self.registry.get(v.session_id)
+        step = nxt = None
+        if view is not None:
+            steps = session.history.steps()  # outside the lock: the first look replays the journal
+            step = session.history.step(view)
+            nxt = steps[view] if view < len(steps) else None
+        now = session.scene_data()
+        with self._lock:
+            v.step = step
+            if v.drawing is not None:
+                v.drawing.update(now if step is None else step.scene_data(now))
+            robot = v.robot
+        arm = self.arm_of(session)
+        if robot is not None and arm is not None:
+            if step is None:
+                robot.stop()
+                robot.show(session.cell.arm.joint_positions(), session.cell.angle)
+                arm.show_target(robot, arm.target(now))
+            else:
+                _show_step_arm(robot, step, nxt)
+        self.notify(v)
+        return step
 
     # ------------------------------------------------------------------ layers, info
 
@@ -304,8 +353,9 @@ class SceneController:
     def info(self, viewer_id: str) -> dict[str, Any]:
         """The viewer's session, whether its client is connected, layers, drawn nodes and the colour bar."""
         v = self.viewer(viewer_id)
+        step = v.step
         try:
-            plan = self.registry.get(v.session_id).scene_data().plan
+            plan = self.registry.get(v.session_id).scene_data().plan if step is None else step.plan
         except WorkbenchError:
             plan = None
         lo_hi = (0.0, 1.0)
@@ -326,6 +376,7 @@ class SceneController:
                     k: list(COLORS[k]) for k in ("occupied", "frontier", "unknown", "empty", "cloud", "nbv", "selected")
                 },
                 "scale": f"F of eligible candidates, {SCALE_PERCENTILES[0]:g}th to {SCALE_PERCENTILES[1]:g}th percentile",
+                "timeline": None if step is None else step.summary(),
             }
 
     # ------------------------------------------------------------------ camera
@@ -353,6 +404,54 @@ class SceneController:
             client.camera.look_at = np.asarray(look_at, dtype=float)
         return 1
 
+    def picture(self, viewer_id: str, timeout: float = 15.0) -> bytes:
+        """A PNG of the viewer's 3D view as its tab shows it now (its camera, its canvas size, capped at
+        ``PICTURE_MAX`` px), rendered by the browser. Conflict when its client is not connected or does not answer
+        within ``timeout`` s."""
+        v = self.viewer(viewer_id)
+        client = v.client
+        if client is None:
+            raise Conflict(f"viewer {viewer_id}: not connected (open the tab's 3D view first)")
+        cam = client.camera
+        width, height = int(cam.image_width or 1280), int(cam.image_height or 720)
+        scale = min(1.0, PICTURE_MAX / max(width, height))
+        width, height = max(16, int(width * scale)), max(16, int(height * scale))
+        try:
+            rgba = client.get_render(height, width, transport_format="png", timeout=timeout)
+        except Exception as exc:  # a timeout or a disconnect: the tab cannot render now
+            raise Conflict(f"viewer {viewer_id}: no picture from the browser ({exc or type(exc).__name__})") from None
+        return png_bytes(rgba)
+
     def cameras(self) -> list[dict[str, Any]]:
         """The camera each connected client reported last (OpenCV pose, vertical fov, canvas size)."""
         return client_cameras(self.server)
+
+
+def _show_step_arm(robot: RobotScene, step: TimelineStep, nxt: TimelineStep | None) -> None:
+    """The arm where it was at ``step``'s capture; the ghost where the approved view took it (``nxt``'s capture)."""
+    robot.stop()
+    robot.show_path(None)
+    here = (step.device_state or {}).get("arm")
+    there = None if nxt is None else (nxt.device_state or {}).get("arm")
+    if here is not None:
+        robot.show(np.asarray(here["q"], dtype=np.float64), float(here["angle"]))
+    if there is None:
+        robot.show_ghost(None)
+    else:
+        robot.show_ghost(np.asarray(there["q"], dtype=np.float64), float(there["angle"]))
+
+
+def png_bytes(image: Any) -> bytes:
+    """(H, W, 3 | 4) uint8 RGB(A) as PNG bytes (a transparent background made white, as slides want)."""
+    from PIL import Image
+
+    arr = np.asarray(image, dtype=np.uint8)
+    if arr.ndim != 3 or arr.shape[2] not in (3, 4):
+        raise ValueError(f"image: expected (H, W, 3|4) uint8, got shape {arr.shape}")
+    out = Image.fromarray(arr, "RGBA" if arr.shape[2] == 4 else "RGB")
+    if out.mode == "RGBA":
+        white = Image.new("RGBA", out.size, (255, 255, 255, 255))
+        out = Image.alpha_composite(white, out).convert("RGB")
+    buf = io.BytesIO()
+    out.save(buf, format="PNG")
+    return buf.getvalue()

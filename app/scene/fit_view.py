@@ -30,6 +30,8 @@ class Viewer(Protocol):
     session_id: str
     layers: dict[str, bool]
     drawing: SessionDrawing | None
+    step: Any
+    """The timeline's step it shows (``TimelineStep``), None: now."""
 
 
 class Viewers(Protocol):
@@ -48,7 +50,8 @@ class Viewers(Protocol):
 
 
 def viewer_message(v: Viewer) -> dict[str, Any]:
-    """``{"type": "viewer", "viewer", "layers", "focus", "refits": {kind: T}}``: what the page is pushed."""
+    """``{"type": "viewer", "viewer", "layers", "focus", "refits": {kind: T}, "view": j | None}``: what the page is
+    pushed (``view``: the timeline's view the viewer shows, None: now)."""
     layer = None if v.drawing is None else v.drawing.clusters
     return {
         "type": "viewer",
@@ -56,6 +59,7 @@ def viewer_message(v: Viewer) -> dict[str, Any]:
         "layers": dict(v.layers),
         "focus": None if layer is None else layer.focus,
         "refits": {} if layer is None else {k: r.t for k, r in layer.refits.items()},
+        "view": None if v.step is None else v.step.view,
     }
 
 

@@ -22,6 +22,19 @@ const S = {
   events: null,
   progress: null, // the session's long operation (ProgressOut), pushed
   chain: Promise.resolve(), // pushed messages are handled one after the other
+  metrics: null, // the last GET /metrics (the charts, redrawn with the timeline's cursor)
+  sessions: [], // the session list (GET /api/sessions), kept current by pushed "sessions" messages
+};
+// The timeline (the session after view j, or now): the tab's viewer shows it (PUT /api/scene/VIEWER/timeline),
+// the panels show its step (GET /api/sessions/ID/timeline/j[/candidates]); in compare mode every session at j.
+const TL = {
+  view: null, // the view shown, null: now
+  want: null, // the view asked for last (a drag asks faster than steps are drawn: the last one wins)
+  busy: false,
+  step: null, // the step shown (TimelineStepOut)
+  timer: null, // playing
+  compare: null, // compare mode: its redraw(view)
+  views: 0, // compare mode: the most views of the sessions compared
 };
 const FORM_KEY = "nbv-form";
 const LAYER_KEY = "nbv-layers";
@@ -172,7 +185,14 @@ async function loadSensors() {
 }
 
 async function loadSessions() {
-  const list = await api("GET", "/api/sessions");
+  S.sessions = await api("GET", "/api/sessions");
+  renderSessions();
+  return S.sessions;
+}
+
+// The session picker (the select and, without a session, the picker table) from S.sessions.
+function renderSessions() {
+  const list = S.sessions;
   const sel = $("session-select");
   sel.innerHTML = '<option value="">(choose)</option>';
   for (const s of list) {
@@ -184,7 +204,16 @@ async function loadSessions() {
   }
   sel.value = S.session || "";
   if (!S.session && !QUERY.get("compare")) P.renderPicker(list, (id) => pageUrl({ session: id }));
-  return list;
+}
+
+// A pushed change of the session list: a session's new state or view count is put in place (no request),
+// a created or deleted session reloads the list.
+async function onSessions(m) {
+  const at = m.session ? S.sessions.findIndex((s) => s.id === m.id) : -1;
+  if (m.change === "state" && at >= 0) {
+    S.sessions[at] = m.session;
+    renderSessions();
+  } else await loadSessions();
 }
 
 // ------------------------------------------------------------------ this tab's session: viewer and events
@@ -193,6 +222,8 @@ async function openViewer() {
   try {
     const v = await api("POST", "/api/viewer", { session: S.session });
     S.viewer = v.viewer;
+    TL.view = TL.want = TL.step = null; // a new viewer shows now
+    renderTimeline();
     $("viewer").src = v.url;
     if (v.note) showNotice(v.note);
     let saved = {};
@@ -260,7 +291,7 @@ async function followCreate(progressId) {
 async function onMessage(m) {
   if (m.type === "progress") showProgress(m.progress);
   else if (m.type === "status") await onStatus(m.status, m.event);
-  else if (m.type === "sessions") await loadSessions();
+  else if (m.type === "sessions") await onSessions(m);
   else if (m.type === "viewer") await onViewer(m);
   else if (m.type === "deleted") {
     showError(`session ${S.session} was deleted`);
@@ -271,6 +302,8 @@ async function onMessage(m) {
 
 async function onStatus(st, event) {
   S.status = st;
+  renderTimeline();
+  if (TL.view !== null) { updateButtons(); return; } // the panels show the timeline's step, not now
   renderStatus(st);
   showProgress(st.progress || null);
   const planId = st.pending_plan ? st.pending_plan.plan_id : null;
@@ -295,7 +328,8 @@ async function onStatus(st, event) {
   const key = `${st.iteration}/${planId}`;
   if (key !== S.metricsKey && !["capturing", "planning", "moving", "discarding", "interrupted"].includes(st.state)) {
     S.metricsKey = key;
-    P.renderCharts(await api("GET", `/api/sessions/${S.session}/metrics`));
+    S.metrics = await api("GET", `/api/sessions/${S.session}/metrics`);
+    P.renderCharts(S.metrics, TL.view);
     FitPanel.markChart();
   }
 }
@@ -306,7 +340,8 @@ function updateButtons() {
   const st = S.status;
   const state = st ? st.state : null;
   const it = st ? st.iteration : 0;
-  const busy = S.inFlight || ["capturing", "planning", "moving", "auto", "discarding"].includes(state);
+  // on the timeline the page shows the past: nothing acts on the session until it shows now again
+  const busy = S.inFlight || TL.view !== null || ["capturing", "planning", "moving", "auto", "discarding"].includes(state);
   $("capture").disabled = busy || !st || !(state === "new" || (state === "error" && it === 0));
   $("plan").disabled = busy || !st || it === 0 || !["ready", "planned", "done", "error"].includes(state);
   $("approve").disabled = busy || !st || state !== "planned" || st.selected === null;
@@ -404,6 +439,7 @@ async function loadInspector(selected) {
 // ------------------------------------------------------------------ actions
 
 function pick(index) {
+  if (TL.view !== null) return; // the timeline's candidates are looked at, not selected
   return action("selecting", () => api("PUT", `/api/sessions/${S.session}/selection`, { index }));
 }
 
@@ -520,6 +556,13 @@ function wire() {
   $("page-next").addEventListener("click", () => { P.Table.page += 1; P.renderTable(S.selectedShown, pick); });
   $("help-open").addEventListener("click", () => { $("help").hidden = false; });
   $("help-close").addEventListener("click", () => { $("help").hidden = true; });
+  $("tl-slider").addEventListener("input", (e) => {
+    const v = Number(e.target.value);
+    goTo(v > timelineViews() ? null : v);
+  });
+  $("tl-now").addEventListener("click", () => { stopPlaying(); goTo(null); });
+  $("tl-play").addEventListener("click", () => (TL.timer ? stopPlaying() : play()));
+  $("snapshot").addEventListener("click", snapshot);
   document.addEventListener("keydown", onKey);
 }
 
@@ -533,10 +576,144 @@ function onKey(e) {
     g: () => $("gizmo").click(), "?": () => { $("help").hidden = !$("help").hidden; }, Escape: () => { $("help").hidden = true; },
   };
   if (keys[e.key]) { e.preventDefault(); keys[e.key](); return; }
+  if ((e.key === "ArrowLeft" || e.key === "ArrowRight") && !$("timeline").hidden) {
+    e.preventDefault();
+    stepTimeline(e.key === "ArrowLeft" ? -1 : 1);
+    return;
+  }
   if (/^[1-9]$/.test(e.key) && S.layers) {
     const names = Object.keys(S.layers).filter((n) => n !== "gizmo");
     const name = names[Number(e.key) - 1];
     if (name) toggleLayer(name, !S.layers[name]);
+  }
+}
+
+// ------------------------------------------------------------------ the timeline
+
+function timelineViews() {
+  return TL.compare ? TL.views : (S.status ? S.status.iteration : 0);
+}
+
+// The bar: the slider over views 1..n and, at its right end, now.
+function renderTimeline() {
+  const n = timelineViews();
+  const bar = $("timeline");
+  bar.hidden = n === 0;
+  const slider = $("tl-slider");
+  slider.max = String(n + 1);
+  slider.value = String(TL.view === null ? n + 1 : TL.view);
+  bar.classList.toggle("past", TL.view !== null);
+  $("tl-label").textContent = TL.view === null ? `now · ${n} view${n === 1 ? "" : "s"}` : `view ${TL.view} of ${n}`;
+  $("tl-now").disabled = TL.view === null;
+  $("tl-play").textContent = TL.timer ? "❚❚" : "▶";
+  const st = TL.step;
+  let note = "";
+  if (TL.view !== null && !TL.compare && st) {
+    const d = st.decision;
+    const best = st.best ? `best #${st.best.index} (F ${P.num(st.best.score, 3)})` : "no plan";
+    const took = !d ? "no decision yet" : d.custom ? `${d.kind}: a custom pose` :
+      `${d.kind} #${d.index}${d.index !== d.best_index ? " (override)" : ""}`;
+    note = `plan ${st.plan_id || "–"} · ${best} · ${took} · actions off until Now`;
+  }
+  $("tl-note").textContent = note;
+}
+
+// Show view `view` (null: now); requests run one after the other, the last one asked wins.
+async function goTo(view) {
+  TL.want = view;
+  if (TL.busy) return;
+  TL.busy = true;
+  try {
+    while (TL.want !== TL.view) await showView(TL.want);
+  } catch (e) {
+    TL.want = TL.view;
+    showError("timeline: " + e.message);
+  } finally {
+    TL.busy = false;
+    renderTimeline();
+  }
+}
+
+async function showView(view) {
+  if (TL.compare) {
+    TL.view = view;
+    TL.compare(view);
+    renderTimeline();
+    return;
+  }
+  const step = await api("PUT", `/api/scene/${S.viewer}/timeline`, { view });
+  TL.view = view;
+  TL.step = step;
+  renderTimeline();
+  if (view === null) { // now: every panel from the session's status again
+    S.planId = undefined;
+    S.selectedShown = undefined;
+    S.armKey = S.metricsKey = null;
+    if (S.status) await onStatus(S.status, "captured");
+    return;
+  }
+  renderStep(step);
+  P.Table.items = await api("GET", `/api/sessions/${S.session}/timeline/${view}/candidates`);
+  const shown = step.approved !== null ? step.approved : (step.best ? step.best.index : null);
+  if (shown !== null) P.pageOf(shown);
+  P.renderTable(shown, pick);
+  if (S.metrics) P.renderCharts(S.metrics, view);
+  if (S.viewer) P.renderLegend(await api("GET", `/api/scene/${S.viewer}`));
+}
+
+// The status and candidate panels as they were after the step's view.
+function renderStep(step) {
+  $("iteration").textContent = step.view;
+  $("coverage").textContent = step.coverage !== null ? (100 * step.coverage).toFixed(1) + " %" : "–";
+  $("points").textContent = step.points;
+  $("plan-id").textContent = step.plan_id ? `plan ${step.plan_id} · after view ${step.view}` : `no plan after view ${step.view}`;
+  $("selected-label").textContent = step.approved !== null ? `candidate ${step.approved} (approved)` : "no selection";
+  P.renderInspector(null);
+  updateButtons();
+}
+
+function stepTimeline(delta) {
+  stopPlaying();
+  const n = timelineViews();
+  const at = TL.want === null ? n + 1 : TL.want;
+  const next = Math.min(n + 1, Math.max(1, at + delta));
+  goTo(next > n ? null : next);
+}
+
+function play() {
+  if (timelineViews() === 0) return;
+  if (TL.want === null) goTo(1);
+  TL.timer = setInterval(() => {
+    if (TL.busy) return; // the step before is still being drawn
+    const n = timelineViews();
+    if (TL.view === null || TL.view >= n) { stopPlaying(); goTo(null); return; }
+    goTo(TL.view + 1);
+  }, 1200);
+  renderTimeline();
+}
+
+function stopPlaying() {
+  if (TL.timer) clearInterval(TL.timer);
+  TL.timer = null;
+  renderTimeline();
+}
+
+// A PNG of the tab's 3D view as it is now (the viewer renders it at its canvas size), saved as a download.
+async function snapshot() {
+  if (!S.viewer) return;
+  try {
+    const init = { headers: TOKEN ? { Authorization: "Bearer " + TOKEN } : {} };
+    const res = await fetch(`/api/scene/${S.viewer}/view.png`, init);
+    if (!res.ok) throw new Error(`${res.status}: ${(await res.json()).detail}`);
+    const a = document.createElement("a");
+    a.href = URL.createObjectURL(await res.blob());
+    a.download = `${S.session}-${TL.view === null ? "now" : "view" + TL.view}.png`;
+    document.body.appendChild(a);
+    a.click();
+    a.remove();
+    setTimeout(() => URL.revokeObjectURL(a.href), 10_000);
+  } catch (e) {
+    showError("PNG: " + e.message);
   }
 }
 
@@ -553,8 +730,13 @@ async function showCompare(ids) {
         sessions.push({ status: await api("GET", `/api/sessions/${id}`), metrics: await api("GET", `/api/sessions/${id}/metrics`) });
       } catch (e) { showError(`${id}: ${e.message}`); }
     }
-    P.renderCompare(sessions, (id) => pageUrl({ session: id }));
+    TL.views = Math.max(0, ...sessions.map((s) => s.status.iteration));
+    TL.compare = (view) => P.renderCompare(sessions, (id) => pageUrl({ session: id }), view);
+    TL.compare(TL.view);
+    renderTimeline();
   };
+  $("tl-recording").hidden = true;
+  $("snapshot").hidden = true;
   await draw();
   for (const id of ids) { // live: redraw when a compared session takes a view
     const ws = eventSocket("session", id);
@@ -582,6 +764,7 @@ async function init() {
     for (const fmt of SURFACE_FORMATS) {
       $(`export-surface-${fmt}`).href = withToken(`/api/sessions/${S.session}/surface.ply?format=${fmt}`);
     }
+    $("tl-recording").href = withToken(`/api/sessions/${S.session}/recording`);
     connectEvents(500);
     await openViewer();
   } else {

@@ -31,7 +31,8 @@ function fmt(v) {
 
 /**
  * Draw series [{points: [[x, y], ...], color, label, marker: [x, y] | null, hover: [text per point]}] into an <svg>.
- * opts: {yMin, yMax, xInteger, xLabel, yLabel, hline: y of a dashed reference line (null: none)}
+ * opts: {yMin, yMax, xInteger, xLabel, yLabel, hline: y of a dashed reference line (null: none),
+ *        cursor: x of the timeline's cursor, a vertical line (null: none)}
  * Every point has a hover text (its series' hover, else "x, y").
  */
 function lineChart(svg, series, opts) {
@@ -68,6 +69,10 @@ function lineChart(svg, series, opts) {
   if (opts.yLabel) svgEl("text", { x: 10, y: (m.t + H - m.b) / 2, "text-anchor": "middle", class: "axis", transform: `rotate(-90 10 ${(m.t + H - m.b) / 2})` }, svg).textContent = opts.yLabel;
   if (opts.hline !== undefined && opts.hline !== null) {
     svgEl("line", { x1: m.l, x2: W - m.r, y1: Y(opts.hline), y2: Y(opts.hline), stroke: "#15894a", "stroke-dasharray": "5 4", class: "ceiling" }, svg);
+  }
+  if (opts.cursor !== undefined && opts.cursor !== null) {
+    svgEl("line", { x1: X(opts.cursor), x2: X(opts.cursor), y1: m.t, y2: H - m.b, stroke: "#d0312d", "stroke-width": 1.5,
+      "stroke-dasharray": "3 3", class: "cursor", "data-x": opts.cursor }, svg);
   }
   svgEl("line", { x1: m.l, x2: m.l, y1: m.t, y2: H - m.b, stroke: "#b9bfca" }, svg);
   svgEl("line", { x1: m.l, x2: W - m.r, y1: H - m.b, y2: H - m.b, stroke: "#b9bfca" }, svg);

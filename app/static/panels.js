@@ -145,17 +145,19 @@ function renderLayers(layers, onToggle) {
 
 // ------------------------------------------------------------------ charts
 
-function renderCharts(m) {
+// m: GET /metrics; cursor: the timeline's view (a red line on the per-view charts), null: none.
+function renderCharts(m, cursor) {
   const it = m.iterations;
+  cursor = cursor === undefined ? null : cursor;
   const pct = (key) => it.map((r) => [r.iteration, r[key] === null || r[key] === undefined ? null : 100 * r[key]]);
   const cov = [{ points: pct("coverage"), color: "#15894a", label: "coverage" },
     { points: pct("precision_5mm"), color: "#2e63d8", label: "precision@5mm" },
     { points: pct("fscore_5mm"), color: "#e08a00", label: "F@5mm" }];
   const ceiling = m.ceiling === undefined || m.ceiling === null ? null : 100 * m.ceiling;
   $("ceiling-note").textContent = ceiling === null ? "" : `(dashed: reachable ceiling ${num(ceiling)} %)`;
-  lineChart($("chart-coverage"), cov, { xInteger: true, yMin: 0, yMax: 100, xLabel: "view", yLabel: "%", hline: ceiling });
-  lineChart($("chart-points"), [{ points: it.map((r) => [r.iteration, r.points]), color: "#2e63d8" }], { xInteger: true, yMin: 0, xLabel: "view", yLabel: "points" });
-  lineChart($("chart-time"), [{ points: it.map((r) => [r.iteration, r.plan_seconds]), color: "#8a4fd8" }], { xInteger: true, yMin: 0, xLabel: "view", yLabel: "s" });
+  lineChart($("chart-coverage"), cov, { xInteger: true, yMin: 0, yMax: 100, xLabel: "view", yLabel: "%", hline: ceiling, cursor });
+  lineChart($("chart-points"), [{ points: it.map((r) => [r.iteration, r.points]), color: "#2e63d8" }], { xInteger: true, yMin: 0, xLabel: "view", yLabel: "points", cursor });
+  lineChart($("chart-time"), [{ points: it.map((r) => [r.iteration, r.plan_seconds]), color: "#8a4fd8" }], { xInteger: true, yMin: 0, xLabel: "view", yLabel: "s", cursor });
   // BIC: each kind normalised to [0, 1] (their magnitudes differ by orders), real values on hover
   const series = m.fits.map((f) => {
     const ys = f.bic.map((p) => p[1]);
@@ -191,21 +193,29 @@ function renderPicker(list, hrefOf) {
 
 const PALETTE = ["#2e63d8", "#d0312d", "#15894a", "#8a4fd8", "#e08a00", "#0a8ea0"];
 
-// sessions: [{status, metrics}] of sessions on the same object, drawn over each other.
-function renderCompare(sessions, hrefOf) {
+// sessions: [{status, metrics}] of sessions on the same object, drawn over each other. view: the timeline's view
+// index all sessions are stepped to (their coverage and plan time up to it, a cursor on the charts), null: now.
+function renderCompare(sessions, hrefOf, view) {
+  view = view === undefined ? null : view;
   const box = $("compare");
-  const rows = sessions.map((s, i) => `<tr><td><i class="swatch" style="background:${PALETTE[i % PALETTE.length]}"></i>` +
+  const upTo = (s) => s.metrics.iterations.filter((r) => view === null || r.iteration <= view);
+  const pct = (c) => c === null || c === undefined ? "–" : (100 * c).toFixed(1) + " %";
+  const rows = sessions.map((s, i) => {
+    const it = upTo(s), last = it.length ? it[it.length - 1] : null;
+    return `<tr data-session="${esc(s.status.id)}"><td><i class="swatch" style="background:${PALETTE[i % PALETTE.length]}"></i>` +
     `<a href="${hrefOf(s.status.id)}" target="_blank" rel="noopener">${esc(s.status.id)}</a></td><td>${esc(s.status.planner || "projection")}</td>` +
-    `<td>${s.status.iteration}</td><td>${s.status.coverage === null ? "–" : (100 * s.status.coverage).toFixed(1) + " %"}</td>` +
-    `<td>${num(s.metrics.iterations.reduce((a, r) => a + (r.plan_seconds || 0), 0), 2)}</td></tr>`).join("");
+    `<td class="views">${view === null ? s.status.iteration : Math.min(view, s.status.iteration)}</td>` +
+    `<td class="coverage">${view === null ? pct(s.status.coverage) : pct(last && last.coverage)}</td>` +
+    `<td>${num(it.reduce((a, r) => a + (r.plan_seconds || 0), 0), 2)}</td></tr>`;
+  }).join("");
   const model = sessions.length ? shortModel(sessions[0].status.model) : "";
-  box.innerHTML = `<h2>Compare · ${esc(model)}</h2><table class="small"><thead><tr><th>session (opens in a tab)</th><th>planner</th>` +
+  box.innerHTML = `<h2>Compare · ${esc(model)}${view === null ? "" : ` · at view ${view}`}</h2><table class="small"><thead><tr><th>session (opens in a tab)</th><th>planner</th>` +
     `<th>views</th><th>coverage</th><th>plan time (s)</th></tr></thead><tbody>${rows}</tbody></table>` +
     `<div class="compare-charts"><figure><figcaption>coverage (%) vs view</figcaption><svg id="cmp-coverage"></svg></figure>` +
     `<figure><figcaption>plan time (s) vs view</figcaption><svg id="cmp-time"></svg></figure></div>`;
   const series = (f) => sessions.map((s, i) => ({ points: s.metrics.iterations.map(f), color: PALETTE[i % PALETTE.length], label: s.status.id }));
-  lineChart($("cmp-coverage"), series((r) => [r.iteration, r.coverage === null ? null : 100 * r.coverage]), { xInteger: true, yMin: 0, yMax: 100, xLabel: "view", yLabel: "%" });
-  lineChart($("cmp-time"), series((r) => [r.iteration, r.plan_seconds]), { xInteger: true, yMin: 0, xLabel: "view", yLabel: "s" });
+  lineChart($("cmp-coverage"), series((r) => [r.iteration, r.coverage === null ? null : 100 * r.coverage]), { xInteger: true, yMin: 0, yMax: 100, xLabel: "view", yLabel: "%", cursor: view });
+  lineChart($("cmp-time"), series((r) => [r.iteration, r.plan_seconds]), { xInteger: true, yMin: 0, xLabel: "view", yLabel: "s", cursor: view });
 }
 
 // ------------------------------------------------------------------ progress of a long operation
@@ -226,7 +236,7 @@ const SHORTCUTS = [
   ["c", "capture the first view"], ["p", "plan"], ["a", "approve the selected candidate"],
   ["n / j", "select the next candidate (table order)"], ["k", "select the previous candidate"],
   ["u", "run auto"], ["s", "stop a plan or auto"], ["d", "discard the last view"], ["g", "toggle the override gizmo"],
-  ["1 … 9", "toggle the layers in the 3D view's layer bar"], ["?", "this help"], ["Esc", "close the help"],
+  ["1 … 9", "toggle the layers in the 3D view's layer bar"], ["← / →", "timeline: the view before / after (→ past the last: now)"], ["?", "this help"], ["Esc", "close the help"],
 ];
 
 // Which views ICP rejected (and why) and which of the planner's choices the cell refused before a view.

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from planner import Planner, PlannerConfig, PlanResult
+from planner import Planner, PlannerConfig, PlanResult, Pose
 from planner.planner import IntegrationReport
 from workbench.journal.discard import without_discarded
 from workbench.journal.store import Journal
@@ -47,6 +47,10 @@ class ReplayedCapture:
     voxels: dict[str, int]
     coverage: float | None
     plans: list[tuple[dict[str, Any], PlanResult]] = field(default_factory=list)
+    views: tuple[Pose, ...] | None = None
+    """The views taken up to this capture (Poses), kept when the rebuild was asked for them (a timeline)."""
+    cloud: NDArray[np.float64] | None = None
+    """(N, 3) the registered cloud after this capture, kept when the rebuild was asked for it (a timeline)."""
 
 
 @dataclass
@@ -90,6 +94,7 @@ def rebuild(
     cell: Any,
     coverage: Callable[[NDArray[np.float64]], float] | None = None,
     progress: Callable[[str, int, int], None] | None = None,
+    keep_scene: bool = False,
 ) -> Rebuilt:
     """Replay ``journal`` through a fresh Planner, up to the first damaged event or frame (``Rebuilt.dropped``
     says what was left out). ValueError when the header itself is unusable.
@@ -97,6 +102,7 @@ def rebuild(
     cell: the session's cell, asked as the session asked it when planning (:func:`workbench.planning.plan_in`).
     coverage: cloud -> coverage of the ground truth, when it is known (simulation).
     progress: ``(REPLAY_STAGE, done, total)`` over the captures and plans replayed (the heavy events).
+    keep_scene: each replayed capture keeps the views and the cloud after it (workbench/journal/timeline.py).
     """
     header = journal.header
     config = PlannerConfig.from_dict(header["config"])
@@ -135,6 +141,9 @@ def rebuild(
                 used,
                 stale,
             )
+            if keep_scene and ev.get("kind") == "capture" and captures and captures[-1].event is ev:
+                captures[-1].views = tuple(planner.views)
+                captures[-1].cloud = np.array(planner.cloud, dtype=np.float64, copy=True)
         except (ValueError, KeyError, TypeError) as exc:
             rest = len(events) - kept - 1
             dropped.insert(0, f"event {ev.get('seq')} ({ev.get('kind')}): {exc}; it and {rest} later event(s) dropped")

@@ -24,6 +24,7 @@ from workbench.session.auto import AutoRunner
 from workbench.session.core import SessionCore
 from workbench.session.discard import discard_last_view
 from workbench.session.fit import Refit, refit
+from workbench.session.history import History
 from workbench.session.states import BUSY, Action
 from workbench.session.values import CustomPose, PendingPlan
 
@@ -36,9 +37,12 @@ class Session(SessionCore):
 
     auto: AutoRunner
     """Step and auto mode (``auto.step(n)``, ``auto.start(n)``, ``auto.stop()``)."""
+    history: History
+    """The session as it was after each view, rebuilt from its journal (``history.step(j)``; changes nothing)."""
 
     def _compose(self) -> None:
         self.auto = AutoRunner(self)
+        self.history = History(self)
 
     # ------------------------------------------------------------------ the loop
 

@@ -18,6 +18,9 @@ and a fresh worker takes up the next job. Jobs:
 - ``("rebuild", (journal, cell_config, q, angle, surface_samples))``: ``("progress", (stage, done, total))``
   messages on the way, then the ``Rebuilt`` session (a resume or a discard replays its journal here), its
   surface rebuilt too (``Rebuilt.surface``);
+- ``("timeline", (journal, cell_config, q, angle, surface_samples))``: ``("progress", (stage, done, total))``
+  messages on the way, then the ``TimelineStep`` of every kept view (workbench/journal/timeline.py); the worker's
+  own surface stays as it was (a timeline reads the journal only, it changes nothing of the session);
 - ``("fit", (points_world, cluster_config, resolution, kind, t))``: ``(ellipsoids, ClusterFit)`` of one voxel
   kind at exactly T components (``planner.ellipsoids.fit_at_t``: the Fit panel's "fit at another T").
 
@@ -43,6 +46,7 @@ from workbench.evaluation.accuracy import GroundTruth
 from workbench.journal.rebuild import Rebuilt
 from workbench.journal.store import Journal
 from workbench.journal.surface import in_step, surface_of_journal
+from workbench.journal.timeline import TimelineStep
 from workbench.planning import plan_in
 from workbench.progress import Throttle
 from workbench.surface.live import LiveSurface
@@ -167,8 +171,26 @@ class _Worker:
     def rebuild(self, payload: Any, send: Callable[[Any], None] | None) -> Rebuilt:
         """:func:`workbench.journal.rebuild.rebuild` of a journal in this worker's planning cell; the replayed
         captures' plans stay here (the pending and last plans travel in the result)."""
-        from workbench.evaluation.coverage import coverage
         from workbench.journal.rebuild import rebuild
+
+        journal, cell, truth, report = self._replay_args(payload, send)
+        rebuilt = rebuild(journal, cell, truth, report)
+        for capture in rebuilt.captures:
+            capture.plans.clear()
+        self.surface = surface_of_journal(journal, self.truth)
+        rebuilt.surface = self.surface.update
+        return rebuilt
+
+    def timeline(self, payload: Any, send: Callable[[Any], None] | None) -> list[TimelineStep]:
+        """:func:`workbench.journal.timeline.timeline_of` a journal in this worker's planning cell."""
+        from workbench.journal.timeline import timeline_of
+
+        return timeline_of(*self._replay_args(payload, send))
+
+    def _replay_args(self, payload: Any, send: Callable[[Any], None] | None) -> tuple[Journal, Cell, Any, Any]:
+        """(journal, planning cell, coverage of a cloud or None, progress report) of a rebuild's payload
+        ``(journal, cell_config, q, angle, surface_samples)``."""
+        from workbench.evaluation.coverage import coverage
 
         journal, config, q, angle, samples = cast(tuple[Journal, CellConfig, Any, float, Any], payload)
         throttle = Throttle()
@@ -178,12 +200,7 @@ class _Worker:
                 send((stage, done, total))
 
         truth = None if samples is None else (lambda cloud: coverage(samples, cloud))
-        rebuilt = rebuild(journal, self.reach(config, q, angle), truth, report)
-        for capture in rebuilt.captures:
-            capture.plans.clear()
-        self.surface = surface_of_journal(journal, self.truth)
-        rebuilt.surface = self.surface.update
-        return rebuilt
+        return journal, self.reach(config, q, angle), truth, report
 
     def run(self, kind: str, payload: Any, send: Callable[[Any], None] | None = None) -> Any:
         """The answer of one job; ``send`` ships ``("progress", value)`` messages to the server on the way."""
@@ -202,6 +219,8 @@ class _Worker:
             return plan, planner
         if kind == "rebuild":
             return self.rebuild(payload, send)
+        if kind == "timeline":
+            return self.timeline(payload, send)
         if kind == "integrate":
             planner, frame, journal_dir = cast(tuple[Planner, DepthFrame, Any], payload)
             views = len(planner.views)

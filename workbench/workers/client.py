@@ -27,6 +27,7 @@ from planner.planner import IntegrationReport, PlanResult
 from planner.progress import ProgressFn
 from workbench.journal.rebuild import Rebuilt
 from workbench.journal.store import Journal
+from workbench.journal.timeline import TimelineStep
 from workbench.surface.live import SurfaceUpdate
 from workbench.workers.child import RenderSpec, TruthSpec, serve
 
@@ -133,6 +134,20 @@ class SessionWorker:
         ``on_progress`` hears ``(stage, done, total)``."""
         report = None if on_progress is None else (lambda value: on_progress(*value))
         return self.call("rebuild", (journal, cell, q, angle, samples), 0.0, "rebuild", report)
+
+    def timeline(
+        self,
+        journal: Journal,
+        cell: CellConfig,
+        q: Any,
+        angle: float,
+        samples: Any,
+        on_progress: Callable[[str, int, int], None] | None = None,
+    ) -> list[TimelineStep]:
+        """:func:`workbench.journal.timeline.timeline_of` ``journal`` in the worker's planning cell (arguments as
+        :meth:`rebuild`); the worker's surface and the session are left as they are. No budget."""
+        report = None if on_progress is None else (lambda value: on_progress(*value))
+        return self.call("timeline", (journal, cell, q, angle, samples), 0.0, "timeline", report)
 
     def integrate(
         self, planner: Planner, frame: DepthFrame, budget: float, journal_dir: Path | None = None

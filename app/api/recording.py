@@ -1,0 +1,33 @@
+"""A session's recording: a zip that plays the scan offline (app/scene/recording.py), from its timeline."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, Response
+
+from app.api.deps import SessionDep
+from app.scene.recording import build_recording
+from workbench import Conflict
+
+router = APIRouter(prefix="/sessions/{session_id}/recording", tags=["recording"])
+
+
+@router.get("", response_class=Response, responses={200: {"content": {"application/zip": {}}}})
+def recording(session: SessionDep) -> Response:
+    """The scan as a zip (``index.html``: viser's client with the scene embedded, one step per view, plus
+    ``scene.viser`` and ``steps.json``) that plays from its unzipped folder or any static host, offline. 409
+    without a journal or a view."""
+    steps = session.history.steps()
+    if not steps:
+        raise Conflict(f"session {session.id}: no view yet to record")
+    built = build_recording(steps, session.scene_data(), f"NBV scan {session.id} · {session.status()['model']}")
+    return Response(
+        built.data,
+        media_type="application/zip",
+        headers={
+            "Content-Disposition": f'attachment; filename="nbv-{session.id}-recording.zip"',
+            "Cache-Control": "no-store",
+        },
+    )
+
+
+routers = [router]

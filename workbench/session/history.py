@@ -1,0 +1,72 @@
+"""A live session's timeline: its journal replayed in its worker once, the steps cached until the journal grows.
+
+:meth:`History.step` is what a tab's timeline asks (the session after view ``j``). The steps are built by
+:func:`workbench.journal.timeline.timeline_of` from the journal on disk, in the session's worker when it has one
+(the same planning cell its plans had; a job like a plan, so a plan of the session waits for it) and else here
+in a replay cell of the journal's frames (as ``nbv replay``). The session's lock, state, planner, cell and worker
+surface are never touched: looking back changes nothing. The cache holds the steps of one journal length; a new
+event (a plan, a view, a discard) makes the next look rebuild them.
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import TYPE_CHECKING
+
+from workbench.errors import Conflict, Invalid, NotFound
+from workbench.journal.store import Journal, read_journal
+from workbench.journal.timeline import TimelineStep, replay_cell, timeline_of
+from workbench.session.loop import planning_worker
+from workbench.workers.client import JobKilled
+
+if TYPE_CHECKING:
+    from workbench.session.core import SessionCore
+
+
+class History:
+    """The timeline of one session (thread-safe; one build at a time)."""
+
+    def __init__(self, session: SessionCore) -> None:
+        self.session = session
+        self._lock = threading.Lock()
+        self._key: tuple[int, int] | None = None
+        self._steps: list[TimelineStep] = []
+        self.builds = 0
+        """How many times the steps were rebuilt (a cached look rebuilds nothing)."""
+
+    def steps(self) -> list[TimelineStep]:
+        """Every step of the session's journal as it is now. Conflict without a journal; Invalid when it cannot
+        be replayed; Gone when the session was deleted meanwhile."""
+        s = self.session
+        writer = s.journal
+        if writer is None:
+            raise Conflict(f"session {s.id}: no journal, so no timeline")
+        with self._lock:
+            journal = read_journal(writer.directory)
+            key = (len(journal.events), journal.valid_bytes)
+            if key == self._key:
+                return self._steps
+            try:
+                steps = self._build(journal)
+            except (ValueError, KeyError, TypeError, JobKilled) as exc:
+                if s.deleted:
+                    raise s.gone() from None
+                raise Invalid(f"session {s.id}: cannot rebuild its timeline from the journal: {exc}") from None
+            self._key, self._steps = key, steps
+            self.builds += 1
+            return steps
+
+    def step(self, view: int) -> TimelineStep:
+        """The session after view ``view`` (1-based). NotFound for a view it has not taken."""
+        steps = self.steps()
+        if not 1 <= view <= len(steps):
+            raise NotFound(f"session {self.session.id}: no view {view} in its timeline (views 1 to {len(steps)})")
+        return steps[view - 1]
+
+    def _build(self, journal: Journal) -> list[TimelineStep]:
+        s = self.session
+        worker = planning_worker(s)
+        if worker is None:
+            return timeline_of(journal, replay_cell(journal))
+        # coverage comes from the journal's capture events: the replay need not score it again
+        return worker.timeline(journal, s.cell.config, s.cell.joint_positions(), s.cell.angle, None)
