@@ -18,6 +18,7 @@ so ``index.html`` plays from the unzipped folder (file://) and from any static h
 
 from __future__ import annotations
 
+import contextlib
 import html
 import io
 import json
@@ -62,7 +63,8 @@ def record_scene(steps: Sequence[TimelineStep], now: SceneData, step_seconds: fl
     does not hold: mesh, plate, camera model). ValueError without a step."""
     if not steps:
         raise ValueError("recording: the session has no view to play")
-    server = viser.ViserServer(host="127.0.0.1", port=_free_port(), verbose=False)
+    with contextlib.redirect_stdout(io.StringIO()):  # viser prints its address: nobody connects to this one
+        server = viser.ViserServer(host="127.0.0.1", port=_free_port(), verbose=False)
     try:
         server.scene.set_up_direction("+z")
         server.initial_camera.position = (0.95, -0.8, 0.75)
@@ -80,7 +82,8 @@ def record_scene(steps: Sequence[TimelineStep], now: SceneData, step_seconds: fl
             serializer.insert_sleep(step_seconds)
         return serializer.serialize()
     finally:
-        server.stop()
+        with contextlib.redirect_stdout(io.StringIO()):
+            server.stop()
 
 
 def _caption(step: TimelineStep, views: int) -> str:

@@ -106,10 +106,15 @@ class TimelineStep:
 
 def steps_of(journal: Journal, rebuilt: Rebuilt) -> list[TimelineStep]:
     """The steps of a rebuild made with ``keep_scene`` (one per replayed capture, in order)."""
-    decisions: dict[str, dict[str, Any]] = {}
+    decisions: dict[str, dict[str, Any]] = {}  # plan id -> the decision whose view was taken (and kept)
+    taken: dict[str, Any] | None = None
     for ev in without_discarded(journal.events):
-        if ev.get("kind") == "decision" and ev.get("plan_id") is not None:
-            decisions[str(ev["plan_id"])] = ev  # a decision retried after a fault: the last one counts
+        if ev.get("kind") == "decision":
+            taken = ev  # a decision retried after a fault, or one whose view was discarded: the last one counts
+        elif ev.get("kind") == "capture":
+            if taken is not None and taken.get("plan_id") is not None:
+                decisions[str(taken["plan_id"])] = taken
+            taken = None
     steps: list[TimelineStep] = []
     for k, capture in enumerate(rebuilt.captures, start=1):
         if capture.views is None or capture.cloud is None:
