@@ -2,24 +2,28 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter, Response
+from typing import Annotated
+
+from fastapi import APIRouter, Query, Response
 
 from app.api.deps import SessionDep
-from app.scene.recording import build_recording
+from app.scene.recording import STEP_SECONDS, build_recording
 from workbench import Conflict
 
 router = APIRouter(prefix="/sessions/{session_id}/recording", tags=["recording"])
 
 
 @router.get("", response_class=Response, responses={200: {"content": {"application/zip": {}}}})
-def recording(session: SessionDep) -> Response:
+def recording(session: SessionDep, step_seconds: Annotated[float, Query(gt=0.0, le=60.0)] = STEP_SECONDS) -> Response:
     """The scan as a zip (``index.html``: viser's client with the scene embedded, one step per view, plus
     ``scene.viser`` and ``steps.json``) that plays from its unzipped folder or any static host, offline. 409
-    without a journal or a view."""
+    without a journal or a view. ``step_seconds``: playback time per view."""
     steps = session.history.steps()
     if not steps:
         raise Conflict(f"session {session.id}: no view yet to record")
-    built = build_recording(steps, session.scene_data(), f"NBV scan {session.id} · {session.status()['model']}")
+    built = build_recording(
+        steps, session.scene_data(), f"NBV scan {session.id} · {session.status()['model']}", step_seconds
+    )
     return Response(
         built.data,
         media_type="application/zip",

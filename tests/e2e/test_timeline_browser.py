@@ -1,0 +1,177 @@
+"""Looking back at a scan in Chromium (live server, the session's worker, real viser): the timeline scrubs a 5-view
+session to view 2 (the viewer's nodes are those the live session drew at view 2: plan id, best index, voxel
+counts) and back to now, the page's PNG of the 3D view, the picker's label pushed live; and the session's
+recording, unzipped and served by ``python -m http.server``, plays in the browser with no workbench server up to
+its fifth view (and opens from file:// too)."""
+
+from __future__ import annotations
+
+import io
+import re
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+from PIL import Image
+from playwright.sync_api import BrowserContext, expect
+
+from tests.e2e.test_workbench_browser import Tab, _state
+from tests.helpers import SMALL, free_port
+from tests.servers import LiveServer
+from tests.viewer_buffers import decode_frame_arrays
+
+
+def _scan(api: httpx.Client, views: int) -> tuple[str, dict[int, dict[str, Any]]]:
+    """A session of ``views`` views (the planner's choice each time) and a plan pending after the last; per view,
+    the live session's status right after its plan."""
+    sid = api.post("/api/sessions", json={"model": "l-block", "config": SMALL}).json()["id"]
+    api.post(f"/api/sessions/{sid}/capture").raise_for_status()
+    live = {}
+    for view in range(1, views + 1):
+        plan = api.post(f"/api/sessions/{sid}/plan").json()
+        live[view] = api.get(f"/api/sessions/{sid}").json()
+        if view < views:
+            body = {"plan_id": plan["plan_id"], "index": plan["best"]["index"]}
+            api.post(f"/api/sessions/{sid}/approve", json=body).raise_for_status()
+    return sid, live
+
+
+def _last_clouds(frames: list[bytes]) -> dict[str, int]:
+    """Per /map/<kind> point cloud, how many points it had when last sent in ``frames``."""
+    out = {}
+    for data in frames:
+        for m in decode_frame_arrays(data):
+            name = m.get("name", "")
+            if name.startswith("/map/") and m.get("type") == "PointCloudMessage":
+                out[name.split("/")[2]] = len(np.asarray(m["props"]["points"])) // 3
+    return out
+
+
+def _non_white(png: bytes) -> float:
+    rgb = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(int)
+    return float(np.mean(np.abs(rgb - 255).sum(axis=2) > 30))
+
+
+def test_scrub_the_timeline_and_play_the_recording_offline(
+    live_server: LiveServer, browser_context: BrowserContext, tmp_path: Path
+) -> None:
+    api = httpx.Client(base_url=live_server.url, timeout=120)
+    sid, live = _scan(api, 5)
+    tab = Tab(browser_context, f"{live_server.url}/?session={sid}")
+    page = tab.page
+    _state(tab, "planned")
+    page.wait_for_function("() => Boolean(S.viewer)", timeout=60_000)
+    viewer = page.evaluate("S.viewer")
+    tab.wait(lambda: api.get(f"/api/scene/{viewer}").json()["connected"], 60_000)
+    label = page.get_by_test_id("timeline-label")
+    expect(label).to_have_text("now · 5 views")
+    now_nodes = set(api.get(f"/api/scene/{viewer}").json()["nodes"])
+    assert "/views/5/frustum" in now_nodes
+
+    # back three views with the keys (the slider's right end is now): view 2
+    mark = len(tab.frames)
+    page.locator("body").click(position={"x": 5, "y": 5})
+    for _ in range(4):
+        page.keyboard.press("ArrowLeft")
+    expect(label).to_have_text("view 2 of 5", timeout=60_000)
+    at2 = live[2]
+    tab.wait(lambda: (api.get(f"/api/scene/{viewer}").json()["timeline"] or {}).get("view") == 2, 60_000)
+    info = api.get(f"/api/scene/{viewer}").json()
+    step = info["timeline"]
+    assert step["plan_id"] == at2["pending_plan"]["plan_id"]
+    assert step["best"]["index"] == at2["pending_plan"]["best"]["index"]
+    assert step["voxels"] == at2["voxels"]
+    nodes = set(info["nodes"])
+    assert {"/views/1/frustum", "/views/2/frustum", "/nbv", "/candidates"} <= nodes and "/views/3/frustum" not in nodes
+    tab.wait(lambda: _last_clouds(tab.frames[mark:]).get("occupied") == at2["voxels"]["occupied"])
+    clouds = _last_clouds(tab.frames[mark:])
+    assert {k: clouds[k] for k in ("occupied", "frontier", "unknown")} == {
+        k: at2["voxels"][k] for k in ("occupied", "frontier", "unknown")
+    }
+    expect(page.locator("#plan-id")).to_contain_text(at2["pending_plan"]["plan_id"])
+    expect(page.locator("#iteration")).to_have_text("2")
+    expect(page.locator("#approve")).to_be_disabled()
+    expect(page.locator("#chart-coverage line.cursor")).to_have_attribute("data-x", "2")
+    assert page.locator("#candidates tbody tr").count() > 0
+    assert api.get(f"/api/sessions/{sid}").json() == live[5]  # the live session did not move
+
+    # a PNG of the 3D view as the tab shows it (view 2)
+    with page.expect_download(timeout=60_000) as download:
+        page.get_by_test_id("snapshot").click()
+    png = Path(download.value.path()).read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and download.value.suggested_filename == f"{sid}-view2.png"
+    assert _non_white(png) > 0.01  # the scene, not a blank canvas
+
+    # leave the timeline: the session now, every panel live again
+    page.get_by_test_id("timeline-now").click()
+    expect(label).to_have_text("now · 5 views")
+    tab.wait(lambda: api.get(f"/api/scene/{viewer}").json()["timeline"] is None)
+    assert "/views/5/frustum" in api.get(f"/api/scene/{viewer}").json()["nodes"]
+    expect(page.locator("#plan-id")).to_have_text(f"plan {live[5]['pending_plan']['plan_id']}")
+    expect(page.locator("#iteration")).to_have_text("5")
+    expect(page.locator("#approve")).to_be_enabled()
+
+    recording = api.get(f"/api/sessions/{sid}/recording?step_seconds=0.5")  # of the 5 views, 0.5 s each
+    assert recording.status_code == 200
+
+    # the picker's label follows the session (it was listed as "planned · 5 views"): one more view, pushed
+    option = page.locator(f"#session-select option[value='{sid}']")
+    expect(option).to_contain_text("planned · 5 views")
+    pending = live[5]["pending_plan"]
+    api.post(f"/api/sessions/{sid}/approve", json={"plan_id": pending["plan_id"], "index": pending["best"]["index"]})
+    expect(option).to_have_text(re.compile(r"· (ready|done) · 6 views$"), timeout=60_000)
+
+    # the recording of the 5 views, played with no workbench server
+    folder = tmp_path / "recording"
+    zipfile.ZipFile(io.BytesIO(recording.content)).extractall(folder)
+    port = free_port()
+    static = subprocess.Popen(
+        [sys.executable, "-m", "http.server", str(port), "--bind", "127.0.0.1", "--directory", str(folder)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        player = browser_context.new_page()
+        logs: list[str] = []
+        player.on("console", lambda m: logs.append(m.text))
+        hosts: set[str] = set()
+        player.on("request", lambda req: hosts.add(req.url.split("/")[2]))
+        for _ in range(50):  # the static server starting
+            try:
+                player.goto(f"http://127.0.0.1:{port}/index.html")
+                break
+            except Exception:
+                player.wait_for_timeout(100)
+        time_box = player.locator(".mantine-NumberInput-input")
+        expect(time_box).to_be_visible(timeout=60_000)
+        assert any("Embedded data loaded" in line for line in logs)  # the scene decoded
+        steps = player.get_by_test_id("recording-steps")
+        expect(steps.locator("#nbv-now")).to_contain_text("of 5", timeout=30_000)
+        # it plays by itself, 0.5 s a view: every view in turn, up to the fifth (each one the panel names, collected
+        # in the page: polling from here could miss one)
+        player.evaluate(
+            """() => { window.seen = [];
+            new MutationObserver(() => window.seen.push(document.getElementById("nbv-now").textContent))
+              .observe(document.getElementById("nbv-now"), { childList: true, characterData: true, subtree: true }); }"""
+        )
+        player.wait_for_function("() => window.seen.includes('view 5 of 5')", timeout=60_000)
+        seen = set(player.evaluate("window.seen"))
+        assert {f"view {k} of 5" for k in range(2, 6)} <= seen, seen
+        expect(steps.locator("tr.on")).to_have_attribute("data-view", "5")
+        player.wait_for_timeout(1500)  # SwiftShader draws it
+        assert _non_white(player.locator("canvas").first.screenshot()) > 0.01
+        assert hosts == {f"127.0.0.1:{port}"}  # nothing from the workbench, nothing from the internet
+
+        opened = browser_context.new_page()  # and from the folder itself, no server at all
+        file_logs: list[str] = []
+        opened.on("console", lambda m: file_logs.append(m.text))
+        opened.goto((folder / "index.html").as_uri())
+        expect(opened.get_by_test_id("recording-steps").locator("#nbv-now")).to_contain_text("of 5", timeout=60_000)
+        assert any("Embedded data loaded" in line for line in file_logs)
+    finally:
+        static.kill()
+        static.wait(5)
