@@ -15,7 +15,8 @@ from pathlib import Path
 import httpx
 
 from app.settings import AppSettings
-from tests.e2e.conftest import CHROMIUM_ARGS, chromium_path, free_port, running_server, save_screenshot
+from tests.e2e.conftest import free_port, running_server, save_screenshot
+from tests.e2e.pages import model_arg, scanned_page
 from workbench.settings import default_models_dir
 
 MODELS = default_models_dir()  # ../shared/models beside the clone
@@ -34,19 +35,7 @@ def main(out: str, width: int = 1600, height: int = 1000, model: str = "bunny.ob
         settings = AppSettings(port=free_port(), viser_port=0, data_dir=Path(tmp), models_dir=MODELS)
         with running_server(settings) as server, sync_playwright() as p:
             api = httpx.Client(base_url=server.url, timeout=300)
-            sid = api.post("/api/sessions", json={"model": model}).json()["id"]
-            api.post(f"/api/sessions/{sid}/capture")
-            api.post(f"/api/sessions/{sid}/step", json={"count": 2})
-            api.post(f"/api/sessions/{sid}/plan")
-            browser = p.chromium.launch(executable_path=chromium_path(), args=CHROMIUM_ARGS)
-            page = browser.new_page(viewport={"width": width, "height": height}, device_scale_factor=1)
-            page.goto(f"{server.url}/?session={sid}")
-            expect(page.locator("#state")).to_have_text("planned", timeout=120_000)
-            viewer = page.evaluate("S.viewer")
-            for _ in range(300):
-                if api.get(f"/api/scene/{viewer}").json()["connected"]:
-                    break
-                page.wait_for_timeout(200)
+            browser, page, viewer, _ = scanned_page(p, api, server.url, model, 2, width, height)
             for name, on in SHOWN.items():
                 box = page.locator(f"#layers input[data-layer='{name}']")
                 if box.is_checked() != on:
@@ -65,10 +54,5 @@ def main(out: str, width: int = 1600, height: int = 1000, model: str = "bunny.ob
 
 
 if __name__ == "__main__":
-    args = sys.argv[1:]
-    name = "bunny.obj"
-    if "--model" in args:
-        i = args.index("--model")
-        name = args[i + 1]
-        args = args[:i] + args[i + 2 :]
+    name, args = model_arg(sys.argv[1:])
     main(args[0] if args else "docs/workbench-fit.png", *(int(a) for a in args[1:3]), model=name)
