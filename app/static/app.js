@@ -668,6 +668,10 @@ function renderStep(step) {
   $("points").textContent = step.points;
   $("plan-id").textContent = step.plan_id ? `plan ${step.plan_id} · after view ${step.view}` : `no plan after view ${step.view}`;
   $("selected-label").textContent = step.approved !== null ? `candidate ${step.approved} (approved)` : "no selection";
+  if (!$("arm").hidden) {
+    $("arm").textContent = `arm: where it took view ${step.view}; the ghost: where the approved view took it`;
+    $("arm").className = "small muted";
+  }
   P.renderInspector(null);
   updateButtons();
 }
