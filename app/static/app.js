@@ -673,6 +673,7 @@ function renderStep(step) {
     $("arm").className = "small muted";
   }
   P.renderInspector(null);
+  $("fit-label").textContent = "(the session now: the timeline does not refit)";
   updateButtons();
 }
 
