@@ -17,6 +17,7 @@ import numpy as np
 from PIL import Image
 from playwright.sync_api import BrowserContext, expect
 
+from tests.e2e.conftest import draw_viewer
 from tests.e2e.pages import goto_when_up, served
 from tests.e2e.test_workbench_browser import Tab, _state
 from tests.helpers import SMALL
@@ -98,12 +99,14 @@ def test_scrub_the_timeline_and_play_the_recording_offline(
     assert page.locator("#candidates tbody tr").count() > 0
     assert api.get(f"/api/sessions/{sid}").json() == live[5]  # the live session did not move
 
-    # a PNG of the 3D view as the tab shows it (view 2)
+    # a PNG of the 3D view as the tab shows it (view 2): the browser renders it, so its viewer draws for it
+    draw_viewer(page)
     with page.expect_download(timeout=60_000) as download:
         page.get_by_test_id("snapshot").click()
     png = Path(download.value.path()).read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and download.value.suggested_filename == f"{sid}-view2.png"
     assert _non_white(png) > 0.01  # the scene, not a blank canvas
+    draw_viewer(page, False)
 
     # leave the timeline: the session now, every panel live again
     page.get_by_test_id("timeline-now").click()
