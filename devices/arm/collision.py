@@ -42,6 +42,8 @@ class CollisionWorld:
         import pinocchio as pin  # pyright: ignore[reportMissingImports]  (under cmeel.prefix)
 
         self.arm = arm
+        self.plate = (float(plate_radius), float(plate_thickness))
+        """(radius, thickness) of the turntable, metres: with ``arm``, what the world's fixed obstacles are made of."""
         model = arm.model
         geometry = arm.geometry.copy()
         self._arm_geoms = list(range(geometry.ngeoms))

@@ -19,6 +19,7 @@ change).
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
@@ -30,6 +31,11 @@ from devices.arm.collision import CollisionWorld
 from devices.arm.ik import fixed_seeds, solve_ik
 from devices.arm.model import ArmModel
 from planner.types import Pose
+
+_SeedLibrary = tuple[list[NDArray[np.float64]], KDTree, NDArray[np.float64], NDArray[np.float64], float]
+_LIBRARIES: dict[tuple[int, tuple[float, float]], tuple[ArmModel, _SeedLibrary]] = {}
+"""(id of the arm model, plate) -> (the model, its seed library): the arm is kept so its id is not reused."""
+_LIBRARIES_LOCK = threading.Lock()
 
 LIBRARY_SIZE = 600
 """Configurations sampled at start-up whose camera poses seed IK for nearby targets."""
@@ -94,15 +100,35 @@ class ArmReach:
         mount = arm.T_base_mount.translation
         self.arm_azimuth = math.atan2(mount[1], mount[0])
         self._offsets = [math.radians(o) for o in arm.config.plate_offsets_deg]
-        self._library = [q for q in fixed_seeds(arm, LIBRARY_SIZE, seed=1) if world.collision(q, 0.0) is None]
-        self._library_tree = KDTree(np.array([self._feature(arm.camera_pose(q, self._data)) for q in self._library]))
         self._wrist_joint = int(arm.model.frames[arm.camera_frame].parentJoint)
-        self._wrist_in_camera, self._root, self.reach = self._reach_bound()
+        self._library, self._library_tree, self._wrist_in_camera, self._root, self.reach = self._seed_library()
         self._cache: dict[tuple[object, ...], tuple[list[NDArray[np.float64]], str | None]] = {}
         self._anchors: dict[tuple[int, ...], NDArray[np.float64] | None] = {}
         self._last_offset = 0
 
     # ------------------------------------------------------------------ helpers
+
+    def _seed_library(self) -> _SeedLibrary:
+        """The seed library, its pose tree and the reach bound: a pure function of the (cached, never changed) arm
+        model and the world's fixed obstacles (plate, table; the library is checked at plate angle 0 before any
+        object box is set), so computed once per process for each (arm, plate) and shared, read only, by the
+        sessions' cells (a world that already holds an object box gets its own)."""
+        key = (id(self.arm), self.world.plate)
+        shared = self.world.box is None
+        with _LIBRARIES_LOCK:
+            hit = _LIBRARIES.get(key) if shared else None
+        if hit is not None and hit[0] is self.arm:
+            return hit[1]
+        library = [q for q in fixed_seeds(self.arm, LIBRARY_SIZE, seed=1) if self.world.collision(q, 0.0) is None]
+        tree = KDTree(np.array([self._feature(self.arm.camera_pose(q, self._data)) for q in library]))
+        self._library = library
+        built: _SeedLibrary = (library, tree, *self._reach_bound())
+        if shared:
+            with _LIBRARIES_LOCK:
+                if len(_LIBRARIES) >= 8:
+                    _LIBRARIES.clear()
+                _LIBRARIES[key] = (self.arm, built)
+        return built
 
     def _reach_bound(self) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
         """(the last joint's origin in the camera frame (3,), the first joint's origin (3,), the largest distance

@@ -109,3 +109,20 @@ def test_fit_limits_wraps_whole_turns_towards_the_reference() -> None:
     )
     np.testing.assert_allclose(fit_limits(q, np.zeros(2), lower, upper), q)
     assert fit_limits(np.array([3.0, 0.0]), np.zeros(2), np.array([-1.0, -1.0]), np.array([1.0, 1.0])) is None
+
+
+def test_cells_of_one_arm_and_plate_share_one_seed_library_equal_to_a_fresh_one() -> None:
+    from devices.arm import reach
+
+    a = ArmKinematics(ArmConfig(), plate_radius=0.2, plate_thickness=0.02)
+    b = ArmKinematics(ArmConfig(), plate_radius=0.2, plate_thickness=0.02)
+    assert b.reach._library is a.reach._library  # computed once per process
+    wider = ArmKinematics(ArmConfig(), plate_radius=0.3, plate_thickness=0.02)
+    assert wider.reach._library is not a.reach._library  # another plate, other collisions
+    reach._LIBRARIES.clear()
+    fresh = ArmKinematics(ArmConfig(), plate_radius=0.2, plate_thickness=0.02)
+    assert fresh.reach._library is not a.reach._library
+    assert len(fresh.reach._library) == len(a.reach._library) > 0
+    assert all(np.array_equal(p, q) for p, q in zip(fresh.reach._library, a.reach._library, strict=True))
+    assert fresh.reach.reach == a.reach.reach
+    assert all(wider.world.collision(q, 0.0) is None for q in wider.reach._library)  # checked in its own world
