@@ -22,7 +22,7 @@ CAMERA = CameraConfig(width=320, height=240, fx=280.0, fy=280.0, cx=159.5, cy=11
 ANGLES = (0.0, 120.0, -120.0)
 """The plate angles of the calibration, degrees."""
 FAST_ARM = (
-    "max_joint_speed_deg = 90\nspeed_fraction = 1.0\nacceleration_fraction = 1.0\nmax_joint_acceleration_deg = 360"
+    "max_joint_speed_deg = 360\nspeed_fraction = 1.0\nacceleration_fraction = 1.0\nmax_joint_acceleration_deg = 1440"
 )
 
 
