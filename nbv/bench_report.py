@@ -6,8 +6,12 @@ ceilings of its (model, placement) pairs. results.csv, per iteration:
 - ``coverage``: fraction of the surface samples with a scanned point within 5 mm;
 - ``reachable_coverage``: the ceiling of the run's (model, yaw) (empty without one), and
   ``coverage_ratio`` = coverage / ceiling;
-- ``auc``, ``views_to_90``, ``views_to_95``, ``views_to_98``: the run's metrics
-  (:mod:`nbv.bench_metrics`), repeated on each of its rows (filter on the last iteration for one a run);
+- ``auc``, ``views_to_90``, ``views_to_95``, ``views_to_98``, ``time_to_90``, ``time_to_95``: the run's metrics
+  (:mod:`workbench.evaluation.curves`; ``time_to_*`` the cumulative robot seconds when coverage / ceiling first
+  reaches 90 / 95 %, the run's total plus its mean per view when never), repeated on each of its rows (filter on
+  the last iteration for one a run);
+- ``robot_seconds``: the view's robot time (move, plate turn, capture, planning); ``cumulative_robot_seconds``
+  its running sum over the run;
 - ``plan_seconds``: frame in -> next view out (integration, candidates, clustering, ellipsoids,
   scoring, selection), as in ``nbv scan``; preprocessing and ICP are timed apart;
 - ``eval_seconds``: the candidate-evaluation stage alone (``timings["score"]``): for
@@ -37,7 +41,7 @@ from pathlib import Path
 from typing import Any
 
 from nbv.bench_summary import run_metrics_of, summary_markdown
-from workbench.evaluation import ACCURACY_COLUMNS, RunOutcome
+from workbench.evaluation import ACCURACY_COLUMNS, TIME_THRESHOLDS, RunOutcome
 
 COLUMNS = (
     "model",
@@ -57,6 +61,9 @@ COLUMNS = (
     "views_to_90",
     "views_to_95",
     "views_to_98",
+    "cumulative_robot_seconds",
+    "time_to_90",
+    "time_to_95",
     *ACCURACY_COLUMNS,
     "surface_fscore_5mm",
 )
@@ -82,9 +89,12 @@ def result_rows(outcomes: Sequence[RunOutcome], ceilings: Ceilings, views: int) 
                 "views_to_95": m.views_to[1],
                 "views_to_98": m.views_to[2],
             }
+            extra |= {f"time_to_{round(100 * t)}": v for t, v in zip(TIME_THRESHOLDS, m.time_to, strict=False)}
+        cumulative = 0.0
         for row in o.rows:
             ratio = row["coverage"] / ceiling if ceiling and row["coverage"] is not None else None
-            rows.append({"yaw": o.yaw, **row, **extra, "coverage_ratio": ratio})
+            cumulative += float(row.get("robot_seconds") or 0.0)
+            rows.append({"yaw": o.yaw, **row, **extra, "coverage_ratio": ratio, "cumulative_robot_seconds": cumulative})
     return rows
 
 
