@@ -18,6 +18,9 @@ and a fresh worker takes up the next job. Jobs:
 - ``("rebuild", (journal, cell_config, q, angle, surface_samples))``: ``("progress", (stage, done, total))``
   messages on the way, then the ``Rebuilt`` session (a resume or a discard replays its journal here), its
   surface rebuilt too (``Rebuilt.surface``);
+- ``("warm", (cell_config, q, angle))`` once per process, right after it starts (while the person captures): the
+  planning cell's arm model built and its IK warmed on a nominal hemisphere, the planner's modules imported, so
+  the session's first plan does not pay for them (:meth:`_Worker.warm`);
 - ``("fit", (points_world, cluster_config, resolution, kind, t))``: ``(ellipsoids, ClusterFit)`` of one voxel
   kind at exactly T components (``planner.ellipsoids.fit_at_t``: the Fit panel's "fit at another T").
 
@@ -46,6 +49,10 @@ from workbench.journal.surface import in_step, surface_of_journal
 from workbench.planning import plan_in
 from workbench.progress import Throttle
 from workbench.surface.live import LiveSurface
+
+WARM_BOX = ((-0.1, -0.1, 0.0), (0.1, 0.1, 0.2))
+"""The nominal object box (table frame, m) whose hemisphere a new worker's IK is warmed on: an object of the default
+0.2 m size on the plate."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -164,6 +171,30 @@ class _Worker:
             state[1].reset(angle)
         return cell
 
+    def warm(self, config: CellConfig, q: NDArray[np.float64] | None, angle: float) -> None:
+        """Build the planning cell of ``config`` (the arm model: URDF, collision world, IK seed library), import what
+        a plan runs (the planner, the evaluators, scikit-learn's GMM) and ask the reachability of the candidates
+        about a nominal box (``WARM_BOX``) with the arm at ``q``: the IK anchors of that hemisphere are solved and
+        kept. Reachability is a pure function of the view and the object box, so the plans are the same as
+        without it."""
+        import planner.baselines
+        import planner.bic_search
+        import planner.tour  # noqa: F401
+        from planner import PlannerConfig
+        from planner.candidates import propose_candidates
+        from planner.types import BoundingBox
+
+        cell = self.reach(config, q, angle)
+        if cell.kinematics is None:
+            return
+        cfg = PlannerConfig()
+        box = BoundingBox(np.array(WARM_BOX[0]), np.array(WARM_BOX[1]))
+        candidates, _, _ = propose_candidates(box, cfg.candidates, cfg.partitions)
+        cell.set_object_box(box)
+        for c in candidates:
+            cell.is_reachable(c.T_world_camera)
+        cell.set_object_box(None)
+
     def rebuild(self, payload: Any, send: Callable[[Any], None] | None) -> Rebuilt:
         """:func:`workbench.journal.rebuild.rebuild` of a journal in this worker's planning cell; the replayed
         captures' plans stay here (the pending and last plans travel in the result)."""
@@ -195,6 +226,8 @@ class _Worker:
             return None
         if kind == "render":
             return self.render(payload)
+        if kind == "warm":
+            return self.warm(*cast(tuple[CellConfig, Any, float], payload))
         if kind == "plan":
             planner, config, q, angle = cast(tuple[Planner, CellConfig, Any, float], payload)
             report = _Throttled(send) if send is not None else None
