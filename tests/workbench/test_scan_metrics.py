@@ -106,7 +106,9 @@ def test_time_to_reach_is_the_cumulative_robot_time_or_a_penalty() -> None:
     with pytest.raises(ValueError, match=r"^seconds: must be finite"):
         cumulative_seconds([1.0, -2.0])
     # the session's metrics: the times when every view has its robot seconds, None otherwise
-    its = [{"coverage": 0.9 * r, "robot_seconds": s} for r, s in zip(ratios, seconds, strict=True)]
+    its: list[dict[str, float | None]] = [
+        {"coverage": 0.9 * r, "robot_seconds": s} for r, s in zip(ratios, seconds, strict=True)
+    ]
     m = ceiling_metrics(its, 0.9)
     assert m["time_to_90"] == pytest.approx(3.5) and m["time_to_95"] == pytest.approx(10.0)
     assert m["robot_seconds"] == pytest.approx([0.5, 3.5, 7.5, 10.0])
