@@ -24,7 +24,8 @@ ceilings of its (model, placement) pairs. results.csv, per iteration:
   :mod:`workbench.surface`), on a run's last row only (empty on the others).
 
 Plots: ``ratio.png`` (coverage / ceiling against view, one panel per model, mean over seeds and
-placements with a ± one standard deviation band), ``coverage.png`` (raw coverage, ceiling dashed),
+placements with a ± one standard deviation band), ``robot.png`` (coverage / ceiling against the cumulative
+robot seconds, a line per run), ``coverage.png`` (raw coverage, ceiling dashed),
 ``time.png`` (plan and evaluation time per view).
 """
 
@@ -170,7 +171,7 @@ def plot(
     views = views or max((len(o.rows) for o in outcomes), default=1) or 1
     colors = {p: f"C{i % 10}" for i, p in enumerate(planners)}
     nrows, ncols = _grid(max(1, len(models)))
-    names = (["ratio"] if ceilings else []) + ["coverage", "time"]
+    names = (["ratio", "robot"] if ceilings else []) + ["coverage", "time"]
     for name in names:
         fig = Figure(figsize=(4.2 * ncols, 3.4 * nrows), layout="constrained")
         FigureCanvasAgg(fig)
@@ -179,6 +180,9 @@ def plot(
             for p in planners:
                 if name == "ratio":
                     _ratio_panel(ax, outcomes, model, p, ceilings, views, colors[p])
+                    continue
+                if name == "robot":
+                    _robot_panel(ax, outcomes, model, p, ceilings, colors[p])
                     continue
                 if name == "coverage":
                     its, ys = _by_iteration(outcomes, model, p, "coverage")
@@ -190,7 +194,7 @@ def plot(
                 _, fit = _by_iteration(outcomes, model, p, "fit_seconds")
                 full = [max(a + b, 1e-6) for a, b in zip(ev, fit, strict=True)]
                 ax.plot(its, full, ls=":", color=colors[p], label=f"{p} eval" + (" + fit" if any(fit) else ""))
-            if name == "ratio":
+            if name in ("ratio", "robot"):
                 for level in (0.9, 0.95):
                     ax.axhline(level, ls=":", lw=0.8, color="0.5")
                 low = min((y for line in ax.get_lines() for y in line.get_ydata()), default=0.0)  # type: ignore[union-attr]
@@ -206,7 +210,7 @@ def plot(
                 ax.set_yscale("log")
                 ax.set_ylabel("seconds per iteration")
             ax.set_title(model)
-            ax.set_xlabel("view")
+            ax.set_xlabel("robot seconds" if name == "robot" else "view")
             ax.xaxis.set_major_locator(MaxNLocator(integer=True))
             ax.grid(True, alpha=0.3)
             if k == 0:
@@ -216,12 +220,32 @@ def plot(
         fig.suptitle(
             {
                 "ratio": "coverage / reachable ceiling against view (mean ± std over seeds and placements)",
+                "robot": "coverage / reachable ceiling against cumulative robot seconds (one line per run)",
                 "coverage": "coverage against view",
                 "time": "plan time (solid), candidate evaluation (dotted)",
             }[name]
         )
         fig.savefig(out / f"{name}.png", dpi=110)
     return [f"{n}.png" for n in names]
+
+
+def _robot_panel(
+    ax: Any, outcomes: Sequence[RunOutcome], model: str, planner: str, ceilings: Ceilings, color: str
+) -> None:
+    """One planner's runs of ``model``: coverage / ceiling against the cumulative robot seconds, a line per run."""
+    first = True
+    for o in outcomes:
+        ceiling = ceilings.get((o.label, o.yaw))
+        if o.error is not None or o.label != model or o.planner != planner or not ceiling:
+            continue
+        xs, ys, total = [], [], 0.0
+        for r in o.rows:
+            total += float(r.get("robot_seconds") or 0.0)
+            if r["coverage"] is not None:
+                xs.append(total)
+                ys.append(r["coverage"] / ceiling)
+        ax.plot(xs, ys, marker="o", ms=2, lw=1, alpha=0.7, color=color, label=planner if first else None)
+        first = False
 
 
 def _ratio_panel(

@@ -108,7 +108,7 @@ def check_outputs(out: Path, reachable: bool) -> list[dict[str, str]]:
     assert "| planner | l-block | average per iteration |" in text
     assert "| random |" in text and "×" in text
     assert "eval + fit" in text
-    for name in ("coverage.png", "time.png", *(["ratio.png"] if reachable else [])):
+    for name in ("coverage.png", "time.png", *(["ratio.png", "robot.png"] if reachable else [])):
         width, height = png_size(out / name)
         assert width > 200 and height > 200
     return rows
