@@ -18,9 +18,9 @@ and a fresh worker takes up the next job. Jobs:
 - ``("rebuild", (journal, cell_config, q, angle, surface_samples))``: ``("progress", (stage, done, total))``
   messages on the way, then the ``Rebuilt`` session (a resume or a discard replays its journal here), its
   surface rebuilt too (``Rebuilt.surface``);
-- ``("warm", (cell_config, q, angle))`` once per process, right after it starts (while the person captures): the
-  planning cell's arm model built and its IK warmed on a nominal hemisphere, the planner's modules imported, so
-  the session's first plan does not pay for them (:meth:`_Worker.warm`);
+- ``("warm", (cell_config, q, angle, planner_config))`` once per process, right after it starts (while the person
+  captures): the planning cell's arm model built, the planner's modules imported and the reachability of the
+  first plan's candidates cached, so the session's first plan does not pay for them (:meth:`_Worker.warm`);
 - ``("fit", (points_world, cluster_config, resolution, kind, t))``: ``(ellipsoids, ClusterFit)`` of one voxel
   kind at exactly T components (``planner.ellipsoids.fit_at_t``: the Fit panel's "fit at another T").
 
@@ -30,6 +30,7 @@ target of its processes, and the forkserver preloads it so a new worker starts i
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
@@ -171,12 +172,13 @@ class _Worker:
             state[1].reset(angle)
         return cell
 
-    def warm(self, config: CellConfig, q: NDArray[np.float64] | None, angle: float) -> None:
+    def warm(self, config: CellConfig, q: NDArray[np.float64] | None, angle: float, planner_config: Any = None) -> None:
         """Build the planning cell of ``config`` (the arm model: URDF, collision world, IK seed library), import what
-        a plan runs (the planner, the evaluators, scikit-learn's GMM) and ask the reachability of the candidates
-        about a nominal box (``WARM_BOX``) with the arm at ``q``: the IK anchors of that hemisphere are solved and
-        kept. Reachability is a pure function of the view and the object box, so the plans are the same as
-        without it."""
+        a plan runs, and fill the reachability cache of the first plan's candidates with the arm at ``q``: in a
+        simulated session (a render scene is set up) the candidates about the box the first frame at the cell's
+        initial view gives ``planner_config``'s map (the frame rendered here, noise-free); otherwise about a
+        nominal box (``WARM_BOX``). Reachability is a pure function of the view and the object box, so the plans
+        are the same as without it; only the first one is faster."""
         import planner.baselines
         import planner.bic_search
         import planner.tour  # noqa: F401
@@ -187,8 +189,15 @@ class _Worker:
         cell = self.reach(config, q, angle)
         if cell.kinematics is None:
             return
-        cfg = PlannerConfig()
+        cfg = planner_config if isinstance(planner_config, PlannerConfig) else PlannerConfig()
         box = BoundingBox(np.array(WARM_BOX[0]), np.array(WARM_BOX[1]))
+        if self.camera is not None:
+            pose = cell.initial_pose()
+            scratch = Planner(cfg)
+            with contextlib.suppress(ValueError):  # nothing on the object from there: the nominal box
+                scratch.integrate(DepthFrame(self.camera.render(pose), pose, self.camera.intrinsics))
+            if scratch.voxel_map.bbox is not None:
+                box = scratch.voxel_map.bbox
         candidates, _, _ = propose_candidates(box, cfg.candidates, cfg.partitions)
         cell.set_object_box(box)
         for c in candidates:
@@ -227,7 +236,7 @@ class _Worker:
         if kind == "render":
             return self.render(payload)
         if kind == "warm":
-            return self.warm(*cast(tuple[CellConfig, Any, float], payload))
+            return self.warm(*cast(tuple[CellConfig, Any, float, Any], payload))
         if kind == "plan":
             planner, config, q, angle = cast(tuple[Planner, CellConfig, Any, float], payload)
             report = _Throttled(send) if send is not None else None
