@@ -4,12 +4,12 @@ Reads the results.csv and runs.json of one or more bench directories (e.g. one w
 mesh and one with ``raycast-apora`` on fewer), pairs the runs by (model, seed, placement), and prints for every
 planner against ``--reference`` (and ``--also``): the mean robot seconds to 95 % / 90 % of the ceiling, the
 relative change of the mean, the paired mean difference with its 95 % t-interval, the AUC over views and final
-coverage / ceiling differences (points), and the median plan time. With ``--write DIR`` it also writes the
-bench's report (results.csv, summary.md, report.html, plots) of the merged runs with this checkout's report code.
+coverage / ceiling differences (points), and the median plan time. (``nbv bench`` writes the same robot-time
+rows into its own summary.md; this script pairs runs of several benches.)
 
     nbv bench --models ../shared/models/*.{obj,ply} ../shared/models/extra/*.{obj,off} \\
         --planners projection,tour --seeds 2 --yaws 0,90 --out out/tour-ideal
-    .venv/bin/python benchmarks/bench_tour.py out/tour-ideal [more dirs] [--reference projection] [--write DIR]
+    .venv/bin/python benchmarks/bench_tour.py out/tour-ideal [more dirs] [--reference projection]
 """
 
 from __future__ import annotations
@@ -21,9 +21,7 @@ import statistics
 from pathlib import Path
 from typing import Any
 
-from nbv.bench_report import write_report
-from nbv.bench_summary import run_metrics_of
-from workbench.evaluation import RunOutcome, paired_comparison
+from workbench.evaluation import RunMetrics, RunOutcome, paired_comparison, run_metrics
 
 INTEGER = {"seed", "iteration", "points", "views_to_90", "views_to_95", "views_to_98"}
 TEXT = {"model", "planner"}
@@ -37,8 +35,8 @@ def _value(key: str, text: str) -> Any:
     return int(float(text)) if key in INTEGER else float(text)
 
 
-def load(directory: Path) -> tuple[list[RunOutcome], dict[tuple[str, float], float], dict[str, Any]]:
-    """The finished runs of a bench directory, its ceilings per (model, yaw) and its meta.json (or {})."""
+def load(directory: Path) -> tuple[list[RunOutcome], dict[tuple[str, float], float]]:
+    """The finished runs of a bench directory and its ceilings per (model, yaw)."""
     rows: dict[tuple[str, str, int, float], list[dict[str, Any]]] = {}
     ceilings: dict[tuple[str, float], float] = {}
     with (directory / "results.csv").open() as fh:
@@ -56,14 +54,28 @@ def load(directory: Path) -> tuple[list[RunOutcome], dict[tuple[str, float], flo
         o.poses, o.terminated, o.seconds, o.error = run["poses"], run["terminated"], run["seconds"], run["error"]
         o.refused_moves, o.icp_rejected = run.get("refused_moves", []), run.get("icp_rejected", [])
         outcomes.append(o)
-    meta_path = directory / "meta.json"
-    meta = json.loads(meta_path.read_text()) if meta_path.exists() else {}
-    return outcomes, ceilings, meta
+    return outcomes, ceilings
+
+
+def metrics_of(
+    outcomes: list[RunOutcome], ceilings: dict[tuple[str, float], float], views: int
+) -> dict[tuple[str, str, int, float], RunMetrics]:
+    """(model, planner, seed, yaw) -> the run's metrics with its robot times, for finished runs with a ceiling."""
+    out = {}
+    for o in outcomes:
+        ceiling = ceilings.get((o.label, o.yaw))
+        rows = [r for r in o.rows if r["coverage"] is not None]
+        if o.error is None and rows and ceiling:
+            seconds = [float(r["robot_seconds"] or 0.0) for r in rows]
+            out[(o.label, o.planner, o.seed, o.yaw)] = run_metrics(
+                [r["coverage"] for r in rows], ceiling, views, seconds
+            )
+    return out
 
 
 def compare(outcomes: list[RunOutcome], ceilings: dict[tuple[str, float], float], views: int, reference: str) -> None:
     """Print every planner against ``reference`` over their shared (model, seed, yaw) runs."""
-    metrics = run_metrics_of(outcomes, ceilings, views)
+    metrics = metrics_of(outcomes, ceilings, views)
     planners = sorted({p for (_, p, _, _) in metrics})
     plan_seconds = {
         p: statistics.median(r["plan_seconds"] for o in outcomes if o.planner == p for r in o.rows) for p in planners
@@ -102,30 +114,18 @@ def main() -> None:
     parser.add_argument("dirs", nargs="+", type=Path, help="nbv bench output directories")
     parser.add_argument("--reference", default="projection")
     parser.add_argument("--also", default="raycast-apora", help="a second reference, when its runs are there")
-    parser.add_argument("--write", type=Path, default=None, help="write the merged bench report here")
     args = parser.parse_args()
     outcomes: list[RunOutcome] = []
     ceilings: dict[tuple[str, float], float] = {}
-    meta: dict[str, Any] = {}
     for d in args.dirs:
-        o, c, m = load(d)
+        o, c = load(d)
         outcomes += o
         ceilings |= c
-        meta = meta or m
     views = max(len(o.rows) for o in outcomes)
     compare(outcomes, ceilings, views, args.reference)
     if any(o.planner == args.also for o in outcomes):
         print()
         compare(outcomes, ceilings, views, args.also)
-    if args.write is not None:
-        args.write.mkdir(parents=True, exist_ok=True)
-        planners = list(dict.fromkeys(o.planner for o in outcomes))
-        models = list(dict.fromkeys(o.label for o in outcomes))
-        meta = {**meta, "planners": planners, "models": models, "views": views, "reference": args.reference}
-        meta.setdefault("seeds", sorted({o.seed for o in outcomes}))
-        meta.setdefault("yaws", sorted({o.yaw for o in outcomes}))
-        write_report(args.write, outcomes, meta, ceilings)
-        print(f"\nwrote {args.write}/results.csv, summary.md, report.html")
 
 
 if __name__ == "__main__":
