@@ -225,6 +225,13 @@ class CandidateOut(BaseModel):
     reason: str = Field(
         description='why it is not eligible: "sector locked", "unreachable", "near a taken view"; "" when eligible'
     )
+    move_seconds: float | None = Field(
+        None, description="estimated seconds of the move from the current state (plate turn + arm); None: unknown"
+    )
+    tour_order: int | None = Field(None, description="place (1-based) in the tour planner's predicted tour, or None")
+    tour_seconds: float | None = Field(
+        None, description="predicted move seconds from now until the tour reaches this view (None off the tour)"
+    )
 
 
 class EllipsoidTerm(BaseModel):

@@ -20,8 +20,13 @@ class SafeJSONResponse(JSONResponse):
 
 
 def candidate_json(plan: PlanResult, i: int) -> dict[str, Any]:
-    """``{"index", "pose", "score", "eligible", "frontier", "occupied", ...}`` of candidate ``i``."""
+    """``{"index", "pose", "score", "eligible", "frontier", "occupied", ...}`` of candidate ``i``; ``move_seconds``
+    the estimated move from the current state (None when the plan has no move times or the move is unknown),
+    ``tour_order`` its place (1-based) in the ``tour`` planner's predicted tour and ``tour_seconds`` the predicted
+    move seconds from now until it is reached (both None off the tour)."""
     c, s = plan.candidates[i], plan.scores[i]
+    move = None if plan.move_costs is None else float(plan.move_costs[i])
+    order = plan.tour.views.index(i) if plan.tour is not None and i in plan.tour.views else None
     return {
         "index": i,
         "pose": c.T_world_camera.to_dict(),
@@ -34,6 +39,9 @@ def candidate_json(plan: PlanResult, i: int) -> dict[str, Any]:
         "azimuth_deg": math.degrees(c.azimuth),
         "best": plan.best_index == i,
         "reason": plan.ineligible_reasons[i] if plan.ineligible_reasons else ("" if s.eligible else "ineligible"),
+        "move_seconds": move if move is not None and math.isfinite(move) else None,
+        "tour_order": None if order is None else order + 1,
+        "tour_seconds": None if order is None or plan.tour is None else plan.tour.seconds[order],
     }
 
 

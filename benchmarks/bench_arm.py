@@ -19,7 +19,12 @@ One scan of the model with the UR5 (the default cell) and one with the reach-sph
    seeds, each query twice): ``plan_path`` wall and CPU time, the move durations, and whether each repeat gave
    the same waypoints (it must: the planner is deterministic);
 
+6. the same UR5 scan with the reachability cache (per view, plate angle and object box) and the swept-box turn
+   test off: its median plan_seconds and reachability per plan, and whether both scans made the same plans
+   (every plan's chosen view and eligible set);
+
 and the share of the first hemisphere the arm reaches, with the reasons for the rest.
+``--sensor realsense-d435 --calibration typical`` scans with a realistic sensor.
 """
 
 from __future__ import annotations
@@ -38,17 +43,25 @@ from devices.arm.config import ArmConfig
 from devices.arm.motion import NoPathError, plan_path, time_path
 from devices.builtins import resolve_model
 from devices.config import CameraConfig, CellConfig
+from devices.planner_noise import planner_config_for
 from devices.sim import make_sim_cell
 from planner import Planner, PlannerConfig, PlanResult
 from workbench.evaluation import IterationRecord, run_scan
 
 
-def timed_scan(model: str, views: int, kinematics: str, seed: int) -> dict[str, Any]:
-    """Scan with the given arm, timing the cell's reachability per plan and its motion planning per move."""
+def timed_scan(
+    model: str, views: int, kinematics: str, seed: int, cache: bool = True, camera: CameraConfig | None = None
+) -> dict[str, Any]:
+    """Scan with the given arm, timing the cell's reachability per plan and its motion planning per move.
+    cache: the UR5's reachability cache and swept-box turn test on (off: every attempt computed afresh)."""
     name, mesh = resolve_model(model, up="y", size=0.2)
+    camera = camera or CameraConfig()
     t0 = time.perf_counter()
-    cell = make_sim_cell(mesh, CameraConfig(), CellConfig(kinematics=kinematics), seed=seed)  # type: ignore[arg-type]
+    cell = make_sim_cell(mesh, camera, CellConfig(kinematics=kinematics), seed=seed)  # type: ignore[arg-type]
     build = time.perf_counter() - t0
+    if cell.kinematics is not None:
+        cell.kinematics.reach.use_attempt_cache = cache
+        cell.kinematics.use_sweep_test = cache
     reach_seconds = [0.0]
     reach_cpu = [0.0]
     motion_seconds: list[float] = []
@@ -90,8 +103,10 @@ def timed_scan(model: str, views: int, kinematics: str, seed: int) -> dict[str, 
     per_plan: list[float] = []
     per_plan_cpu: list[float] = []
     first_plan: list[PlanResult] = []
+    choices: list[tuple[int | None, tuple[bool, ...]]] = []
 
     def done(record: IterationRecord, plan: PlanResult) -> None:
+        choices.append((plan.best_index, tuple(s.eligible for s in plan.scores)))
         per_plan.append(reach_seconds[-1])
         per_plan_cpu.append(reach_cpu[-1])
         reach_seconds.append(0.0)
@@ -101,7 +116,7 @@ def timed_scan(model: str, views: int, kinematics: str, seed: int) -> dict[str, 
 
     config = PlannerConfig.from_dict({"termination": {"max_views": views}, "cluster": {"seed": seed}})
     try:
-        result = run_scan(Planner(config), cell, on_iteration=done)
+        result = run_scan(Planner(planner_config_for(config, camera)), cell, on_iteration=done)
     finally:
         arm_kinematics.plan_path = plan_path  # type: ignore[assignment]
     reasons: collections.Counter[str] = collections.Counter()
@@ -120,6 +135,7 @@ def timed_scan(model: str, views: int, kinematics: str, seed: int) -> dict[str, 
         "move_seconds": sum(float((r.move or {}).get("move_duration") or 0.0) for r in result.records),
         "paths": dict(paths),
         "reasons": reasons,
+        "choices": choices,
     }
 
 
@@ -165,9 +181,13 @@ def main() -> int:
     p.add_argument("--model", default=str(Path("../shared/models/bunny.obj")))
     p.add_argument("--views", type=int, default=10)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--sensor", default="ideal", help="the depth sensor's model (e.g. realsense-d435)")
+    p.add_argument("--calibration", default="none", help="the cell's calibration error (e.g. typical)")
     args = p.parse_args()
-    arm = timed_scan(args.model, args.views, "urdf", args.seed)
-    sphere = timed_scan(args.model, args.views, "reach_sphere", args.seed)
+    camera = CameraConfig(sensor=args.sensor, calibration=args.calibration)
+    arm = timed_scan(args.model, args.views, "urdf", args.seed, camera=camera)
+    uncached = timed_scan(args.model, args.views, "urdf", args.seed, cache=False, camera=camera)
+    sphere = timed_scan(args.model, args.views, "reach_sphere", args.seed, camera=camera)
     print(f"{arm['name']}, {args.views} views, seed {args.seed} (UR5 cell built in {arm['build']:.2f} s)")
     print(f"1. IK + collisions of the 400 candidates, per plan: {stats(arm['reach_per_plan'])}")
     print(f"   its CPU time (the wall time on an idle core): {stats(arm['reach_per_plan_cpu'])}")
@@ -190,6 +210,12 @@ def main() -> int:
         f"   move durations {min(d):.2f}-{max(d):.2f} s (median {statistics.median(d):.2f} s); "
         f"{rrt['differ']} of {rrt['queries']} repeated queries gave other waypoints, {rrt['refused']} refused"
     )
+    print(
+        f"6. without the reachability cache: median plan_seconds {statistics.median(uncached['plan_seconds']):.3f} s "
+        f"(with it {arm_plan:.3f} s); IK + collisions per plan {stats(uncached['reach_per_plan'])}"
+    )
+    same = arm["choices"] == uncached["choices"]
+    print(f"   the same plans (chosen view and eligible set of all {len(arm['choices'])} plans): {same}")
     print(f"robot time of the scan: arm {arm['robot_seconds']:.1f} s, reach sphere {sphere['robot_seconds']:.1f} s")
     print(f"   the arm's move durations (no wall-clock part): {arm['move_seconds']:.6f} s")
     return 0

@@ -277,6 +277,47 @@ class Cell:
             out[i] = self.move_estimate(candidates[int(i)].T_world_camera)
         return out
 
+    def move_times(self, candidates: Sequence[Any], indices: Sequence[int]) -> NDArray[np.float64]:
+        """(K + 1, K + 1) estimated seconds of the move between every two of the current state and the K views
+        ``candidates[indices]`` (``.T_world_camera``; inf to and from an unreachable one): the ``move_times`` of
+        ``Planner.plan``. URDF arm: plate turn + the slowest joint's trapezoid between the views' cached
+        reachability targets (:meth:`ArmReach.nearest_target`, :meth:`ArmReach.move_matrix`; no IK of their own).
+        Reach sphere: plate turn + the camera's straight travel at ``SPHERE_CAMERA_SPEED``."""
+        poses = [candidates[int(i)].T_world_camera for i in indices]
+        n = len(poses) + 1
+        ok = np.ones(n, dtype=bool)
+        if self.kinematics is not None:
+            reach = self.kinematics.reach
+            q0, a0 = self.arm.joint_positions(), self.turntable.angle
+            qs, angles = [np.asarray(q0, dtype=np.float64)], [a0]
+            for k, T in enumerate(poses, start=1):
+                target = reach.nearest_target(T, q0, a0)
+                ok[k] = target is not None
+                qs.append(qs[0] if target is None else target[0])
+                angles.append(a0 if target is None else target[1])
+            times = reach.move_matrix(np.stack(qs), np.array(angles))
+        else:
+            xyz, angles = [self.arm.pose.translation], [self.turntable.angle]
+            for k, T in enumerate(poses, start=1):
+                try:
+                    motion = self.plan_motion(T)
+                except UnreachableError:
+                    ok[k] = False
+                    xyz.append(xyz[0])
+                    angles.append(angles[0])
+                    continue
+                xyz.append(motion.T_base_camera.translation)
+                angles.append(motion.angle)
+            a = np.array(angles)
+            turn = np.abs(np.remainder(a[:, None] - a[None, :] + math.pi, 2 * math.pi) - math.pi)
+            p = np.stack(xyz)
+            travel = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=2)
+            times = turn / math.radians(self.config.arm.turntable_speed_deg) + travel / SPHERE_CAMERA_SPEED
+        times[~ok, :] = math.inf
+        times[:, ~ok] = math.inf
+        np.fill_diagonal(times, 0.0)
+        return times
+
     def is_reachable(self, T_table_camera: Pose) -> bool:
         """Whether the view is reachable (:meth:`reachability`; for the sphere in closed form, no Pose built).
 

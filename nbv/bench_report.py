@@ -6,8 +6,12 @@ ceilings of its (model, placement) pairs. results.csv, per iteration:
 - ``coverage``: fraction of the surface samples with a scanned point within 5 mm;
 - ``reachable_coverage``: the ceiling of the run's (model, yaw) (empty without one), and
   ``coverage_ratio`` = coverage / ceiling;
-- ``auc``, ``views_to_90``, ``views_to_95``, ``views_to_98``: the run's metrics
-  (:mod:`nbv.bench_metrics`), repeated on each of its rows (filter on the last iteration for one a run);
+- ``auc``, ``views_to_90``, ``views_to_95``, ``views_to_98``, ``time_to_90``, ``time_to_95``: the run's metrics
+  (:mod:`workbench.evaluation.curves`; ``time_to_*`` the cumulative robot seconds when coverage / ceiling first
+  reaches 90 / 95 %, the run's total plus its mean per view when never), repeated on each of its rows (filter on
+  the last iteration for one a run);
+- ``robot_seconds``: the view's robot time (move, plate turn, capture, planning); ``cumulative_robot_seconds``
+  its running sum over the run;
 - ``plan_seconds``: frame in -> next view out (integration, candidates, clustering, ellipsoids,
   scoring, selection), as in ``nbv scan``; preprocessing and ICP are timed apart;
 - ``eval_seconds``: the candidate-evaluation stage alone (``timings["score"]``): for
@@ -20,7 +24,8 @@ ceilings of its (model, placement) pairs. results.csv, per iteration:
   :mod:`workbench.surface`), on a run's last row only (empty on the others).
 
 Plots: ``ratio.png`` (coverage / ceiling against view, one panel per model, mean over seeds and
-placements with a ± one standard deviation band), ``coverage.png`` (raw coverage, ceiling dashed),
+placements with a ± one standard deviation band), ``robot.png`` (coverage / ceiling against the cumulative
+robot seconds, a line per run), ``coverage.png`` (raw coverage, ceiling dashed),
 ``time.png`` (plan and evaluation time per view).
 """
 
@@ -37,7 +42,7 @@ from pathlib import Path
 from typing import Any
 
 from nbv.bench_summary import run_metrics_of, summary_markdown
-from workbench.evaluation import ACCURACY_COLUMNS, RunOutcome
+from workbench.evaluation import ACCURACY_COLUMNS, TIME_THRESHOLDS, RunOutcome
 
 COLUMNS = (
     "model",
@@ -57,6 +62,9 @@ COLUMNS = (
     "views_to_90",
     "views_to_95",
     "views_to_98",
+    "cumulative_robot_seconds",
+    "time_to_90",
+    "time_to_95",
     *ACCURACY_COLUMNS,
     "surface_fscore_5mm",
 )
@@ -82,9 +90,12 @@ def result_rows(outcomes: Sequence[RunOutcome], ceilings: Ceilings, views: int) 
                 "views_to_95": m.views_to[1],
                 "views_to_98": m.views_to[2],
             }
+            extra |= {f"time_to_{round(100 * t)}": v for t, v in zip(TIME_THRESHOLDS, m.time_to, strict=False)}
+        cumulative = 0.0
         for row in o.rows:
             ratio = row["coverage"] / ceiling if ceiling and row["coverage"] is not None else None
-            rows.append({"yaw": o.yaw, **row, **extra, "coverage_ratio": ratio})
+            cumulative += float(row.get("robot_seconds") or 0.0)
+            rows.append({"yaw": o.yaw, **row, **extra, "coverage_ratio": ratio, "cumulative_robot_seconds": cumulative})
     return rows
 
 
@@ -160,7 +171,7 @@ def plot(
     views = views or max((len(o.rows) for o in outcomes), default=1) or 1
     colors = {p: f"C{i % 10}" for i, p in enumerate(planners)}
     nrows, ncols = _grid(max(1, len(models)))
-    names = (["ratio"] if ceilings else []) + ["coverage", "time"]
+    names = (["ratio", "robot"] if ceilings else []) + ["coverage", "time"]
     for name in names:
         fig = Figure(figsize=(4.2 * ncols, 3.4 * nrows), layout="constrained")
         FigureCanvasAgg(fig)
@@ -169,6 +180,9 @@ def plot(
             for p in planners:
                 if name == "ratio":
                     _ratio_panel(ax, outcomes, model, p, ceilings, views, colors[p])
+                    continue
+                if name == "robot":
+                    _robot_panel(ax, outcomes, model, p, ceilings, colors[p])
                     continue
                 if name == "coverage":
                     its, ys = _by_iteration(outcomes, model, p, "coverage")
@@ -180,7 +194,7 @@ def plot(
                 _, fit = _by_iteration(outcomes, model, p, "fit_seconds")
                 full = [max(a + b, 1e-6) for a, b in zip(ev, fit, strict=True)]
                 ax.plot(its, full, ls=":", color=colors[p], label=f"{p} eval" + (" + fit" if any(fit) else ""))
-            if name == "ratio":
+            if name in ("ratio", "robot"):
                 for level in (0.9, 0.95):
                     ax.axhline(level, ls=":", lw=0.8, color="0.5")
                 low = min((y for line in ax.get_lines() for y in line.get_ydata()), default=0.0)  # type: ignore[union-attr]
@@ -196,7 +210,7 @@ def plot(
                 ax.set_yscale("log")
                 ax.set_ylabel("seconds per iteration")
             ax.set_title(model)
-            ax.set_xlabel("view")
+            ax.set_xlabel("robot seconds" if name == "robot" else "view")
             ax.xaxis.set_major_locator(MaxNLocator(integer=True))
             ax.grid(True, alpha=0.3)
             if k == 0:
@@ -206,12 +220,32 @@ def plot(
         fig.suptitle(
             {
                 "ratio": "coverage / reachable ceiling against view (mean ± std over seeds and placements)",
+                "robot": "coverage / reachable ceiling against cumulative robot seconds (one line per run)",
                 "coverage": "coverage against view",
                 "time": "plan time (solid), candidate evaluation (dotted)",
             }[name]
         )
         fig.savefig(out / f"{name}.png", dpi=110)
     return [f"{n}.png" for n in names]
+
+
+def _robot_panel(
+    ax: Any, outcomes: Sequence[RunOutcome], model: str, planner: str, ceilings: Ceilings, color: str
+) -> None:
+    """One planner's runs of ``model``: coverage / ceiling against the cumulative robot seconds, a line per run."""
+    first = True
+    for o in outcomes:
+        ceiling = ceilings.get((o.label, o.yaw))
+        if o.error is not None or o.label != model or o.planner != planner or not ceiling:
+            continue
+        xs, ys, total = [], [], 0.0
+        for r in o.rows:
+            total += float(r.get("robot_seconds") or 0.0)
+            if r["coverage"] is not None:
+                xs.append(total)
+                ys.append(r["coverage"] / ceiling)
+        ax.plot(xs, ys, marker="o", ms=2, lw=1, alpha=0.7, color=color, label=planner if first else None)
+        first = False
 
 
 def _ratio_panel(

@@ -11,7 +11,16 @@ from collections import defaultdict
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from workbench.evaluation import THRESHOLDS, Paired, RunMetrics, RunOutcome, mean_std, paired_comparison, run_metrics
+from workbench.evaluation import (
+    THRESHOLDS,
+    TIME_THRESHOLDS,
+    Paired,
+    RunMetrics,
+    RunOutcome,
+    mean_std,
+    paired_comparison,
+    run_metrics,
+)
 
 Row = dict[str, Any]
 
@@ -29,9 +38,13 @@ def run_metrics_of(
     out: dict[RunKey, RunMetrics] = {}
     for o in outcomes:
         ceiling = ceilings.get((o.label, o.yaw))
-        coverage = [r["coverage"] for r in o.rows if r["coverage"] is not None]
+        rows = [r for r in o.rows if r["coverage"] is not None]
+        coverage = [r["coverage"] for r in rows]
+        seconds = [r.get("robot_seconds") for r in rows]
+        timed = [float(s) for s in seconds if isinstance(s, int | float)]  # runs of older benches lack it
         if o.error is None and coverage and ceiling:
-            out[(o.label, o.planner, o.seed, o.yaw)] = run_metrics(coverage, ceiling, views)
+            robot = timed if len(timed) == len(coverage) else None
+            out[(o.label, o.planner, o.seed, o.yaw)] = run_metrics(coverage, ceiling, views, robot)
     return out
 
 
@@ -52,6 +65,8 @@ METRICS: tuple[tuple[str, str, bool, float, int], ...] = (
     ("final", "coverage / ceiling at the last view", True, TIE, 4),
     ("auc", "area under coverage / ceiling (mean over views)", True, TIE, 4),
     ("v95", "views to 95 % of the ceiling", False, 0.0, 2),
+    ("t90", "robot seconds to 90 % of the ceiling", False, 0.0, 2),
+    ("t95", "robot seconds to 95 % of the ceiling", False, 0.0, 2),
 )
 """(key, label, higher is better, tie tolerance, digits) of the paired comparisons."""
 
@@ -73,7 +88,11 @@ def final_fscores(
     return out
 
 
-def _metric(m: RunMetrics, key: str) -> float:
+def _metric(m: RunMetrics, key: str) -> float | None:
+    """The run's value of a :data:`METRICS` key (None: a robot time the run does not have)."""
+    if key.startswith("t"):
+        k = TIME_THRESHOLDS.index(int(key[1:]) / 100)
+        return m.time_to[k] if len(m.time_to) > k else None
     return {"final": m.final_ratio, "auc": m.auc, "v95": float(m.views_to[THRESHOLDS.index(0.95)])}[key]
 
 
@@ -92,11 +111,13 @@ def ceiling_sections(
         note = "No ceiling was computed (`--no-reachable`, or it failed): no normalised metrics."
         return [*lines, note, "", f"## Paired comparison against {reference}", "", note]
     head = ["planner", f"at view {views}", "area under curve", *(f"views to {round(t * 100)} %" for t in THRESHOLDS)]
+    head += [f"robot s to {round(t * 100)} %" for t in TIME_THRESHOLDS]
     body = []
     for p in planners:
         ms = [m for (_, q, _, _), m in metrics.items() if q == p]
         cells = [_pm([m.final_ratio for m in ms], 4), _pm([m.auc for m in ms], 4)]
         cells += [_pm([float(m.views_to[i]) for m in ms], 2) for i in range(len(THRESHOLDS))]
+        cells += [_pm([m.time_to[i] for m in ms if len(m.time_to) > i], 1) for i in range(len(TIME_THRESHOLDS))]
         body.append([p, *cells])
     lines += _table(head, body)
     lines += [
@@ -104,6 +125,9 @@ def ceiling_sections(
         "Coverage divided by the object's reachable ceiling, mean ± standard deviation over models, seeds and",
         "placements. The area under the curve is the mean of coverage / ceiling over views 1..N: it rewards a",
         f"planner that gets there sooner. Views to reach a fraction of the ceiling count {views + 1} when never.",
+        "Robot seconds to reach a fraction of the ceiling: the cumulative robot time (moves, plate turns,",
+        "captures, planning) at the first view that reaches it; when never, the run's total plus its mean per",
+        "view (one more view).",
         "",
         "Area under the curve per model:",
         "",
@@ -128,8 +152,14 @@ def ceiling_sections(
     body = []
     for p in others:
         for key, label, higher, tie, digits in METRICS:
-            mine = {(m, s, y): _metric(v, key) for (m, q, s, y), v in metrics.items() if q == p}
-            ref = {(m, s, y): _metric(v, key) for (m, q, s, y), v in metrics.items() if q == reference}
+            mine = {
+                (m, s, y): x for (m, q, s, y), v in metrics.items() if q == p and (x := _metric(v, key)) is not None
+            }
+            ref = {
+                (m, s, y): x
+                for (m, q, s, y), v in metrics.items()
+                if q == reference and (x := _metric(v, key)) is not None
+            }
             c = paired_comparison(mine, ref, higher_is_better=higher, tie=tie)
             if c is None:
                 body.append([p, label, "0", "–", "–", "–"])
@@ -152,7 +182,7 @@ def ceiling_sections(
         f"Each pair is one (model, seed, placement) scanned by the planner and by {reference}; the difference is",
         f"planner − {reference}. The interval is the 95 % t-interval of the mean difference over the pairs; * marks",
         "one that excludes 0 (a difference larger than the seed-to-seed noise). A win is a better value: higher",
-        f"coverage, fewer views; coverage differences within {TIE} are ties.",
+        f"coverage, fewer views, less robot time; coverage differences within {TIE} are ties.",
     ]
     return lines
 

@@ -15,11 +15,14 @@ from rich.table import Table
 from nbv.options import planner_config_from_args
 from workbench.evaluation import (
     STAGES,
+    TIME_THRESHOLDS,
     IterationRecord,
     SimScan,
+    cumulative_seconds,
     final_accuracy,
     icp_rejections,
     simulate,
+    time_to_reach,
 )
 
 
@@ -39,6 +42,12 @@ def _row(r: IterationRecord) -> str:
 def metrics_json(scan: SimScan, planner_name: str) -> dict[str, Any]:
     """The metrics.json document of issue 2."""
     records = scan.result.records
+    seconds = [r.robot_seconds for r in records]
+    time_to: dict[str, float | None] = {f"time_to_{round(100 * t)}": None for t in TIME_THRESHOLDS}
+    coverage = [r.coverage for r in records]
+    if scan.reachable_coverage and records and all(c is not None for c in coverage):
+        ratios = [float(c) / scan.reachable_coverage for c in coverage if c is not None]
+        time_to = {f"time_to_{round(100 * t)}": time_to_reach(ratios, seconds, t) for t in TIME_THRESHOLDS}
     return {
         "model": scan.model,
         "planner": planner_name,
@@ -56,6 +65,8 @@ def metrics_json(scan: SimScan, planner_name: str) -> dict[str, Any]:
         "terminated": scan.result.terminated,
         "seconds": scan.result.seconds,
         "robot_seconds": scan.result.robot_seconds,
+        "cumulative_robot_seconds": cumulative_seconds(seconds),
+        **time_to,
     }
 
 

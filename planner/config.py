@@ -257,6 +257,51 @@ class SelectionConfig:
 
 
 @dataclass(frozen=True)
+class TourConfig:
+    """The ``tour`` planner (``planner.tour``): a set of views covering the predicted frontier, ordered by move time."""
+
+    horizon: int = 6
+    """Most views in one tour (the set cover stops here): the receding horizon."""
+    min_gain: float = 0.03
+    """The cover stops when the best next view would add less than this fraction of the frontier all eligible views
+    see together."""
+    width: int = 80
+    """Raster columns of the visibility z-buffer per candidate (80 x 60: about one voxel per raster pixel at the
+    working distance for a 640 x 480 camera)."""
+    height: int = 60
+    """Raster rows of the visibility z-buffer."""
+    depth_tolerance_voxels: float = 1.0
+    """A frontier voxel is seen when it is at most this many voxels behind the nearest voxel in its raster pixel."""
+    order: Literal["tsp", "rate", "gain"] = "rate"
+    """Which view of the cover runs next (the rest follow in the shortest order from it): "tsp" the first of the
+    shortest open path (LKH), "rate" the first of the order with the largest area under the predicted coverage
+    against robot time (``planner.tour.rate_order``), "gain" the view with the largest gain."""
+    overhead_seconds: float = 0.0
+    """Seconds each view costs besides its move (capture and plan), in the "rate" order."""
+
+    def __post_init__(self) -> None:
+        require(
+            integer(self.horizon) and 1 <= self.horizon <= 50,
+            f"tour.horizon: an integer in [1, 50], got {self.horizon!r}",
+        )
+        require(
+            finite(self.min_gain) and 0 <= self.min_gain < 1, f"tour.min_gain: must be in [0, 1), got {self.min_gain!r}"
+        )
+        for name in ("width", "height"):
+            n = getattr(self, name)
+            require(integer(n) and 1 <= n <= 1024, f"tour.{name}: must be an integer in [1, 1024], got {n!r}")
+        require(
+            finite(self.depth_tolerance_voxels) and self.depth_tolerance_voxels >= 0,
+            f"tour.depth_tolerance_voxels: must be >= 0, got {self.depth_tolerance_voxels!r}",
+        )
+        require(self.order in ("tsp", "rate", "gain"), f"tour.order: 'tsp', 'rate' or 'gain', got {self.order!r}")
+        require(
+            finite(self.overhead_seconds) and self.overhead_seconds >= 0,
+            f"tour.overhead_seconds: must be >= 0, got {self.overhead_seconds!r}",
+        )
+
+
+@dataclass(frozen=True)
 class TerminationConfig:
     """When Algorithm 1 stops: any of these."""
 
@@ -422,6 +467,7 @@ class PlannerConfig:
     zbuffer: ZBufferConfig = field(default_factory=ZBufferConfig)
     partitions: PartitionConfig = field(default_factory=PartitionConfig)
     selection: SelectionConfig = field(default_factory=SelectionConfig)
+    tour: TourConfig = field(default_factory=TourConfig)
     termination: TerminationConfig = field(default_factory=TerminationConfig)
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
     registration: RegistrationConfig = field(default_factory=RegistrationConfig)

@@ -16,6 +16,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,8 +39,12 @@ from planner.partitions import select_best as select_best_view
 from planner.preprocess import preprocess_frame, voxel_downsample
 from planner.progress import ProgressFn, Stages
 from planner.registration import RegistrationResult, register
-from planner.types import Candidate, DepthFrame, Intrinsics, PlanResult, Pose, VoxelClass
+from planner.types import Candidate, DepthFrame, Intrinsics, PlanResult, Pose, TourPlan, VoxelClass
 from planner.voxel_map import VoxelMap
+
+ChooseFn = Callable[..., tuple[int | None, TourPlan | None]]
+"""An evaluator's own choice (``planner.tour.TourEvaluator.choose``): (scores, candidates, the last view, move_times)
+-> (the next view, the predicted tour)."""
 
 
 @dataclass(frozen=True)
@@ -205,13 +210,18 @@ class Planner:
         reachable: Callable[[Pose], bool] | None = None,
         move_cost: Callable[[Sequence[Candidate], NDArray[np.bool_]], NDArray[np.float64]] | None = None,
         progress: ProgressFn | None = None,
+        move_times: Callable[[Sequence[Candidate], Sequence[int]], NDArray[np.float64]] | None = None,
     ) -> PlanResult:
         """Score every candidate and pick the next best view.
 
         reachable: the cell's check; unreachable candidates are ineligible.
         move_cost: (candidates, eligible (C,) bool) -> (C,) seconds each move would take (inf = unknown), from
         the caller (the planner never sees the arm); asked only when ``selection.move_cost_weight`` > 0, and
-        then the choice trades F against it (:func:`planner.partitions.select_with_move_cost`).
+        then the choice trades F against it (:func:`planner.partitions.select_with_move_cost`). With the ``tour``
+        planner ``PlanResult.move_costs`` comes from ``move_times`` instead.
+        move_times: (candidates, K indices) -> (K + 1, K + 1) seconds between the current state and those views
+        (:data:`planner.tour.MoveTimes`): what an evaluator that chooses by itself (``tour``) orders its views by;
+        without it, straight lines at a nominal speed.
         progress: called with a :class:`planner.progress.PlanProgress` at each stage (candidates,
         reachability, the evaluator's stages, move costs, select) and as its items are done.
         Raises ValueError before the first frame.
@@ -226,7 +236,7 @@ class Planner:
                 "candidates",
                 *(["reachability"] if reachable is not None else []),
                 *getattr(self.evaluator, "stages", ("evaluate",)),
-                *(["move costs"] if weight > 0 and move_cost is not None else []),
+                *(["move costs"] if weight > 0 and (move_cost is not None or move_times is not None) else []),
                 "select",
             ],
             progress,
@@ -266,10 +276,21 @@ class Planner:
 
         t0 = time.perf_counter()
         move_costs = None
-        if weight > 0 and move_cost is not None:
+        tour = None
+        choose = getattr(self.evaluator, "choose", None)
+        if callable(choose):
+            stages("tour", 0, 1)
+            best, tour = cast(ChooseFn, choose)(evaluation.scores, candidates, self.views[-1], move_times)
+            if move_times is not None:  # each eligible candidate's move from here, for the table
+                move_costs = moves_from_here(move_times, candidates, [s.eligible for s in evaluation.scores])
+            stages("select", 0, 1)
+        elif weight > 0 and (move_times is not None or move_cost is not None):
             eligible_now = np.array([s.eligible for s in evaluation.scores], dtype=bool)
             stages("move costs", 0, int(eligible_now.sum()))
-            move_costs = np.asarray(move_cost(candidates, eligible_now), dtype=np.float64)
+            if move_times is not None:  # the cell's cached estimates (no IK of their own)
+                move_costs = moves_from_here(move_times, candidates, eligible_now)
+            else:
+                move_costs = np.asarray(move_cost(candidates, eligible_now), dtype=np.float64)  # type: ignore[misc]
             stages("select", 0, 1)
             best = select_with_move_cost(evaluation.scores, move_costs, weight)
         else:
@@ -295,10 +316,24 @@ class Planner:
             terminated=self.terminated,
             move_costs=move_costs,
             ineligible_reasons=reasons,
+            tour=tour,
         )
         self.last_plan = plan
         stages("select", 1, 1)
         return plan
+
+
+def moves_from_here(
+    move_times: Callable[[Sequence[Candidate], Sequence[int]], NDArray[np.float64]],
+    candidates: Sequence[Candidate],
+    eligible: Sequence[bool] | NDArray[np.bool_],
+) -> NDArray[np.float64]:
+    """(C,) seconds of the move from the current state to each eligible candidate (row 0 of ``move_times``), inf
+    for the others."""
+    idx = [int(i) for i in np.flatnonzero(np.asarray(eligible, dtype=bool))]
+    out = np.full(len(candidates), math.inf)
+    out[idx] = np.asarray(move_times(candidates, idx), dtype=np.float64)[0, 1:]
+    return out
 
 
 def ineligible_reasons(

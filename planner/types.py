@@ -439,6 +439,32 @@ class ViewScore:
     weighted: NDArray[np.float64]
 
 
+@dataclass(frozen=True)
+class TourPlan:
+    """The ``tour`` planner's predicted tour (``planner.tour``): candidate indices in visit order (the first is the
+    plan's next view), the frontier voxels each adds that the views before it do not see, the predicted cumulative
+    move seconds from the current state at each view, and how the order was found ("exact" or "lkh")."""
+
+    views: tuple[int, ...]
+    gains: tuple[int, ...]
+    seconds: tuple[float, ...]
+    method: str
+
+    @property
+    def total_seconds(self) -> float:
+        """Predicted move seconds of the whole tour (0 for an empty one)."""
+        return self.seconds[-1] if self.seconds else 0.0
+
+    def to_json(self) -> dict[str, object]:
+        return {
+            "views": list(self.views),
+            "gains": list(self.gains),
+            "seconds": list(self.seconds),
+            "method": self.method,
+            "total_seconds": self.total_seconds,
+        }
+
+
 @dataclass(frozen=True, eq=False)
 class ClusterFit:
     """The model selection of one voxel kind.
@@ -501,6 +527,8 @@ class PlanResult:
     ineligible_reasons: tuple[str, ...] = ()
     """Per candidate, why it is not eligible ("sector locked", "unreachable", "near a taken view"), "" when it
     is; empty for a PlanResult built without them (e.g. an older caller)."""
+    tour: TourPlan | None = None
+    """The ``tour`` planner's predicted tour from this plan (None for the other planners)."""
 
     @property
     def best(self) -> Candidate | None:

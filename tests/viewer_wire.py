@@ -22,7 +22,7 @@ import zstandard
 from websockets.typing import Subprotocol
 
 SCENE_PREFIXES = ("/map", "/ellipsoids", "/gmm", "/candidates", "/nbv", "/selected", "/views", "/cloud",
-                  "/context/bbox", "/context/sectors", "/context/turntable", "/context/mesh", "/context/session", "/override", "/surface", "/clusters")  # fmt: skip
+                  "/context/bbox", "/context/sectors", "/context/turntable", "/context/mesh", "/context/session", "/override", "/surface", "/clusters", "/tour")  # fmt: skip
 """Node names that only a session draws."""
 
 

@@ -7,6 +7,7 @@ Node names (stable, per client)::
     /gmm/frontier/0                                          2-sigma GMM covariances (debug)
     /candidates                                              one batched mesh, clickable
     /nbv, /selected                                          the planner's choice, the selection
+    /tour/path, /tour/1/frustum, /tour/1/label               the tour planner's predicted tour (numbered, in order)
     /views/7/frustum, /views/7/label                         views taken (new views are added, never re-sent)
     /context/bbox /context/sectors /context/turntable /context/mesh
     /context/session                                         "session ID": which session this scene shows
@@ -190,7 +191,9 @@ class SessionDrawing:
 
     def _draw_plan(self, data: SceneData) -> None:
         self._plan = data.plan
-        for name in ("/map", "/ellipsoids", "/gmm", "/candidates", "/context/bbox", "/context/sectors", "/clusters"):
+        for name in (
+            "/map", "/ellipsoids", "/gmm", "/candidates", "/context/bbox", "/context/sectors", "/clusters", "/tour"
+        ):  # fmt: skip
             self._drop(name)
         self._drawn_lazy -= {"occupied", "frontier", "unknown", "empty", "gmm", "clusters"}
         self._selection_key = None
@@ -209,6 +212,7 @@ class SessionDrawing:
                 wxyz=wxyz, position=pos, cast_shadow=False, receive_shadow=False, side="double",
             ))  # fmt: skip
         self._draw_candidates(plan)
+        self._draw_tour(data)
         self._put("/context/bbox", self.scene.add_line_segments(
             "/context/bbox", box_segments(plan.bbox), COLORS["bbox"], thickness=1.5, thickness_units="screen",
             visible=self.layers["bbox"],
@@ -223,6 +227,31 @@ class SessionDrawing:
             tag = "scanned" if k in plan.scanned_sectors else ("eligible" if k in plan.eligible_sectors else "locked")
             name = f"/context/sectors/{k}"
             self._put(name, self.scene.add_label(name, f"S{k} {tag}", position=pos, font_screen_scale=0.7))
+
+    def _draw_tour(self, data: SceneData) -> None:
+        """The ``tour`` planner's predicted tour: a frustum per view numbered in visit order (with the predicted
+        move seconds until it), and the path from the last view taken through them."""
+        plan = data.plan
+        tour = None if plan is None else plan.tour
+        if plan is None or tour is None or not tour.views:
+            return
+        poses = [plan.candidates[i].T_world_camera for i in tour.views]
+        points = [p.translation for p in poses]
+        if data.views:
+            points.insert(0, data.views[-1].translation)
+        if len(points) > 1:
+            segments = np.stack([np.array(points[:-1]), np.array(points[1:])], axis=1)
+            self._put("/tour/path", self.scene.add_line_segments(
+                "/tour/path", segments, COLORS["tour"], thickness=2.5, thickness_units="screen",
+            ))  # fmt: skip
+        for k, (pose, seconds) in enumerate(zip(poses, tour.seconds, strict=True), start=1):
+            self._put(f"/tour/{k}/frustum", self.scene.add_camera_frustum(
+                f"/tour/{k}/frustum", fov=data.fov_y, aspect=data.aspect, color=COLORS["tour"], wxyz=pose.wxyz,
+                position=pose.translation, scale=0.05, thickness=0.003, cast_shadow=False, receive_shadow=False,
+            ))  # fmt: skip
+            self._put(f"/tour/{k}/label", self.scene.add_label(
+                f"/tour/{k}/label", f"{k} · {seconds:.1f} s", position=pose.translation, font_screen_scale=0.7,
+            ))  # fmt: skip
 
     def _draw_lazy(self, layer: str, data: SceneData) -> None:
         self._drawn_lazy.add(layer)

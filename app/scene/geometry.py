@@ -52,7 +52,7 @@ LAYER_NODES: dict[str, tuple[str, ...]] = {
     "ellipsoids": ("/ellipsoids",),
     "gmm": ("/gmm",),
     "candidates": ("/candidates",),
-    "nbv": ("/nbv", "/selected"),
+    "nbv": ("/nbv", "/selected", "/tour"),
     "views": ("/views",),
     "bbox": ("/context/bbox",),
     "sectors": ("/context/sectors",),
@@ -73,6 +73,7 @@ GROUPS: dict[str, str | None] = {
     "/context/sectors": "sectors",
     "/override": "gizmo",
     "/clusters": "clusters",
+    "/tour": "nbv",
 }
 """Group nodes (empty frames) and the layer that hides them (None: always shown)."""
 
@@ -87,6 +88,7 @@ COLORS: dict[str, tuple[int, int, int]] = {
     "gmm_frontier": (140, 20, 20),
     "nbv": (255, 150, 0),
     "selected": (230, 0, 200),
+    "tour": (0, 150, 190),
     "view": (60, 60, 70),
     "bbox": (30, 30, 30),
     "sector": (130, 60, 200),

@@ -395,6 +395,8 @@ async function loadCandidates() {
   $("plan-id").textContent = S.planId ? `plan ${S.planId}` : "";
   P.Table.items = S.planId ? await api("GET", `/api/sessions/${S.session}/candidates`) : [];
   P.renderTable(S.status ? S.status.selected : null, pick);
+  $("tour-info").textContent = P.tourSummary(P.Table.items);
+  $("tour-info").hidden = !$("tour-info").textContent;
   if (S.viewer) P.renderLegend(await api("GET", `/api/scene/${S.viewer}`));
 }
 

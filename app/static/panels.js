@@ -51,7 +51,9 @@ function renderTable(selected, onPick) {
     const why = c.eligible ? "yes" : esc(c.reason || "no");
     if (!c.eligible && c.reason) tr.title = `not eligible: ${c.reason}`;
     tr.innerHTML = `<td>${c.index}</td><td>${num(c.score)}</td><td>${num(c.frontier)}</td><td>${num(c.occupied)}</td>` +
-      `<td>S${c.sector}</td><td class="why">${why}</td>`;
+      `<td>S${c.sector}</td><td class="why">${why}</td>` +
+      `<td data-testid="move-s">${c.move_seconds == null ? "–" : c.move_seconds.toFixed(1)}</td>` +
+      `<td>${c.tour_order == null ? "" : c.tour_order}</td>`;
     tr.addEventListener("click", () => onPick(c.index));
     tbody.appendChild(tr);
   }
@@ -66,6 +68,14 @@ function renderTable(selected, onPick) {
 function pageOf(index) {
   const at = sortedCandidates().findIndex((c) => c.index === index);
   if (at >= 0) Table.page = Math.floor(at / PAGE_SIZE);
+}
+
+// "tour: 4 views, predicted robot time to done 9.8 s (moves)" from the table's rows ("" without a tour).
+function tourSummary(items) {
+  const tour = items.filter((c) => c.tour_order != null);
+  if (!tour.length) return "";
+  const total = Math.max(...tour.map((c) => c.tour_seconds || 0));
+  return `tour: ${tour.length} views, predicted robot time to done ${total.toFixed(1)} s (moves)`;
 }
 
 function candidateOf(index) {
@@ -253,5 +263,5 @@ function renderHelp() {
   $("help-keys").innerHTML = SHORTCUTS.map(([k, what]) => `<tr><td><kbd>${esc(k)}</kbd></td><td>${esc(what)}</td></tr>`).join("");
 }
 
-window.Panels = { Table, renderTable, pageOf, candidateOf, renderInspector, renderLegend, renderLayers, renderCharts,
+window.Panels = { Table, renderTable, pageOf, candidateOf, tourSummary, renderInspector, renderLegend, renderLayers, renderCharts,
   renderViewNotes, renderPicker, renderCompare, renderHelp, renderProgress, shortModel, num, esc };

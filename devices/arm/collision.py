@@ -91,6 +91,9 @@ class CollisionWorld:
         self._gdata = pin.GeometryData(geometry)
         self._box_center_table = FAR_AWAY.copy()
         self.box: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
+        self._sweep: object | None = None  # the cylinder the padded box sweeps as the plate turns (coal.Cylinder)
+        self._sweep_z = 0.0
+        self._sweep_geoms = [i for i in self._arm_geoms if joints[i] != 0]
 
     @property
     def pair_count(self) -> int:
@@ -105,6 +108,7 @@ class CollisionWorld:
         if lower_table is None or upper_table is None:
             self.box = None
             self._box_center_table = FAR_AWAY.copy()
+            self._sweep = None
             return
         lo = np.asarray(lower_table, dtype=np.float64) - self.arm.config.object_padding
         hi = np.asarray(upper_table, dtype=np.float64) + self.arm.config.object_padding
@@ -118,6 +122,30 @@ class CollisionWorld:
         self._box_center_table = 0.5 * (lo + hi)
         self.geometry.geometryObjects[self._object].geometry = coal.Box(*(hi - lo))
         self._gdata = pin.GeometryData(self.geometry)
+        corners_xy = np.array([[x, y] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])])
+        self._sweep = coal.Cylinder(float(np.max(np.linalg.norm(corners_xy, axis=1))), float(hi[2] - lo[2]))
+        self._sweep_z = float(0.5 * (lo[2] + hi[2]))
+
+    def sweep_free(self, q: NDArray[np.float64]) -> bool:
+        """Whether configuration (n,) ``q`` is free (self, plate, table) and clear of the vertical cylinder about
+        the plate's axis that holds the padded object box at every plate angle: then no turn of the plate can
+        bring the box into the arm standing at ``q`` (a sufficient test; False says nothing). False without a box
+        model only if ``q`` itself collides."""
+        import coal  # pyright: ignore[reportMissingImports]  (under cmeel.prefix)
+
+        if self.collision(q, 0.0) is not None:  # places the geometries at q (the box's angle is irrelevant below)
+            return False
+        if self._sweep is None:
+            return True
+        where = coal.Transform3s(np.eye(3), np.array([0.0, 0.0, self._sweep_z]))
+        request, objects = coal.CollisionRequest(), self.geometry.geometryObjects
+        for i in self._sweep_geoms:
+            result = coal.CollisionResult()
+            placement = self._gdata.oMg[i]
+            tf = coal.Transform3s(placement.rotation, placement.translation)
+            if coal.collide(objects[i].geometry, tf, self._sweep, where, request, result):
+                return False
+        return True
 
     def collision(self, q: NDArray[np.float64], plate_angle: float) -> str | None:
         """None when configuration (n,) ``q`` with the plate at ``plate_angle`` (rad) is free, else the reason."""

@@ -74,6 +74,9 @@ class ArmKinematics:
         self.home: NDArray[np.float64] = np.clip(home, self.model.lower, self.model.upper)
         self.reach = ArmReach(self.model, self.world, self.home)
         self._turn_hits: dict[tuple[bytes, float], str | None] = {}
+        self._sweep_free: dict[bytes, bool] = {}
+        self.use_sweep_test = True
+        """False: every turn is checked on its grid (the reference the sweep test is tested against)."""
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -87,6 +90,7 @@ class ArmKinematics:
         """The object's box (table frame, (3,) corners) the arm must keep clear of; None = no object model yet."""
         self.world.set_object_box(lower_table, upper_table)
         self._turn_hits.clear()
+        self._sweep_free.clear()
 
     def turn_collision(self, q: NDArray[np.float64], angle: float, turn: float) -> str | None:
         """The first collision of the arm standing at (n,) ``q`` while the plate turns from ``angle`` by ``turn``
@@ -94,6 +98,13 @@ class ArmKinematics:
         (``TURN_CHECKS_PER_RADIAN``) plus the end, cached per configuration: the planner's reachability of 400
         views and the move ask the same question with the same answer."""
         q = np.asarray(q, dtype=np.float64)
+        sweep_key = q.tobytes()
+        if self.use_sweep_test and sweep_key not in self._sweep_free:
+            if len(self._sweep_free) >= 10_000:
+                self._sweep_free.clear()
+            self._sweep_free[sweep_key] = self.world.sweep_free(q)
+        if self.use_sweep_test and self._sweep_free[sweep_key]:
+            return None  # clear of everything the box sweeps: no turn collides (the same answer as the checks)
         step = 1.0 / TURN_CHECKS_PER_RADIAN
         n = math.floor(abs(turn) / step)
         offsets = [math.copysign(k * step, turn) for k in range(n + 1)] + [turn]

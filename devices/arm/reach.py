@@ -12,8 +12,10 @@ seeded by the solution of an *anchor*, the centre of the view's cell on a coarse
 for the whole session: with the turntable, successive plans put their candidates in the same cells), then by
 a library of configurations sampled at start-up; results are cached by exact pose; a reach bound answers
 ``no_ik`` for far poses without IK; the plate offset that served the previous view is tried first (the
-verdict does not depend on the order). Collisions are always checked (the object box and the plate angle
-change).
+verdict does not depend on the order). The whole attempt at one plate angle (IK, joint limits, collisions) is
+cached per (view, plate angle, padded object box): a pure function of the three, so a plan whose candidates and
+box are those of an earlier plan (the box changes a few times per scan; the candidates only with it) answers
+from the cache, with the same targets as without it (``tests/devices/test_reach_cache.py``).
 """
 
 from __future__ import annotations
@@ -47,6 +49,8 @@ ANCHOR_AXIS_STEP = 0.1
 """Grid step of the IK anchors' camera axes (per component of the unit z and x axes)."""
 CACHE_SIZE = 20_000
 """IK results kept (cleared when full)."""
+ATTEMPT_CACHE_SIZE = 50_000
+"""Reachability attempts (view, plate angle, object box) kept (cleared when full)."""
 
 
 def rz_matrix(theta: float) -> NDArray[np.float64]:
@@ -104,7 +108,12 @@ class ArmReach:
         self._library, self._library_tree, self._wrist_in_camera, self._root, self.reach = self._seed_library()
         self._cache: dict[tuple[object, ...], tuple[list[NDArray[np.float64]], str | None]] = {}
         self._anchors: dict[tuple[int, ...], NDArray[np.float64] | None] = {}
+        self._attempts: dict[tuple[bytes, bytes, float, bytes], tuple[NDArray[np.float64], Pose] | str] = {}
         self._last_offset = 0
+        self._velocity: list[float] = arm.velocity.tolist()
+        self._acceleration: list[float] = arm.acceleration.tolist()
+        self.use_attempt_cache = True
+        """False: every reachability attempt is computed afresh (the reference the cache is tested against)."""
 
     # ------------------------------------------------------------------ helpers
 
@@ -167,12 +176,25 @@ class ArmReach:
     def move_estimate(
         self, q_from: NDArray[np.float64], q_to: NDArray[np.float64], angle_from: float, angle_to: float
     ) -> float:
-        """Seconds of a rest-to-rest move: turntable at its speed, then the slowest joint (trapezoid profile)."""
+        """Seconds of a rest-to-rest move: turntable at its speed, then the slowest joint (trapezoid profile).
+        Plain floats (it runs for every candidate of every plan); :meth:`move_matrix` is the same for many pairs."""
         turn = abs(wrap(angle_to - angle_from)) / math.radians(self.arm.config.turntable_speed_deg)
-        dq = np.abs(np.asarray(q_to) - np.asarray(q_from))
+        slowest = 0.0
+        for a_from, a_to, v, a in zip(q_from.tolist(), q_to.tolist(), self._velocity, self._acceleration, strict=True):
+            dq = abs(a_to - a_from)
+            slowest = max(slowest, dq / v + v / a if dq > v * v / a else 2.0 * math.sqrt(dq / a))
+        return turn + slowest
+
+    def move_matrix(self, q: NDArray[np.float64], angles: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(K, K) seconds of the rest-to-rest move between every two of K states (:meth:`move_estimate`'s model):
+        q (K, n) joints, angles (K,) plate angles (rad). Symmetric, 0 on the diagonal."""
+        q = np.asarray(q, dtype=np.float64)
+        angles = np.asarray(angles, dtype=np.float64)
+        turn = np.abs(np.remainder(angles[:, None] - angles[None, :] + math.pi, 2 * math.pi) - math.pi)
+        dq = np.abs(q[:, None, :] - q[None, :, :])
         v, a = self.arm.velocity, self.arm.acceleration
         t = np.where(dq > v * v / a, dq / v + v / a, 2.0 * np.sqrt(dq / a))
-        return float(turn + (np.max(t) if len(t) else 0.0))
+        return turn / math.radians(self.arm.config.turntable_speed_deg) + t.max(axis=2, initial=0.0)
 
     def _ik(
         self, T_base_camera: Pose, reference: NDArray[np.float64], *, first: bool
@@ -278,6 +300,53 @@ class ArmReach:
         return (best, None) if best is not None else (None, worst)
 
     def _try(
+        self, T_table_camera: Pose, angle: float, q_current: NDArray[np.float64], angle_current: float, *, first: bool
+    ) -> tuple[ArmTarget | None, str | None]:
+        if not first or not self.use_attempt_cache:
+            return self._attempt(T_table_camera, angle, q_current, angle_current, first=first)
+        key = self._attempt_key(T_table_camera, angle)
+        hit = self._attempts.get(key)
+        if hit is None:
+            target, reason = self._attempt(T_table_camera, angle, q_current, angle_current, first=True)
+            hit = (target.q, target.T_base_camera) if target is not None else str(reason)
+            if len(self._attempts) >= ATTEMPT_CACHE_SIZE:
+                self._attempts.clear()
+            self._attempts[key] = hit
+            return target, reason
+        if isinstance(hit, str):
+            return None, hit
+        q, T_base_camera = hit
+        return ArmTarget(angle, q, T_base_camera, self.move_estimate(q_current, q, angle_current, angle)), None
+
+    def _attempt_key(self, T_table_camera: Pose, angle: float) -> tuple[bytes, bytes, float, bytes]:
+        box = self.world.box
+        padded = b"" if box is None else box[0].tobytes() + box[1].tobytes()
+        return T_table_camera.translation.tobytes(), T_table_camera.rotation.tobytes(), float(angle), padded
+
+    def cached_target(self, T_table_camera: Pose, angle: float) -> tuple[NDArray[np.float64], Pose] | None:
+        """(q (n,), T_base_camera) of the reachability attempt at plate ``angle`` with the current object box, if
+        one was cached and found a free target (the tour's move times come from here: no IK of their own)."""
+        key = self._attempt_key(T_table_camera, angle)
+        hit = self._attempts.get(key)
+        return None if hit is None or isinstance(hit, str) else hit
+
+    def nearest_target(
+        self, T_table_camera: Pose, q_current: NDArray[np.float64], angle_current: float
+    ) -> tuple[NDArray[np.float64], float] | None:
+        """(q (n,), plate angle) of the cached reachability target of a view with the shortest move from the
+        current state (the view's reachability is asked first if no attempt of it is cached); None if unreachable.
+        No IK of its own: the tour's move times come from the same cache as reachability."""
+        found: list[tuple[NDArray[np.float64], float]] = []
+        for angle in self.plate_angles(T_table_camera, angle_current):
+            hit = self.cached_target(T_table_camera, angle)
+            if hit is not None:
+                found.append((hit[0], angle))
+        if not found:
+            target, _ = self.reachability(T_table_camera, q_current, angle_current)
+            return None if target is None else (target.q, target.angle)
+        return min(found, key=lambda f: self.move_estimate(q_current, f[0], angle_current, f[1]))
+
+    def _attempt(
         self, T_table_camera: Pose, angle: float, q_current: NDArray[np.float64], angle_current: float, *, first: bool
     ) -> tuple[ArmTarget | None, str | None]:
         R = rz_matrix(angle)

@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 
 from nbv.bench import RunOutcome, RunTask, run_tasks
-from nbv.bench_report import COLUMNS, summary_markdown
+from nbv.bench_report import COLUMNS, result_rows, summary_markdown
 from nbv.cli import main
 from planner.config import PlannerConfig
 from planner.evaluators import EVALUATORS
@@ -108,7 +108,7 @@ def check_outputs(out: Path, reachable: bool) -> list[dict[str, str]]:
     assert "| planner | l-block | average per iteration |" in text
     assert "| random |" in text and "×" in text
     assert "eval + fit" in text
-    for name in ("coverage.png", "time.png", *(["ratio.png"] if reachable else [])):
+    for name in ("coverage.png", "time.png", *(["ratio.png", "robot.png"] if reachable else [])):
         width, height = png_size(out / name)
         assert width > 200 and height > 200
     return rows
@@ -208,10 +208,28 @@ def test_summary_numbers() -> None:
     assert "| projection | 0.8000 | 0.8000 |" in text
     assert "| reachable (ceiling) | 0.9000 | 0.9000 |" in text
     # coverage / ceiling: projection 0.8 / 0.9 at both views, raycast-oa 0.7 / 0.9
-    assert "| projection | 0.8889 | 0.8889 | 3.00 | 3.00 | 3.00 |" in text
+    assert "| projection | 0.8889 | 0.8889 | 3.00 | 3.00 | 3.00 | – | – |" in text  # no robot seconds: no times
     assert "| raycast-oa | coverage / ceiling at the last view | 1 | -0.1111 | – | 0 / 0 / 1 |" in text
     assert "| raycast-oa | views to 95 % of the ceiling | 1 | +0.00 | – | 0 / 1 / 0 |" in text
     assert "| raycast-oa | surface F@5mm at the last view | 1 | -0.1000 | – | 0 / 0 / 1 |" in text
+
+
+def test_summary_and_rows_give_robot_time_to_coverage() -> None:
+    fast, slow = _outcome("tour", [0.1, 0.1, 0.1], [0, 0, 0], 0.9), _outcome("projection", [0.1] * 3, [0] * 3, 0.9)
+    for o, seconds, coverage in ((fast, [1.0, 2.0, 3.0], [0.5, 0.86, 0.9]), (slow, [1.0, 5.0, 5.0], [0.5, 0.82, 0.85])):
+        for row, t, c in zip(o.rows, seconds, coverage, strict=True):
+            row["robot_seconds"], row["coverage"] = t, c
+    meta = {"models": ["m"], "planners": ["projection", "tour"], "seeds": [0], "views": 3, "resolution": 0.02}
+    meta |= {"candidates": 40, "jobs": 1, "threads": None, "wall_seconds": 1.0}
+    text = summary_markdown([slow, fast], meta, {("m", 0.0): 0.9})
+    # ceiling 0.9: tour reaches 90 % (0.81) at view 2 (3 s) and 95 % (0.855) at view 2 too; projection reaches
+    # 90 % at view 2 (6 s) and 95 % never: its total 11 s plus its mean per view 11 / 3 s
+    assert "| tour | robot seconds to 90 % of the ceiling | 1 | -3.00 | – | 1 / 0 / 0 |" in text
+    assert "| tour | robot seconds to 95 % of the ceiling | 1 | -11.67 | – | 1 / 0 / 0 |" in text
+    rows = {(r["planner"], r["iteration"]): r for r in result_rows([slow, fast], {("m", 0.0): 0.9}, 3)}
+    assert rows[("projection", 3)]["cumulative_robot_seconds"] == pytest.approx(11.0)
+    assert rows[("projection", 1)]["time_to_95"] == pytest.approx(11.0 * 4 / 3)
+    assert rows[("tour", 1)]["time_to_90"] == rows[("tour", 1)]["time_to_95"] == pytest.approx(3.0)
 
 
 @pytest.mark.parametrize(

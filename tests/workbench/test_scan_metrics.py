@@ -90,3 +90,27 @@ def test_a_clear_difference_is_significant() -> None:
     planner = {k: v + 0.05 + 0.002 * (k % 2) for k, v in ref.items()}
     p = paired_comparison(planner, ref)
     assert p is not None and p.significant and p.low is not None and p.low > 0.04
+
+
+def test_time_to_reach_is_the_cumulative_robot_time_or_a_penalty() -> None:
+    from workbench.evaluation import TIME_THRESHOLDS, cumulative_seconds, time_to_reach
+    from workbench.evaluation.curves import ceiling_metrics
+
+    seconds = [0.5, 3.0, 4.0, 2.5]
+    assert cumulative_seconds(seconds) == [0.5, 3.5, 7.5, 10.0]
+    ratios = [0.4, 0.91, 0.94, 0.96]
+    assert [time_to_reach(ratios, seconds, t) for t in TIME_THRESHOLDS] == [3.5, 10.0]
+    assert time_to_reach(ratios, seconds, 0.99) == pytest.approx(12.5)  # never: 10 s + one more view of 2.5 s
+    with pytest.raises(ValueError, match=r"^ratios, seconds: need the same number"):
+        time_to_reach(ratios, seconds[:2], 0.9)
+    with pytest.raises(ValueError, match=r"^seconds: must be finite"):
+        cumulative_seconds([1.0, -2.0])
+    # the session's metrics: the times when every view has its robot seconds, None otherwise
+    its: list[dict[str, float | None]] = [
+        {"coverage": 0.9 * r, "robot_seconds": s} for r, s in zip(ratios, seconds, strict=True)
+    ]
+    m = ceiling_metrics(its, 0.9)
+    assert m["time_to_90"] == pytest.approx(3.5) and m["time_to_95"] == pytest.approx(10.0)
+    assert m["robot_seconds"] == pytest.approx([0.5, 3.5, 7.5, 10.0])
+    its[1]["robot_seconds"] = None
+    assert ceiling_metrics(its, 0.9)["time_to_95"] is None

@@ -2,7 +2,8 @@
 
 - accuracy.py: GroundTruth, Accuracy, accuracy: precision, recall and F at 2 and 5 mm, distances, chamfer;
 - coverage.py: ground-truth coverage (the fraction of surface samples a cloud point is near);
-- curves.py: coverage against the ceiling per view, its area, views-to-X, means and paired comparisons;
+- curves.py: coverage against the ceiling per view, its area, views-to-X, robot time to X, means and paired
+  comparisons;
 - ceiling.py: the reachable-coverage ceiling by visibility (one occlusion ray per sample and view) and by
   rendering (the reference);
 - object_ceiling.py: the ceiling of one (mesh, placement, cell), keyed and cached on disk;
@@ -18,13 +19,16 @@ from workbench.evaluation.ceiling import DEFAULT_CEILING, CeilingConfig
 from workbench.evaluation.coverage import coverage
 from workbench.evaluation.curves import (
     THRESHOLDS,
+    TIME_THRESHOLDS,
     Paired,
     RunMetrics,
     area_under_curve,
+    cumulative_seconds,
     mean_std,
     paired_comparison,
     ratio_curve,
     run_metrics,
+    time_to_reach,
     views_to_reach,
 )
 from workbench.evaluation.executors import execute, one_line, run_dask, run_local
@@ -49,6 +53,7 @@ __all__ = [
     "STAGES",
     "TAUS_MM",
     "THRESHOLDS",
+    "TIME_THRESHOLDS",
     "Accuracy",
     "Ceiling",
     "CeilingConfig",
@@ -66,6 +71,7 @@ __all__ = [
     "cached_ceiling",
     "ceiling_mask",
     "coverage",
+    "cumulative_seconds",
     "execute",
     "final_accuracy",
     "fscore",
@@ -82,5 +88,6 @@ __all__ = [
     "run_metrics",
     "run_scan",
     "simulate",
+    "time_to_reach",
     "views_to_reach",
 ]

@@ -7,6 +7,10 @@ Pure functions over numbers, no files and no runs:
 - :func:`area_under_curve`: the mean of that curve over views 1..N, in [0, 1] when coverage <= ceiling;
   a planner that gets there sooner scores higher even when every planner ends at the same coverage;
 - :func:`views_to_reach`: the first view whose ratio is >= a threshold (N + 1 when never);
+- :func:`cumulative_seconds` and :func:`time_to_reach`: robot time to coverage, the cumulative robot seconds
+  (moves, plate turns, captures, planning) at the first view whose ratio is >= a threshold; when the run never
+  gets there, its total robot seconds plus its mean seconds per view (the time of one more view, as
+  views-to-reach counts N + 1);
 - :func:`mean_std` over seeds and placements;
 - :func:`paired_comparison` of a planner against a reference planner over the same (model, seed,
   placement) triples: mean difference, its 95 % t-interval over the pairs, and wins / ties / losses.
@@ -24,6 +28,8 @@ K = TypeVar("K")
 
 THRESHOLDS = (0.90, 0.95, 0.98)
 """Fractions of the ceiling for the views-to-reach columns (``views_to_90`` ...)."""
+TIME_THRESHOLDS = (0.90, 0.95)
+"""Fractions of the ceiling for the robot-time-to-reach columns (``time_to_90``, ``time_to_95``)."""
 
 
 def ratio_curve(coverage: Sequence[float], ceiling: float, views: int) -> list[float]:
@@ -61,6 +67,31 @@ def views_to_reach(curve: Sequence[float], threshold: float) -> int:
     return len(curve) + 1
 
 
+def cumulative_seconds(seconds: Sequence[float]) -> list[float]:
+    """(n,) the running sum of per-view robot ``seconds`` (n,): the robot time when each view's plan is done."""
+    out, total = [], 0.0
+    for s in seconds:
+        value = float(s)
+        if not (math.isfinite(value) and value >= 0):
+            raise ValueError(f"seconds: must be finite and >= 0, got {s!r}")
+        total += value
+        out.append(total)
+    return out
+
+
+def time_to_reach(ratios: Sequence[float], seconds: Sequence[float], threshold: float) -> float:
+    """Cumulative robot seconds at the first view whose coverage / ceiling (``ratios`` (n,), the views actually
+    taken) is >= ``threshold``; ``seconds`` (n,) the robot seconds of each view. Never reached: the total plus the
+    mean per view (documented penalty: one more view). ValueError for no view or lengths that differ."""
+    if not ratios or len(ratios) != len(seconds):
+        raise ValueError(f"ratios, seconds: need the same number (>= 1) of views, got {len(ratios)} and {len(seconds)}")
+    cumulative = cumulative_seconds(seconds)
+    for ratio, t in zip(ratios, cumulative, strict=True):
+        if ratio >= threshold - 1e-12:
+            return t
+    return cumulative[-1] * (1.0 + 1.0 / len(cumulative))
+
+
 @dataclass(frozen=True)
 class RunMetrics:
     """The ceiling-normalised metrics of one run."""
@@ -71,12 +102,22 @@ class RunMetrics:
     """Mean of coverage / ceiling over views 1..N."""
     views_to: tuple[int, ...]
     """Views to reach each of :data:`THRESHOLDS` of the ceiling (N + 1 when never)."""
+    time_to: tuple[float, ...] = ()
+    """Robot seconds to reach each of :data:`TIME_THRESHOLDS` of the ceiling (:func:`time_to_reach`); empty when
+    the run's robot seconds are not known."""
 
 
-def run_metrics(coverage: Sequence[float], ceiling: float, views: int) -> RunMetrics:
-    """:class:`RunMetrics` of one run (see :func:`ratio_curve` for the arguments)."""
+def run_metrics(
+    coverage: Sequence[float], ceiling: float, views: int, robot_seconds: Sequence[float] | None = None
+) -> RunMetrics:
+    """:class:`RunMetrics` of one run (see :func:`ratio_curve` for the arguments; ``robot_seconds``: (n,) per
+    view taken, for the robot time to coverage)."""
     curve = ratio_curve(coverage, ceiling, views)
-    return RunMetrics(curve[-1], area_under_curve(curve), tuple(views_to_reach(curve, t) for t in THRESHOLDS))
+    time_to: tuple[float, ...] = ()
+    if robot_seconds is not None:
+        taken = [float(c) / ceiling for c in coverage]
+        time_to = tuple(time_to_reach(taken, robot_seconds, t) for t in TIME_THRESHOLDS)
+    return RunMetrics(curve[-1], area_under_curve(curve), tuple(views_to_reach(curve, t) for t in THRESHOLDS), time_to)
 
 
 def mean_std(values: Sequence[float]) -> tuple[float | None, float | None]:
@@ -147,18 +188,26 @@ def paired_comparison(
 
 def ceiling_metrics(iterations: Sequence[Mapping[str, object]], ceiling: float | None) -> dict[str, object]:
     """What a session reports against its ceiling: ``{"ceiling", "coverage_ratio": [...] per view, "auc",
-    "views_to_90", "views_to_95", "views_to_98"}`` over the views taken so far (None without a ceiling or a
-    view with a coverage).
+    "views_to_90", "views_to_95", "views_to_98", "robot_seconds": [...] cumulative per view, "time_to_90",
+    "time_to_95"}`` over the views taken so far (None without a ceiling or a view with a coverage; the robot
+    times also None unless every view has its ``robot_seconds``).
 
-    iterations: the session record's iterations (each with a ``coverage``, None without ground truth).
+    iterations: the session record's iterations (each with a ``coverage``, None without ground truth, and
+    ``robot_seconds``: the view's move, capture and plan seconds).
     """
     coverage = [float(c) for c in (it.get("coverage") for it in iterations) if isinstance(c, int | float)]
-    out: dict[str, object] = {"ceiling": ceiling, "coverage_ratio": None, "auc": None}
+    seconds = [s for s in (it.get("robot_seconds") for it in iterations) if isinstance(s, int | float)]
+    out: dict[str, object] = {"ceiling": ceiling, "coverage_ratio": None, "auc": None, "robot_seconds": None}
     out |= {f"views_to_{round(100 * t)}": None for t in THRESHOLDS}
+    out |= {f"time_to_{round(100 * t)}": None for t in TIME_THRESHOLDS}
+    if len(seconds) == len(iterations) and seconds:
+        out["robot_seconds"] = cumulative_seconds(seconds)
     if ceiling is None or not coverage:
         return out
-    metrics = run_metrics(coverage, ceiling, len(coverage))
+    timed = len(seconds) == len(coverage) == len(iterations)
+    metrics = run_metrics(coverage, ceiling, len(coverage), seconds if timed else None)
     out["coverage_ratio"] = ratio_curve(coverage, ceiling, len(coverage))
     out["auc"] = metrics.auc
     out |= {f"views_to_{round(100 * t)}": v for t, v in zip(THRESHOLDS, metrics.views_to, strict=True)}
+    out |= {f"time_to_{round(100 * t)}": v for t, v in zip(TIME_THRESHOLDS, metrics.time_to, strict=False)}
     return out

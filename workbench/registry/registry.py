@@ -233,8 +233,9 @@ class SessionRegistry:
         if self.engine is not None:
             worker = self.engine.worker(sid, render_spec(parts.cell, devices.cell))
             worker.truth = truth_spec(parts.mesh, parts.surface_samples)
+            worker.warm = (parts.cell.config, parts.cell.joint_positions(), parts.cell.angle, config)
             offload_rendering(parts.cell, worker, s.capture_budget)
-            worker.start_soon()
+            worker.start_soon()  # and warm its planning cell while the person looks at the page and captures
         session = Session(
             sid,
             parts,

@@ -436,6 +436,8 @@ class SessionCore:
                     plan_id=decision.plan_id,
                     device_state=self.cell.device_state(),
                     surface_fscore_5mm=None if outcome.surface is None else outcome.surface.fscore_5mm,
+                    move_seconds=outcome.move_seconds,
+                    capture_seconds=outcome.capture_seconds,
                 )
             except OSError:
                 if stored is not None:

@@ -81,6 +81,9 @@ class SessionRecord:
                 "refused": self._refused_since,
                 "timings": ev.get("timings", {}),
                 "plan_seconds": None,
+                "move_seconds": ev.get("move_seconds"),
+                "capture_seconds": ev.get("capture_seconds"),
+                "robot_seconds": None,
             }
         )
         self._refused_since = []
@@ -110,6 +113,8 @@ class SessionRecord:
         for record in reversed(self.iterations):  # the plan's time also goes on the view it was made at
             if record["iteration"] == ev["iteration"]:
                 record["plan_seconds"] = seconds
+                if record.get("move_seconds") is not None:  # the view's robot time: move, capture, plan
+                    record["robot_seconds"] = record["move_seconds"] + (record.get("capture_seconds") or 0.0) + seconds
                 break
 
     def metrics(self) -> dict[str, Any]:
@@ -118,6 +123,7 @@ class SessionRecord:
         return {
             "iterations": [
                 {k: r[k] for k in ("iteration", "coverage", "points", "plan_seconds", "decision")}
+                | {"robot_seconds": r.get("robot_seconds")}
                 | {"surface_fscore_5mm": r.get("surface_fscore_5mm")}
                 | {k: (r.get("accuracy") or {}).get(k) for k in VIEW_ACCURACY}
                 for r in self.iterations

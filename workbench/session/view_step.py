@@ -11,6 +11,7 @@ session's error message and the domain error its caller receives.
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -58,6 +59,10 @@ class ViewOutcome:
     """The session's surface after the view (workbench/surface/live.py)."""
     accuracy: dict[str, Any] | None = None
     """The cloud's accuracy against the ground truth after the view (``Accuracy.to_json``), None without one."""
+    move_seconds: float | None = None
+    """The robot seconds of the move to the view (``Motion.duration``: plate turn + trajectory), None unknown."""
+    capture_seconds: float | None = None
+    """Wall seconds of the capture."""
 
 
 @dataclass
@@ -100,12 +105,16 @@ class ViewStep:
                 self._moving = exc.pending
                 raise
             moved()
+            motion = getattr(self.cell, "last_motion", None)
+            move_seconds = None if motion is None else float(motion.duration)
+            t_capture = time.perf_counter()
             try:
                 frame = call_with_timeout(self.cell.capture, self.capture_timeout, "camera capture")
             except DeviceTimeoutError:
                 if self.worker is not None:
                     self.worker.cancel("the capture timed out")  # a render still running is killed
                 raise
+            capture_seconds = time.perf_counter() - t_capture
             if self.journal is not None:
                 stored = self.journal.write_frame(planner.iteration + 1, frame)
             journal_dir = None if self.journal is None else self.journal.directory
@@ -126,7 +135,19 @@ class ViewStep:
         cov = None if self.surface_samples is None else float(coverage(self.surface_samples, after.cloud))
         scores = None if self.truth is None else accuracy(self.truth, after.cloud).to_json()
         occupied = after.voxel_map.centers(VoxelClass.OCCUPIED)
-        return ViewOutcome(frame, report, stored, voxel_counts(after), cov, occupied, after, surface, scores)
+        return ViewOutcome(
+            frame,
+            report,
+            stored,
+            voxel_counts(after),
+            cov,
+            occupied,
+            after,
+            surface,
+            scores,
+            move_seconds,
+            capture_seconds,
+        )
 
     def discard_frame(self, name: str) -> None:
         """Remove a stored frame whose view was not taken (rejected, or its event could not be journaled)."""

@@ -21,6 +21,9 @@ and a fresh worker takes up the next job. Jobs:
 - ``("timeline", (journal, cell_config, q, angle, surface_samples))``: ``("progress", (stage, done, total))``
   messages on the way, then the ``TimelineStep`` of every kept view (workbench/journal/timeline.py); the worker's
   own surface stays as it was (a timeline reads the journal only, it changes nothing of the session);
+- ``("warm", (cell_config, q, angle, planner_config))`` once per process, right after it starts (while the person
+  captures): the planning cell's arm model built, the planner's modules imported and the reachability of the
+  first plan's candidates cached, so the session's first plan does not pay for them (:meth:`_Worker.warm`);
 - ``("fit", (points_world, cluster_config, resolution, kind, t))``: ``(ellipsoids, ClusterFit)`` of one voxel
   kind at exactly T components (``planner.ellipsoids.fit_at_t``: the Fit panel's "fit at another T").
 
@@ -30,6 +33,7 @@ target of its processes, and the forkserver preloads it so a new worker starts i
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
@@ -50,6 +54,10 @@ from workbench.journal.timeline import TimelineStep
 from workbench.planning import plan_in
 from workbench.progress import Throttle
 from workbench.surface.live import LiveSurface
+
+WARM_BOX = ((-0.1, -0.1, 0.0), (0.1, 0.1, 0.2))
+"""The nominal object box (table frame, m) whose hemisphere a new worker's IK is warmed on: an object of the default
+0.2 m size on the plate."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -168,6 +176,38 @@ class _Worker:
             state[1].reset(angle)
         return cell
 
+    def warm(self, config: CellConfig, q: NDArray[np.float64] | None, angle: float, planner_config: Any = None) -> None:
+        """Build the planning cell of ``config`` (the arm model: URDF, collision world, IK seed library), import what
+        a plan runs, and fill the reachability cache of the first plan's candidates with the arm at ``q``: in a
+        simulated session (a render scene is set up) the candidates about the box the first frame at the cell's
+        initial view gives ``planner_config``'s map (the frame rendered here, noise-free); otherwise about a
+        nominal box (``WARM_BOX``). Reachability is a pure function of the view and the object box, so the plans
+        are the same as without it; only the first one is faster."""
+        import planner.baselines
+        import planner.bic_search
+        import planner.tour  # noqa: F401
+        from planner import PlannerConfig
+        from planner.candidates import propose_candidates
+        from planner.types import BoundingBox
+
+        cell = self.reach(config, q, angle)
+        if cell.kinematics is None:
+            return
+        cfg = planner_config if isinstance(planner_config, PlannerConfig) else PlannerConfig()
+        box = BoundingBox(np.array(WARM_BOX[0]), np.array(WARM_BOX[1]))
+        if self.camera is not None:
+            pose = cell.initial_pose()
+            scratch = Planner(cfg)
+            with contextlib.suppress(ValueError):  # nothing on the object from there: the nominal box
+                scratch.integrate(DepthFrame(self.camera.render(pose), pose, self.camera.intrinsics))
+            if scratch.voxel_map.bbox is not None:
+                box = scratch.voxel_map.bbox
+        candidates, _, _ = propose_candidates(box, cfg.candidates, cfg.partitions)
+        cell.set_object_box(box)
+        for c in candidates:
+            cell.is_reachable(c.T_world_camera)
+        cell.set_object_box(None)
+
     def rebuild(self, payload: Any, send: Callable[[Any], None] | None) -> Rebuilt:
         """:func:`workbench.journal.rebuild.rebuild` of a journal in this worker's planning cell; the replayed
         captures' plans stay here (the pending and last plans travel in the result)."""
@@ -212,6 +252,8 @@ class _Worker:
             return None
         if kind == "render":
             return self.render(payload)
+        if kind == "warm":
+            return self.warm(*cast(tuple[CellConfig, Any, float, Any], payload))
         if kind == "plan":
             planner, config, q, angle = cast(tuple[Planner, CellConfig, Any, float], payload)
             report = _Throttled(send) if send is not None else None

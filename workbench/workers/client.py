@@ -87,6 +87,9 @@ class SessionWorker:
         self.render_spec = render
         self.truth: TruthSpec | None = None
         """The ground truth shipped to each new process (the surface is scored in the worker), None: not scored."""
+        self.warm: tuple[Any, Any, float, Any] | None = None
+        """(cell config, joints, plate angle, planner config) each new process warms its planning cell with (the
+        ``warm`` job) after its setup, None: no warm-up."""
         self.busy = False
         self.jobs = 0
         self._job_lock = threading.Lock()  # one job at a time
@@ -255,7 +258,7 @@ class SessionWorker:
             self._kill()
             raise JobKilled("the session is closed")
         log.debug("session %s: worker %d started", self.name, proc.pid)
-        for kind, spec in (("setup", self.render_spec), ("truth", self.truth)):
+        for kind, spec in (("setup", self.render_spec), ("truth", self.truth), ("warm", self.warm)):
             if spec is None:
                 continue
             try:

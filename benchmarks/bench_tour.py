@@ -1,0 +1,132 @@
+"""Robot time to coverage: the ``tour`` planner against the greedy ones, from finished ``nbv bench`` runs (issue 25).
+
+Reads the results.csv and runs.json of one or more bench directories (e.g. one with ``projection,tour`` on every
+mesh and one with ``raycast-apora`` on fewer), pairs the runs by (model, seed, placement), and prints for every
+planner against ``--reference`` (and ``--also``): the mean robot seconds to 95 % / 90 % of the ceiling, the
+relative change of the mean, the paired mean difference with its 95 % t-interval, the AUC over views and final
+coverage / ceiling differences (points), and the median plan time. (``nbv bench`` writes the same robot-time
+rows into its own summary.md; this script pairs runs of several benches.)
+
+    nbv bench --models ../shared/models/*.{obj,ply} ../shared/models/extra/*.{obj,off} \\
+        --planners projection,tour --seeds 2 --yaws 0,90 --out out/tour-ideal
+    .venv/bin/python benchmarks/bench_tour.py out/tour-ideal [more dirs] [--reference projection]
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import statistics
+from pathlib import Path
+from typing import Any
+
+from workbench.evaluation import RunMetrics, RunOutcome, paired_comparison, run_metrics
+
+INTEGER = {"seed", "iteration", "points", "views_to_90", "views_to_95", "views_to_98"}
+TEXT = {"model", "planner"}
+
+
+def _value(key: str, text: str) -> Any:
+    if text == "":
+        return None
+    if key in TEXT:
+        return text
+    return int(float(text)) if key in INTEGER else float(text)
+
+
+def load(directory: Path) -> tuple[list[RunOutcome], dict[tuple[str, float], float]]:
+    """The finished runs of a bench directory and its ceilings per (model, yaw)."""
+    rows: dict[tuple[str, str, int, float], list[dict[str, Any]]] = {}
+    ceilings: dict[tuple[str, float], float] = {}
+    with (directory / "results.csv").open() as fh:
+        for raw in csv.DictReader(fh):
+            row = {k: _value(k, v) for k, v in raw.items()}
+            key = (row["model"], row["planner"], row["seed"], row["yaw"])
+            rows.setdefault(key, []).append(row)
+            if row["reachable_coverage"] is not None:
+                ceilings[(row["model"], row["yaw"])] = row["reachable_coverage"]
+    outcomes = []
+    for run in json.loads((directory / "runs.json").read_text()):
+        key = (run["model"], run["planner"], run["seed"], float(run["yaw"]))
+        o = RunOutcome(run["model"], run["planner"], run["seed"], float(run["yaw"]))
+        o.rows = sorted(rows.get(key, []), key=lambda r: r["iteration"])
+        o.poses, o.terminated, o.seconds, o.error = run["poses"], run["terminated"], run["seconds"], run["error"]
+        o.refused_moves, o.icp_rejected = run.get("refused_moves", []), run.get("icp_rejected", [])
+        outcomes.append(o)
+    return outcomes, ceilings
+
+
+def metrics_of(
+    outcomes: list[RunOutcome], ceilings: dict[tuple[str, float], float], views: int
+) -> dict[tuple[str, str, int, float], RunMetrics]:
+    """(model, planner, seed, yaw) -> the run's metrics with its robot times, for finished runs with a ceiling."""
+    out = {}
+    for o in outcomes:
+        ceiling = ceilings.get((o.label, o.yaw))
+        rows = [r for r in o.rows if r["coverage"] is not None]
+        if o.error is None and rows and ceiling:
+            seconds = [float(r["robot_seconds"] or 0.0) for r in rows]
+            out[(o.label, o.planner, o.seed, o.yaw)] = run_metrics(
+                [r["coverage"] for r in rows], ceiling, views, seconds
+            )
+    return out
+
+
+def compare(outcomes: list[RunOutcome], ceilings: dict[tuple[str, float], float], views: int, reference: str) -> None:
+    """Print every planner against ``reference`` over their shared (model, seed, yaw) runs."""
+    metrics = metrics_of(outcomes, ceilings, views)
+    planners = sorted({p for (_, p, _, _) in metrics})
+    plan_seconds = {
+        p: statistics.median(r["plan_seconds"] for o in outcomes if o.planner == p for r in o.rows) for p in planners
+    }
+    ref = {(m, s, y): v for (m, p, s, y), v in metrics.items() if p == reference}
+    print(f"reference {reference}: {len(ref)} runs; median plan {plan_seconds.get(reference, float('nan')):.3f} s")
+    for p in planners:
+        if p == reference:
+            continue
+        mine = {(m, s, y): v for (m, q, s, y), v in metrics.items() if q == p}
+        keys = sorted(set(mine) & set(ref))
+        if not keys:
+            continue
+        print(f"\n{p} vs {reference}: {len(keys)} pairs; median plan {plan_seconds[p]:.3f} s")
+        for label, get, scale in (
+            ("robot s to 95 %", lambda v: v.time_to[1], 1.0),
+            ("robot s to 90 %", lambda v: v.time_to[0], 1.0),
+            ("AUC over views (points)", lambda v: v.auc, 100.0),
+            ("final / ceiling (points)", lambda v: v.final_ratio, 100.0),
+        ):
+            a = {k: scale * get(mine[k]) for k in keys}
+            b = {k: scale * get(ref[k]) for k in keys}
+            c = paired_comparison(a, b, higher_is_better=scale != 1.0)
+            assert c is not None
+            mean_a, mean_b = statistics.fmean(a.values()), statistics.fmean(b.values())
+            change = f", {100 * (mean_a / mean_b - 1):+.1f} %" if scale == 1.0 else ""
+            interval = "-" if c.low is None else f"[{c.low:+.2f}, {c.high:+.2f}]{' *' if c.significant else ''}"
+            print(
+                f"  {label:<26} {mean_a:8.2f} vs {mean_b:8.2f}{change}; paired {c.mean:+.2f} {interval}; "
+                f"wins / ties / losses {c.wins} / {c.ties} / {c.losses}"
+            )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    parser.add_argument("dirs", nargs="+", type=Path, help="nbv bench output directories")
+    parser.add_argument("--reference", default="projection")
+    parser.add_argument("--also", default="raycast-apora", help="a second reference, when its runs are there")
+    args = parser.parse_args()
+    outcomes: list[RunOutcome] = []
+    ceilings: dict[tuple[str, float], float] = {}
+    for d in args.dirs:
+        o, c = load(d)
+        outcomes += o
+        ceilings |= c
+    views = max(len(o.rows) for o in outcomes)
+    compare(outcomes, ceilings, views, args.reference)
+    if any(o.planner == args.also for o in outcomes):
+        print()
+        compare(outcomes, ceilings, views, args.also)
+
+
+if __name__ == "__main__":
+    main()

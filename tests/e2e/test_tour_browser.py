@@ -1,0 +1,47 @@
+"""The ``tour`` planner in the page, real Chromium against a live server (issue 25): its predicted tour drawn in
+the tab's 3D view (numbered frustums and the path through them), each candidate's move time and tour place in
+the table, and the predicted robot time to done."""
+
+from __future__ import annotations
+
+import itertools
+
+import httpx
+from playwright.sync_api import BrowserContext, expect
+
+from tests.e2e.test_workbench_browser import Tab
+from tests.helpers import SMALL
+from tests.servers import LiveServer
+from tests.viewer_wire import session_nodes
+
+CONFIG = {**SMALL, "voxel": {"resolution": 0.01}, "tour": {"min_gain": 0.0, "horizon": 4}}
+"""Few candidates (fast), a map fine enough for several views to add frontier, a tour of all of them (up to 4)."""
+
+
+def test_the_page_draws_the_tour_and_its_move_times(live_server: LiveServer, browser_context: BrowserContext) -> None:
+    api = httpx.Client(base_url=live_server.url, timeout=120)
+    sid = api.post("/api/sessions", json={"model": "l-block", "config": CONFIG, "planner": "tour"}).json()["id"]
+    api.post(f"/api/sessions/{sid}/capture").raise_for_status()
+    api.post(f"/api/sessions/{sid}/plan").raise_for_status()
+    rows = api.get(f"/api/sessions/{sid}/candidates").json()
+    tour = sorted((c for c in rows if c["tour_order"] is not None), key=lambda c: c["tour_order"])
+    assert len(tour) >= 2 and tour[0]["best"]
+    assert [c["tour_order"] for c in tour] == list(range(1, len(tour) + 1))
+    assert all(c["eligible"] and c["move_seconds"] > 0 for c in tour)
+    assert all(a["tour_seconds"] < b["tour_seconds"] for a, b in itertools.pairwise(tour))
+
+    tab = Tab(browser_context, f"{live_server.url}/?session={sid}")
+    expect(tab.page.locator("#state")).to_have_text("planned", timeout=60_000)
+    names = {f"/tour/{k}/frustum" for k in range(1, len(tour) + 1)} | {"/tour/path", "/tour/1/label"}
+    tab.wait(lambda: names <= session_nodes(tab.messages()))
+    labels = {
+        m["props"]["text"]
+        for m in tab.messages()
+        if m.get("type") == "LabelMessage" and m.get("name") == "/tour/1/label"
+    }
+    assert labels == {f"1 · {tour[0]['tour_seconds']:.1f} s"}
+    total = tour[-1]["tour_seconds"]
+    expect(tab.page.locator("#tour-info")).to_have_text(
+        f"tour: {len(tour)} views, predicted robot time to done {total:.1f} s (moves)"
+    )
+    expect(tab.page.locator("[data-testid=move-s]").first).not_to_have_text("–")
