@@ -29,7 +29,10 @@ class LiveServer:
 def running_server(settings: AppSettings) -> Iterator[LiveServer]:
     """uvicorn serving ``create_app(settings)`` on 127.0.0.1:settings.port; stopped on exit."""
     app = create_app(settings)
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=settings.port, log_level="warning"))
+    # keep-alive longer than any gap between two requests: a client reusing a connection the server is closing
+    # gets "connection reset" (the 5 s default loses that race on a busy machine)
+    config = uvicorn.Config(app, host="127.0.0.1", port=settings.port, log_level="warning", timeout_keep_alive=120)
+    server = uvicorn.Server(config)
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
     deadline = time.time() + 30

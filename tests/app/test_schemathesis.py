@@ -62,7 +62,10 @@ def api() -> Iterator[dict[str, Any]]:
     import uvicorn
 
     started = time.perf_counter()
-    server = uvicorn.Server(uvicorn.Config(APP, host="127.0.0.1", port=free_port(), log_level="warning"))
+    # keep-alive longer than any gap between two requests: a client reusing a connection the server is closing
+    # gets "connection reset" (the 5 s default loses that race on a busy machine)
+    config = uvicorn.Config(APP, host="127.0.0.1", port=free_port(), log_level="warning", timeout_keep_alive=120)
+    server = uvicorn.Server(config)
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
     while not server.started:
