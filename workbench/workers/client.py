@@ -135,8 +135,7 @@ class SessionWorker:
         (the arm at joints ``q``, the plate at ``angle``; each capture's device state then), coverage against
         ``samples`` (S, 3) when given. No budget (it is as long as the session); DELETE and shutdown kill it.
         ``on_progress`` hears ``(stage, done, total)``."""
-        report = None if on_progress is None else (lambda value: on_progress(*value))
-        return self.call("rebuild", (journal, cell, q, angle, samples), 0.0, "rebuild", report)
+        return self._replay("rebuild", journal, cell, q, angle, samples, on_progress)
 
     def timeline(
         self,
@@ -149,8 +148,22 @@ class SessionWorker:
     ) -> list[TimelineStep]:
         """:func:`workbench.journal.timeline.timeline_of` ``journal`` in the worker's planning cell (arguments as
         :meth:`rebuild`); the worker's surface and the session are left as they are. No budget."""
+        return self._replay("timeline", journal, cell, q, angle, samples, on_progress)
+
+    def _replay(
+        self,
+        kind: str,
+        journal: Journal,
+        cell: CellConfig,
+        q: Any,
+        angle: float,
+        samples: Any,
+        on_progress: Callable[[str, int, int], None] | None,
+    ) -> Any:
+        """A job that replays ``journal`` in the worker's planning cell (``rebuild``, ``timeline``): no budget,
+        ``(stage, done, total)`` progress."""
         report = None if on_progress is None else (lambda value: on_progress(*value))
-        return self.call("timeline", (journal, cell, q, angle, samples), 0.0, "timeline", report)
+        return self.call(kind, (journal, cell, q, angle, samples), 0.0, kind, report)
 
     def integrate(
         self, planner: Planner, frame: DepthFrame, budget: float, journal_dir: Path | None = None
