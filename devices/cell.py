@@ -308,8 +308,9 @@ class Cell:
                     continue
                 xyz.append(motion.T_base_camera.translation)
                 angles.append(motion.angle)
-            a = np.array(angles)
-            turn = np.abs(np.remainder(a[:, None] - a[None, :] + math.pi, 2 * math.pi) - math.pi)
+            from devices.arm.reach import turn_matrix
+
+            turn = turn_matrix(np.array(angles))
             p = np.stack(xyz)
             travel = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=2)
             times = turn / math.radians(self.config.arm.turntable_speed_deg) + travel / SPHERE_CAMERA_SPEED

@@ -64,6 +64,12 @@ def wrap(angle: float) -> float:
     return math.pi if a == -math.pi else a
 
 
+def turn_matrix(angles: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(K, K) the shorter plate turn (rad, in [0, pi]) between every two of the K plate ``angles`` (rad)."""
+    angles = np.asarray(angles, dtype=np.float64)
+    return np.abs(np.remainder(angles[:, None] - angles[None, :] + math.pi, 2 * math.pi) - math.pi)
+
+
 @dataclass(frozen=True, eq=False)
 class ArmTarget:
     """A reachable view: plate ``angle`` (rad, (-pi, pi]), joint target ``q`` (n,) and ``T_base_camera`` (FK of q).
@@ -189,8 +195,7 @@ class ArmReach:
         """(K, K) seconds of the rest-to-rest move between every two of K states (:meth:`move_estimate`'s model):
         q (K, n) joints, angles (K,) plate angles (rad). Symmetric, 0 on the diagonal."""
         q = np.asarray(q, dtype=np.float64)
-        angles = np.asarray(angles, dtype=np.float64)
-        turn = np.abs(np.remainder(angles[:, None] - angles[None, :] + math.pi, 2 * math.pi) - math.pi)
+        turn = turn_matrix(angles)
         dq = np.abs(q[:, None, :] - q[None, :, :])
         v, a = self.arm.velocity, self.arm.acceleration
         t = np.where(dq > v * v / a, dq / v + v / a, 2.0 * np.sqrt(dq / a))
