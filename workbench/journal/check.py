@@ -12,11 +12,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from devices.config import DeviceConfig
-from devices.replay import ReplayCell
 from planner.config import from_dict
 from workbench.errors import WorkbenchError
 from workbench.evaluation.coverage import coverage
-from workbench.journal.rebuild import Rebuilt, rebuild
+from workbench.journal.rebuild import Rebuilt, rebuild, replay_cell
 from workbench.journal.store import Journal, read_journal
 from workbench.settings import WorkbenchSettings, default_models_dir
 from workbench.sources.parts import ground_truth
@@ -58,8 +57,7 @@ def check_journal(directory: Path, models_dir: Path | None = None) -> JournalChe
     captures = [e for e in journal.of_kind("capture") if e.get("frame")]
     if not captures:
         raise ValueError(f"{directory}: no journaled frame to replay")
-    devices = from_dict(DeviceConfig, journal.header["devices"])
-    cell = ReplayCell([journal.frame(e) for e in captures], devices.cell)  # reachability as in the session
+    cell = replay_cell(journal)  # reachability as in the session
     t0 = time.perf_counter()
     rebuilt = rebuild(journal, cell, ground_truth_coverage(journal, models_dir))
     return JournalCheck(journal, rebuilt, time.perf_counter() - t0)

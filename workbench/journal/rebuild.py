@@ -20,7 +20,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from devices.config import DeviceConfig
+from devices.replay import ReplayCell
 from planner import Planner, PlannerConfig, PlanResult, Pose
+from planner.config import from_dict
 from planner.planner import IntegrationReport
 from workbench.journal.discard import without_discarded
 from workbench.journal.store import Journal
@@ -87,6 +90,13 @@ REPLAY_STAGE = "replaying the journal"
 """The stage a rebuild reports (its items: the captures and plans replayed)."""
 HEAVY_KINDS = frozenset({"capture", "plan"})
 """The events whose replay takes time (integrating a frame, planning)."""
+
+
+def replay_cell(journal: Journal) -> ReplayCell:
+    """A cell that judges reachability as the journaled session's did, playing back its frames (no devices)."""
+    captures = [e for e in journal.of_kind("capture") if e.get("frame")]
+    devices = from_dict(DeviceConfig, journal.header["devices"])
+    return ReplayCell([journal.frame(e) for e in captures], devices.cell)
 
 
 def rebuild(

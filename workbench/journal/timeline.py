@@ -21,11 +21,10 @@ import trimesh
 from numpy.typing import NDArray
 
 from devices.config import DeviceConfig
-from devices.replay import ReplayCell
 from planner import PlanResult, Pose
 from planner.config import from_dict
 from workbench.journal.discard import without_discarded
-from workbench.journal.rebuild import Rebuilt, rebuild
+from workbench.journal.rebuild import Rebuilt, rebuild, replay_cell
 from workbench.journal.store import Journal, read_journal
 from workbench.session.summaries import best_of, plan_fields
 from workbench.session.values import CustomPose, SceneData
@@ -151,13 +150,6 @@ def timeline_of(
     :func:`workbench.journal.rebuild.rebuild` asks it). ValueError for a journal that cannot be replayed."""
     rebuilt = rebuild(journal, cell, coverage, progress, keep_scene=True)
     return steps_of(journal, rebuilt)
-
-
-def replay_cell(journal: Journal) -> ReplayCell:
-    """A cell that judges reachability as the journaled session's did, playing back its frames (no devices)."""
-    captures = [e for e in journal.of_kind("capture") if e.get("frame")]
-    devices = from_dict(DeviceConfig, journal.header["devices"])
-    return ReplayCell([journal.frame(e) for e in captures], devices.cell)
 
 
 def journal_scene(journal: Journal) -> SceneData:

@@ -10,12 +10,14 @@ event (a plan, a view, a discard) makes the next look rebuild them.
 
 from __future__ import annotations
 
+import os
 import threading
 from typing import TYPE_CHECKING
 
 from workbench.errors import Conflict, Invalid, NotFound
-from workbench.journal.store import Journal, read_journal
-from workbench.journal.timeline import TimelineStep, replay_cell, timeline_of
+from workbench.journal.rebuild import replay_cell
+from workbench.journal.store import JOURNAL_FILE, Journal, read_journal
+from workbench.journal.timeline import TimelineStep, timeline_of
 from workbench.session.loop import planning_worker
 from workbench.workers.client import JobKilled
 
@@ -29,7 +31,8 @@ class History:
     def __init__(self, session: SessionCore) -> None:
         self.session = session
         self._lock = threading.Lock()
-        self._key: tuple[int, int] | None = None
+        self._key: int | None = None
+        """The journal file's size when the steps were built (it only grows: a torn line is cut off again)."""
         self._steps: list[TimelineStep] = []
         self.builds = 0
         """How many times the steps were rebuilt (a cached look rebuilds nothing)."""
@@ -42,10 +45,13 @@ class History:
         if writer is None:
             raise Conflict(f"session {s.id}: no journal, so no timeline")
         with self._lock:
-            journal = read_journal(writer.directory)
-            key = (len(journal.events), journal.valid_bytes)
-            if key == self._key:
+            try:  # a cached look reads no journal
+                key: int | None = os.stat(writer.directory / JOURNAL_FILE).st_size
+            except OSError:
+                key = None  # read_journal says what is wrong
+            if key is not None and key == self._key:
                 return self._steps
+            journal = read_journal(writer.directory)
             try:
                 steps = self._build(journal)
             except (ValueError, KeyError, TypeError, JobKilled) as exc:
