@@ -162,6 +162,7 @@ _PANEL_JS = r"""
   });
   document.getElementById("nbv-table").innerHTML = rows.join("");
   let shown = 0;
+  window.NBV_SHOWN = [];  // every view the panel named, in order (the playback loops: 1..n, 1..n, ...)
   function tick() {
     // the playback bar's time: viser's NumberInput next to its slider (the recording is one step per dt)
     const input = document.querySelector(".mantine-NumberInput-input");
@@ -171,6 +172,7 @@ _PANEL_JS = r"""
     const view = Math.min(steps.length, Math.floor(t / dt + 1e-6) + 1);
     if (view === shown) return;
     shown = view;
+    window.NBV_SHOWN.push(view);
     document.getElementById("nbv-now").textContent = `view ${view} of ${steps.length}`;
     for (const tr of document.querySelectorAll("#nbv-table tr")) tr.classList.toggle("on", Number(tr.dataset.view) === view);
   }
