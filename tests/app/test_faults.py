@@ -3,6 +3,7 @@ that failed is pending again, and retrying (or approving it again) works. A hang
 
 from __future__ import annotations
 
+import statistics
 import threading
 import time
 from typing import Any
@@ -121,15 +122,17 @@ def test_a_hanging_camera_does_not_hang_the_server(settings: AppSettings) -> Non
         )
         thread.start()
         seen = set()
-        slowest = 0.0
+        answers: list[float] = []
         while thread.is_alive():  # meanwhile the server answers: well within the capture timeout
             t0 = time.perf_counter()
             seen.add(client.get(f"/api/sessions/{sid}").json()["state"])
             assert client.get("/api/health").status_code == 200
-            slowest = max(slowest, time.perf_counter() - t0)
+            answers.append(time.perf_counter() - t0)
         thread.join()
     assert "moving" in seen  # answered while the approve was still under way
-    assert slowest < HANG_TIMEOUT / 2  # a blocked server would answer only after the timeout (noise: < 1 s)
+    # a server blocked by the capture answers one pair of requests per hang (after up to 3 s); this one answers
+    # many, each in a fraction of it (the median, not the slowest: a busy machine may stall one request ~2 s)
+    assert len(answers) >= 5 and statistics.median(answers) < HANG_TIMEOUT / 4, answers
     assert result["r"].status_code == 503 and "no answer within 3 s" in result["r"].json()["detail"]
 
 

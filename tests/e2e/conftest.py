@@ -28,7 +28,8 @@ CHROMIUM_ARGS = [
 
 HOLD_VIEWER_FRAMES = """
 (() => {
-  if (window === window.top) return;  // the 3D viewer's iframe only; the page's own panels draw as always
+  if (window === window.top && !window.__nbvHoldTop) return;  // the 3D viewer's iframe (or a page that asks)
+  if (window.__nbvDraw) return;  // held already (a page's script and its context's both ran)
   const raf = window.requestAnimationFrame.bind(window);
   const caf = window.cancelAnimationFrame.bind(window);
   const held = new Map();
@@ -56,6 +57,16 @@ def draw_viewer(page: Any, on: bool = True) -> None:
     for frame in page.frames:
         if frame is not page.main_frame:
             frame.evaluate("(on) => window.__nbvDraw && window.__nbvDraw(on)", on)
+
+
+HOLD_PAGE_FRAMES = "window.__nbvHoldTop = true;" + HOLD_VIEWER_FRAMES
+"""The same for a page that is itself a viewer (the offline recording's player): add it with ``add_init_script``
+before ``goto``, and let it draw with :func:`draw_page`."""
+
+
+def draw_page(page: Any, on: bool = True) -> None:
+    """Let a page held by :data:`HOLD_PAGE_FRAMES` draw frames again (or hold them, ``on=False``)."""
+    page.main_frame.evaluate("(on) => window.__nbvDraw && window.__nbvDraw(on)", on)
 
 
 def chromium_path() -> str:

@@ -17,7 +17,7 @@ import numpy as np
 from PIL import Image
 from playwright.sync_api import BrowserContext, expect
 
-from tests.e2e.conftest import draw_viewer
+from tests.e2e.conftest import HOLD_PAGE_FRAMES, draw_page, draw_viewer
 from tests.e2e.pages import goto_when_up, served
 from tests.e2e.test_workbench_browser import Tab, _state
 from tests.helpers import SMALL
@@ -134,6 +134,7 @@ def test_scrub_the_timeline_and_play_the_recording_offline(
     zipfile.ZipFile(io.BytesIO(recording.content)).extractall(folder)
     with served(folder) as base:
         player = browser_context.new_page()
+        player.add_init_script(HOLD_PAGE_FRAMES)  # the player is a viewer itself: it draws for the last check only
         logs: list[str] = []
         player.on("console", lambda m: logs.append(m.text))
         hosts: set[str] = set()
@@ -147,12 +148,13 @@ def test_scrub_the_timeline_and_play_the_recording_offline(
         # it plays by itself, 0.5 s a view, up to the fifth, and loops: the views the panel named since it loaded
         # (a slow machine's timer may jump past some views, but the loop brings it back to view 1)
         player.wait_for_function(
-            "() => window.NBV_SHOWN.includes(5) && new Set(window.NBV_SHOWN).size >= 2", timeout=60_000
-        )
+            "() => window.NBV_SHOWN.includes(5) && new Set(window.NBV_SHOWN).size >= 2", polling=100, timeout=60_000
+        )  # polled on a timer: the page's animation frames are held
         shown = player.evaluate("window.NBV_SHOWN")
         assert set(shown) <= {1, 2, 3, 4, 5}, shown
         expect(steps.locator("#nbv-now")).to_have_text(re.compile(r"^view [1-5] of 5$"))
         assert steps.locator("tr").count() == 5
+        draw_page(player)  # the player draws from here: viser's scene tree and the canvas need its frames
         player.get_by_label("Show scene tree").click()  # viser's own scene tree: the nodes its player decoded
         player.get_by_text("/views", exact=True).click()
         expect(player.get_by_text("/5", exact=True)).to_be_visible(timeout=30_000)
@@ -163,6 +165,7 @@ def test_scrub_the_timeline_and_play_the_recording_offline(
 
         player.close()
         opened = browser_context.new_page()  # and from the folder itself, no server at all
+        opened.add_init_script(HOLD_PAGE_FRAMES)
         file_logs: list[str] = []
         opened.on("console", lambda m: file_logs.append(m.text))
         opened.goto((folder / "index.html").as_uri())
