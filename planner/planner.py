@@ -259,7 +259,8 @@ class Planner:
             allowed = allowed - {leave}
         in_sector = np.array([c.sector in allowed for c in candidates], dtype=bool)
         reach = np.ones(len(candidates), dtype=bool)
-        if reachable is not None:
+        lazy = reachable is not None and move_times is not None and bool(getattr(self.evaluator, "lazy_reach", False))
+        if reachable is not None and not lazy:
             for i, c in enumerate(candidates):
                 stages("reachability", i, len(candidates))
                 reach[i] = bool(reachable(c.T_world_camera))
@@ -281,7 +282,7 @@ class Planner:
         if callable(choose):
             stages("tour", 0, 1)
             best, tour = cast(ChooseFn, choose)(evaluation.scores, candidates, self.views[-1], move_times)
-            if move_times is not None:  # each eligible candidate's move from here, for the table
+            if move_times is not None and not lazy:  # each eligible candidate's move from here, for the table
                 move_costs = moves_from_here(move_times, candidates, [s.eligible for s in evaluation.scores])
             stages("select", 0, 1)
         elif weight > 0 and (move_times is not None or move_cost is not None):
