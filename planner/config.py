@@ -277,28 +277,19 @@ class TourConfig:
     shortest open path (LKH), "rate" the first of the order with the largest area under the predicted coverage
     against robot time (``planner.tour.rate_order``), "gain" the view with the largest gain."""
     overhead_seconds: float = 0.0
-    """Seconds each view costs besides its move (capture and plan), in the "rate" order and the "rate" cover."""
-    exact_moves: bool = False
-    """Ask the cell for the cover's move times as the moves would be made from the current state (every plate angle
-    and IK branch; ``Cell.move_times(exact=True)``, about 20 ms of IK per view) instead of its cached reachability
-    targets (one IK branch per plate angle, often a far one: 2-3 s too long a move)."""
+    """Seconds each view costs besides its move (capture and plan), in the "rate" order."""
     score: Literal["frontier", "projection"] = "frontier"
-    """What a view's gain is: "frontier" the frontier voxels it sees (the set cover's visibility); "projection" the
-    paper's score F (GMM ellipsoids, ``planner.scoring``), and the next view is the one with the shortest move
-    (``exact_moves``) among the ``near_views`` best by F whose F is at least (1 - ``slack``) x the best F."""
+    """What the plan optimises: "frontier" the set cover of the frontier voxels the views see, ordered by move time
+    (``horizon``, ``min_gain``, ``order``); "projection" the paper's score F (GMM ellipsoids, ``planner.scoring``),
+    and the next view is the one with the shortest move from the current state among the best by F that score at
+    least (1 - ``slack``) x the best F (``planner.tour.near_best``: moves timed as the cell would make them, every
+    plate angle and IK branch; reachability asked only of the views timed)."""
     slack: float = 0.1
-    """With ``score = "projection"``: how far below the best F a view may score and still be chosen for a shorter
-    move."""
+    """With ``score = "projection"``: how far below the best F (a fraction of it) a view may score and still be
+    chosen for a shorter move."""
     near_views: int = 8
-    """With ``score = "projection"``: the views by F whose moves are timed (``exact_moves``: IK from the current
-    state each)."""
-    lazy_reach: bool = False
-    """With ``score = "projection"`` and ``exact_moves``: skip the plan's reachability pass over every candidate;
-    the views timed (best F first) are checked by their exact moves (inf: unreachable) instead."""
-    cover: Literal["gain", "rate"] = "gain"
-    """How the tour's views are chosen: "gain" the greedy set cover by new frontier, then ordered (``order``);
-    "rate" each step the view with the most new frontier per second of its move from the view chosen before it
-    plus ``overhead_seconds`` (``planner.tour.rate_cover``), visited in the order chosen."""
+    """With ``score = "projection"``: how many reachable views (best F first) have their moves timed (about 20 ms
+    of IK each)."""
 
     def __post_init__(self) -> None:
         require(
@@ -316,8 +307,12 @@ class TourConfig:
             f"tour.depth_tolerance_voxels: must be >= 0, got {self.depth_tolerance_voxels!r}",
         )
         require(self.order in ("tsp", "rate", "gain"), f"tour.order: 'tsp', 'rate' or 'gain', got {self.order!r}")
-        require(self.cover in ("gain", "rate"), f"tour.cover: 'gain' or 'rate', got {self.cover!r}")
-        require(isinstance(self.exact_moves, bool), f"tour.exact_moves: true or false, got {self.exact_moves!r}")
+        require(self.score in ("frontier", "projection"), f"tour.score: 'frontier' or 'projection', got {self.score!r}")
+        require(finite(self.slack) and 0 <= self.slack < 1, f"tour.slack: must be in [0, 1), got {self.slack!r}")
+        require(
+            integer(self.near_views) and 1 <= self.near_views <= 400,
+            f"tour.near_views: an integer in [1, 400], got {self.near_views!r}",
+        )
         require(
             finite(self.overhead_seconds) and self.overhead_seconds >= 0,
             f"tour.overhead_seconds: must be >= 0, got {self.overhead_seconds!r}",

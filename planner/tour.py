@@ -31,14 +31,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.config import PlannerConfig, TourConfig
-from planner.evaluators import EVALUATORS, Evaluation, EvaluationContext
+from planner.evaluators import EVALUATORS, Evaluation, EvaluationContext, ProjectionEvaluator
 from planner.types import Candidate, Intrinsics, Pose, TourPlan, ViewScore, VoxelClass
 
 MoveTimes = Callable[..., NDArray[np.float64]]
 """(candidates, K indices[, exact=bool]) -> (K + 1, K + 1) seconds of the move between every two states; state 0 is
 the robot's current one, state k the candidate ``indices[k - 1]``; inf for a move the cell cannot make. ``exact``
 (``devices.cell.Cell.move_times``): each view's target as a move from the current state would choose it (every
-plate angle and IK branch), not the cached reachability target; asked only with ``tour.exact_moves``."""
+plate angle and IK branch), not the cached reachability target; asked with ``tour.score = "projection"``."""
 
 FALLBACK_SPEED = 0.25
 """m/s of the camera's straight travel assumed when the caller gives no move times (a cell without an arm model)."""
@@ -123,40 +123,6 @@ def greedy_cover(
     return views, gains
 
 
-def rate_cover(
-    seen: NDArray[np.bool_], times: NDArray[np.float64], horizon: int, min_gain: float, overhead: float
-) -> tuple[list[int], list[int]]:
-    """(views, gains): a cost-aware greedy set cover, in visit order, of the frontier the K views of ``seen`` see.
-
-    seen: (K, F) bool; times: (K + 1, K + 1) seconds between the current state (0) and the views (k + 1; inf: a
-    move the cell cannot make). Each step takes the view with the most frontier voxels not yet covered per second
-    of its move from the view chosen before it (from state 0 first) plus ``overhead`` (the capture and plan every
-    view costs); the lowest index on a tie. ``gains``: the new counts. Stops after ``horizon`` views, or when no
-    reachable view adds a voxel, or the best rate's view adds less than ``min_gain`` x the coverable voxels.
-    """
-    seen = np.asarray(seen, dtype=bool)
-    times = np.asarray(times, dtype=np.float64)
-    coverable = int(seen.any(axis=0).sum())
-    covered = np.zeros(seen.shape[1], dtype=bool)
-    views: list[int] = []
-    gains: list[int] = []
-    state = 0
-    while len(views) < horizon:
-        gain = (seen & ~covered).sum(axis=1).astype(np.float64)
-        cost = times[state, 1:] + overhead
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rate = np.where(np.isfinite(cost) & (gain > 0), gain / np.maximum(cost, 1e-9), -1.0)
-        rate[views] = -1.0
-        best = int(np.argmax(rate))
-        if rate[best] <= 0 or gain[best] < min_gain * coverable:
-            break
-        views.append(best)
-        gains.append(int(gain[best]))
-        covered |= seen[best]
-        state = best + 1
-    return views, gains
-
-
 def tour_order(times: NDArray[np.float64], start_with: int | None = None) -> tuple[list[int], str]:
     """(order, method): the states 1..K of ``times`` in the order of the shortest open path from state 0.
 
@@ -213,6 +179,39 @@ def path_seconds(times: NDArray[np.float64], order: Sequence[int]) -> float:
     return float(sum(times[a, b] for a, b in itertools.pairwise(states)))
 
 
+def near_best(
+    ranked: Sequence[tuple[int, float]],
+    seconds: Callable[[list[int]], NDArray[np.float64]],
+    slack: float,
+    near_views: int,
+) -> tuple[int | None, dict[int, float]]:
+    """(the next view, {view: move seconds} of every view timed): the shortest move among the views scoring
+    nearly the best.
+
+    ranked: (candidate index, F) of the eligible views, best F first. seconds: K indices -> (K,) seconds of the
+    move to each from the current state (inf: the cell cannot reach it; this is the views' only reachability
+    check). Views are timed best F first, ``near_views`` at a time, while their F is at least (1 - ``slack``) x the
+    best F (every view when the best F <= 0), until ``near_views`` reachable ones are timed; the next view is the
+    timed reachable one with the shortest move (on a tie the better F). None when none timed is reachable.
+    """
+    if not ranked:
+        return None, {}
+    top = ranked[0][1]
+    threshold = (1.0 - slack) * top if top > 0 else -math.inf
+    timed: dict[int, float] = {}
+    start = 0
+    while start < len(ranked) and ranked[start][1] >= threshold:
+        batch = [i for i, f in ranked[start : start + near_views] if f >= threshold]
+        start += near_views
+        timed.update(zip(batch, (float(t) for t in seconds(batch)), strict=True))
+        if sum(math.isfinite(t) for t in timed.values()) >= near_views:
+            break
+    order = [i for i, _ in ranked if i in timed and math.isfinite(timed[i])]
+    if not order:
+        return None, timed
+    return min(order, key=lambda i: timed[i]), timed  # min keeps the first (better F) on a tie
+
+
 def straight_move_times(start: Pose, poses: Sequence[Pose]) -> NDArray[np.float64]:
     """(K + 1, K + 1) seconds between ``start`` and every two of ``poses`` at :data:`FALLBACK_SPEED` along straight
     lines: the move times of a cell that gives none."""
@@ -229,29 +228,29 @@ class TourEvaluator:
     def __init__(self, config: PlannerConfig) -> None:
         self.config = config
         self.last_seen: NDArray[np.bool_] = np.zeros((0, 0), dtype=bool)
-        self._projection: object | None = None
+        self._projection: ProjectionEvaluator | None = None
+        self.last_move_seconds: dict[int, float] = {}
+        """With ``score = "projection"``: the exact move seconds of every view the last :meth:`choose` timed."""
 
     @property
     def lazy_reach(self) -> bool:
-        """Whether the plan should skip its reachability pass (``tour.lazy_reach`` with the projection score): the
-        views this evaluator times are checked by their exact moves (inf: unreachable) instead."""
-        cfg: TourConfig = self.config.tour
-        return cfg.lazy_reach and cfg.score == "projection" and cfg.exact_moves
+        """Whether the plan skips its reachability pass over every candidate (``tour.score = "projection"``): the
+        views :meth:`choose` times are checked by their exact moves instead (inf: unreachable;
+        :attr:`last_move_seconds`)."""
+        return self.config.tour.score == "projection"
 
     def reset(self) -> None:
         """Stateless between plans: nothing to forget (but the projection score's fitters)."""
         if self._projection is not None:
-            self._projection.reset()  # type: ignore[attr-defined]
+            self._projection.reset()
 
     def evaluate(self, ctx: EvaluationContext) -> Evaluation:
         t0 = time.perf_counter()
         cfg: TourConfig = self.config.tour
         if cfg.score == "projection":
-            from planner.evaluators import ProjectionEvaluator
-
             if self._projection is None:
                 self._projection = ProjectionEvaluator(self.config)
-            return self._projection.evaluate(ctx)  # type: ignore[attr-defined]
+            return self._projection.evaluate(ctx)
         ctx.progress("visibility", 0, len(ctx.candidates))
         eligible = np.asarray(ctx.eligible, dtype=bool)
         frontier = ctx.voxel_map.centers(VoxelClass.FRONTIER)
@@ -285,14 +284,11 @@ class TourEvaluator:
             return None, None
         if cfg.score == "projection":
             return self._choose_near_best(scores, candidates, move_times)
-        if cfg.cover == "rate":
-            return self._choose_by_rate(scores, candidates, start, move_times, eligible)
         views, gains = greedy_cover(self.last_seen, eligible, cfg.horizon, cfg.min_gain)
         if not views:
             return int(max((s for s in scores if s.eligible), key=lambda s: (s.score, -s.index)).index), None
         if move_times is not None:
-            extra = {"exact": True} if cfg.exact_moves else {}
-            times = np.asarray(move_times(candidates, views, **extra), dtype=np.float64)
+            times = np.asarray(move_times(candidates, views), dtype=np.float64)
         else:
             times = straight_move_times(start, [candidates[i].T_world_camera for i in views])
         reachable = [k for k in range(len(views)) if math.isfinite(times[0, k + 1])]
@@ -322,61 +318,24 @@ class TourEvaluator:
     def _choose_near_best(
         self, scores: Sequence[ViewScore], candidates: Sequence[Candidate], move_times: MoveTimes | None
     ) -> tuple[int | None, TourPlan | None]:
+        """:meth:`choose` with ``tour.score = "projection"``: :func:`near_best` under the cell's exact moves from
+        the current state (without ``move_times``: the best F, as ``projection``)."""
         cfg: TourConfig = self.config.tour
-        ranked = sorted((s for s in scores if s.eligible), key=lambda s: (-s.score, s.index))
-        best = ranked[0]
-        if move_times is None or best.score <= 0:
-            return best.index, None
-        extra = {"exact": True} if cfg.exact_moves else {}
-        threshold = (1.0 - cfg.slack) * best.score
-        near: list[int] = []
-        seconds: list[float] = []
-        start = 0
-        while start < len(ranked) and ranked[start].score >= threshold and sum(map(math.isfinite, seconds)) < cfg.near_views:
-            batch = [s.index for s in ranked[start : start + cfg.near_views] if s.score >= threshold]
-            start += cfg.near_views
-            near += batch
-            seconds += [float(t) for t in np.asarray(move_times(candidates, batch, **extra), dtype=np.float64)[0, 1:]]
-            if not self.lazy_reach:
-                break
-        times = np.array(seconds)
-        if not np.any(np.isfinite(times)):
-            return (None, None) if self.lazy_reach else (best.index, None)
-        k = int(np.argmin(times))
-        return near[k], TourPlan(views=(near[k],), gains=(0,), seconds=(float(times[k]),), method="near")
+        ranked = [
+            (s.index, s.score) for s in sorted((s for s in scores if s.eligible), key=lambda s: (-s.score, s.index))
+        ]
+        self.last_move_seconds = {}
+        if move_times is None:
+            return ranked[0][0], None
+        mt = move_times
 
-    def _choose_by_rate(
-        self,
-        scores: Sequence[ViewScore],
-        candidates: Sequence[Candidate],
-        start: Pose,
-        move_times: MoveTimes | None,
-        eligible: NDArray[np.bool_],
-    ) -> tuple[int | None, TourPlan | None]:
-        """:meth:`choose` with ``tour.cover = "rate"``: :func:`rate_cover` over the eligible views that see some
-        frontier, under the move times between all of them."""
-        cfg: TourConfig = self.config.tour
-        idx = [int(i) for i in np.flatnonzero(eligible & self.last_seen.any(axis=1))]
-        if not idx:
-            return int(max((s for s in scores if s.eligible), key=lambda s: (s.score, -s.index)).index), None
-        if move_times is not None:
-            times = np.asarray(move_times(candidates, idx), dtype=np.float64)
-        else:
-            times = straight_move_times(start, [candidates[i].T_world_camera for i in idx])
-        inner = times[1:, 1:]
-        times[1:, 1:] = np.where(np.isfinite(inner), inner, UNKNOWN_MOVE)
-        picked, gains = rate_cover(self.last_seen[idx], times, cfg.horizon, cfg.min_gain, cfg.overhead_seconds)
-        if not picked:
-            return int(max((s for s in scores if s.eligible), key=lambda s: (s.score, -s.index)).index), None
-        states = [0, *(k + 1 for k in picked)]
-        cumulative = np.cumsum([times[a, b] for a, b in itertools.pairwise(states)])
-        plan = TourPlan(
-            views=tuple(idx[k] for k in picked),
-            gains=tuple(gains),
-            seconds=tuple(float(s) for s in cumulative),
-            method="rate",
-        )
-        return plan.views[0], plan
+        def seconds(views: list[int]) -> NDArray[np.float64]:
+            return np.asarray(mt(candidates, views, exact=True), dtype=np.float64)[0, 1:]
+
+        best, self.last_move_seconds = near_best(ranked, seconds, cfg.slack, cfg.near_views)
+        if best is None:
+            return None, None
+        return best, TourPlan(views=(best,), gains=(0,), seconds=(self.last_move_seconds[best],), method="near")
 
 
 EVALUATORS["tour"] = TourEvaluator
