@@ -283,7 +283,11 @@ class TourConfig:
     (``horizon``, ``min_gain``, ``order``); "projection" the paper's score F (GMM ellipsoids, ``planner.scoring``),
     and the next view is the one with the shortest move from the current state among the best by F that score at
     least (1 - ``slack``) x the best F (``planner.tour.near_best``: moves timed as the cell would make them, every
-    plate angle and IK branch; reachability asked only of the views timed)."""
+    plate angle and IK branch)."""
+    lazy_reach: bool = False
+    """Skip the plan's reachability pass over every candidate: only the views the tour times (its cover, or with
+    ``score = "projection"`` the views near the best F) are checked, by their moves from the current state (inf:
+    unreachable, left out and the cover made again); the others stay unchecked (no move time in the table)."""
     slack: float = 0.1
     """With ``score = "projection"``: how far below the best F (a fraction of it) a view may score and still be
     chosen for a shorter move."""
@@ -308,6 +312,7 @@ class TourConfig:
         )
         require(self.order in ("tsp", "rate", "gain"), f"tour.order: 'tsp', 'rate' or 'gain', got {self.order!r}")
         require(self.score in ("frontier", "projection"), f"tour.score: 'frontier' or 'projection', got {self.score!r}")
+        require(isinstance(self.lazy_reach, bool), f"tour.lazy_reach: true or false, got {self.lazy_reach!r}")
         require(finite(self.slack) and 0 <= self.slack < 1, f"tour.slack: must be in [0, 1), got {self.slack!r}")
         require(
             integer(self.near_views) and 1 <= self.near_views <= 400,

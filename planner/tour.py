@@ -230,14 +230,13 @@ class TourEvaluator:
         self.last_seen: NDArray[np.bool_] = np.zeros((0, 0), dtype=bool)
         self._projection: ProjectionEvaluator | None = None
         self.last_move_seconds: dict[int, float] = {}
-        """With ``score = "projection"``: the exact move seconds of every view the last :meth:`choose` timed."""
+        """The move seconds from the current state of every view the last :meth:`choose` timed (inf: unreachable)."""
 
     @property
     def lazy_reach(self) -> bool:
-        """Whether the plan skips its reachability pass over every candidate (``tour.score = "projection"``): the
-        views :meth:`choose` times are checked by their exact moves instead (inf: unreachable;
-        :attr:`last_move_seconds`)."""
-        return self.config.tour.score == "projection"
+        """Whether the plan skips its reachability pass over every candidate (``tour.lazy_reach``): the views
+        :meth:`choose` times are checked by their moves instead (inf: unreachable; :attr:`last_move_seconds`)."""
+        return self.config.tour.lazy_reach
 
     def reset(self) -> None:
         """Stateless between plans: nothing to forget (but the projection score's fitters)."""
@@ -284,13 +283,21 @@ class TourEvaluator:
             return None, None
         if cfg.score == "projection":
             return self._choose_near_best(scores, candidates, move_times)
-        views, gains = greedy_cover(self.last_seen, eligible, cfg.horizon, cfg.min_gain)
-        if not views:
-            return int(max((s for s in scores if s.eligible), key=lambda s: (s.score, -s.index)).index), None
-        if move_times is not None:
-            times = np.asarray(move_times(candidates, views), dtype=np.float64)
-        else:
-            times = straight_move_times(start, [candidates[i].T_world_camera for i in views])
+        self.last_move_seconds = {}
+        allowed = eligible.copy()
+        while True:  # with lazy_reach: a view of the cover the cell cannot reach is left out and the cover made again
+            views, gains = greedy_cover(self.last_seen, allowed, cfg.horizon, cfg.min_gain)
+            if not views:
+                return int(max((s for s in scores if s.eligible), key=lambda s: (s.score, -s.index)).index), None
+            if move_times is not None:
+                times = np.asarray(move_times(candidates, views), dtype=np.float64)
+            else:
+                times = straight_move_times(start, [candidates[i].T_world_camera for i in views])
+            self.last_move_seconds.update((v, float(times[0, k + 1])) for k, v in enumerate(views))
+            unreachable = [v for k, v in enumerate(views) if not math.isfinite(times[0, k + 1])]
+            if not unreachable or not self.lazy_reach:
+                break
+            allowed[unreachable] = False
         reachable = [k for k in range(len(views)) if math.isfinite(times[0, k + 1])]
         if not reachable:
             return views[0], None
