@@ -115,3 +115,38 @@ def test_a_projection_mode_plan_checks_reachability_only_of_the_views_it_times()
     best_f = max(s.score for s in ref.scores if s.eligible)
     assert plan.scores[best].score >= 0.8 * best_f  # the same F as projection's, within the slack
     assert [s.score for s in plan.scores] == [s.score for s in ref.scores]
+
+
+def test_lazy_reach_covers_again_without_a_view_the_cell_cannot_reach() -> None:
+    from planner.baselines.evaluators import gain_scores
+    from planner.tour import TourEvaluator
+    from planner.types import Pose
+
+    seen = np.array(
+        [
+            [1, 1, 1, 1, 0, 0],  # view 0: the largest gain, but unreachable
+            [1, 1, 1, 0, 0, 0],
+            [0, 0, 0, 1, 1, 1],
+            [0, 0, 0, 0, 1, 1],
+        ],
+        dtype=bool,
+    )
+    at = np.array([0.0, 1.0, 2.0, 3.0])  # the views on a line, state 0 at 0.5; view 0 unreachable
+
+    def move_times(candidates: object, views: list[int]) -> np.ndarray:
+        x = np.concatenate([[0.5], at[views]])
+        t = np.abs(x[:, None] - x[None, :])
+        bad = [k + 1 for k, v in enumerate(views) if v == 0]
+        t[bad, :] = math.inf
+        t[:, bad] = math.inf
+        np.fill_diagonal(t, 0.0)
+        return t
+
+    scores = gain_scores(seen.sum(axis=1).astype(np.float64), np.ones(4, dtype=bool))
+    for lazy, cover in ((True, {1, 2}), (False, {2})):
+        evaluator = TourEvaluator(PlannerConfig().replace(tour={"lazy_reach": lazy, "min_gain": 0.0}))
+        evaluator.last_seen = seen
+        best, tour = evaluator.choose(scores, [], Pose.identity(), move_times)
+        assert tour is not None and set(tour.views) == cover and best == tour.views[0]
+        assert evaluator.last_move_seconds[0] == math.inf
+    # lazy: 0 left out, the cover made again of 1 and 2 (3 voxels each); without: 0 dropped from the cover {0, 2}
