@@ -18,6 +18,12 @@ costs; in the simulated UR5 cell the robot's moves are about 97 % of a scan's ti
    start, solved by LKH (``elkai``) from three views on, exactly below.
 4. The first view of the order is the next view; the rest is the predicted tour (``PlanResult.tour``), re-planned
    after every capture.
+
+With ``tour.lazy_reach`` (the default) the plan skips its reachability pass over every candidate
+(:attr:`TourEvaluator.lazy_reach`): the cover's views are the only ones the cell is asked about, through their move
+times (inf: unreachable; the view is left out and the cover made again). With ``tour.score = "projection"`` the
+plan instead scores by the paper's F and takes the shortest exact move among the views within ``tour.slack`` of the
+best F (:func:`near_best`; tried, not the default).
 """
 
 from __future__ import annotations
