@@ -216,8 +216,8 @@ class Planner:
         """Score every candidate and pick the next best view.
 
         reachable: the cell's check; unreachable candidates are ineligible. An evaluator with ``lazy_reach`` (the
-        ``tour`` planner with ``tour.score = "projection"``) skips it when ``move_times`` is given: the views it
-        times are checked by their exact moves (inf: "unreachable"), the others stay unchecked.
+        ``tour`` planner, ``tour.lazy_reach``) skips it when ``move_times`` is given: the views it times are
+        checked by their move times (inf: ineligible, "unreachable"), the others stay unchecked.
         move_cost: (candidates, eligible (C,) bool) -> (C,) seconds each move would take (inf = unknown), from
         the caller (the planner never sees the arm); asked only when ``selection.move_cost_weight`` > 0, and
         then the choice trades F against it (:func:`planner.partitions.select_with_move_cost`). With the ``tour``
