@@ -277,21 +277,35 @@ class Cell:
             out[i] = self.move_estimate(candidates[int(i)].T_world_camera)
         return out
 
-    def move_times(self, candidates: Sequence[Any], indices: Sequence[int]) -> NDArray[np.float64]:
+    def move_times(
+        self, candidates: Sequence[Any], indices: Sequence[int], *, exact: bool = False
+    ) -> NDArray[np.float64]:
         """(K + 1, K + 1) estimated seconds of the move between every two of the current state and the K views
         ``candidates[indices]`` (``.T_world_camera``; inf to and from an unreachable one): the ``move_times`` of
         ``Planner.plan``. URDF arm: plate turn + the slowest joint's trapezoid between the views' cached
         reachability targets (:meth:`ArmReach.nearest_target`, :meth:`ArmReach.move_matrix`; no IK of their own).
+        exact: each view's target is instead the one a move from the current state would take (every plate angle
+        the turn allows and every IK branch from the current joints, :meth:`ArmReach.best_target`; about 20 ms of
+        IK per view), so row 0 is the move's own estimate; a few views only (the tour's cover).
         Reach sphere: plate turn + the camera's straight travel at ``SPHERE_CAMERA_SPEED``."""
         poses = [candidates[int(i)].T_world_camera for i in indices]
         n = len(poses) + 1
         ok = np.ones(n, dtype=bool)
         if self.kinematics is not None:
-            reach = self.kinematics.reach
+            kinematics = self.kinematics
+            reach = kinematics.reach
             q0, a0 = self.arm.joint_positions(), self.turntable.angle
             qs, angles = [np.asarray(q0, dtype=np.float64)], [a0]
+
+            def turn_check(a: float) -> str | None:
+                return kinematics.turn_blocked(q0, a0, a)
+
             for k, T in enumerate(poses, start=1):
-                target = reach.nearest_target(T, q0, a0)
+                if exact:
+                    best, _ = reach.best_target(T, q0, a0, turn_check)
+                    target = None if best is None else (best.q, best.angle)
+                else:
+                    target = reach.nearest_target(T, q0, a0)
                 ok[k] = target is not None
                 qs.append(qs[0] if target is None else target[0])
                 angles.append(a0 if target is None else target[1])

@@ -278,6 +278,23 @@ class TourConfig:
     against robot time (``planner.tour.rate_order``), "gain" the view with the largest gain."""
     overhead_seconds: float = 0.0
     """Seconds each view costs besides its move (capture and plan), in the "rate" order."""
+    score: Literal["frontier", "projection"] = "frontier"
+    """What the plan optimises: "frontier" the set cover of the frontier voxels the views see, ordered by move time
+    (``horizon``, ``min_gain``, ``order``); "projection" the paper's score F (GMM ellipsoids, ``planner.scoring``),
+    and the next view is the one with the shortest move from the current state among the best by F that score at
+    least (1 - ``slack``) x the best F (``planner.tour.near_best``: moves timed as the cell would make them, every
+    plate angle and IK branch)."""
+    lazy_reach: bool = True
+    """Skip the plan's reachability pass over every candidate: only the views the tour times (its cover, or with
+    ``score = "projection"`` the views near the best F) are checked, by their moves from the current state (inf:
+    unreachable, left out and the cover made again); the others stay unchecked (no move time in the table).
+    False: every candidate checked first, as for the other planners (the same cover; 0.3-1 s more per cold plan)."""
+    slack: float = 0.1
+    """With ``score = "projection"``: how far below the best F (a fraction of it) a view may score and still be
+    chosen for a shorter move."""
+    near_views: int = 8
+    """With ``score = "projection"``: how many reachable views (best F first) have their moves timed (about 20 ms
+    of IK each)."""
 
     def __post_init__(self) -> None:
         require(
@@ -295,6 +312,13 @@ class TourConfig:
             f"tour.depth_tolerance_voxels: must be >= 0, got {self.depth_tolerance_voxels!r}",
         )
         require(self.order in ("tsp", "rate", "gain"), f"tour.order: 'tsp', 'rate' or 'gain', got {self.order!r}")
+        require(self.score in ("frontier", "projection"), f"tour.score: 'frontier' or 'projection', got {self.score!r}")
+        require(isinstance(self.lazy_reach, bool), f"tour.lazy_reach: true or false, got {self.lazy_reach!r}")
+        require(finite(self.slack) and 0 <= self.slack < 1, f"tour.slack: must be in [0, 1), got {self.slack!r}")
+        require(
+            integer(self.near_views) and 1 <= self.near_views <= 400,
+            f"tour.near_views: an integer in [1, 400], got {self.near_views!r}",
+        )
         require(
             finite(self.overhead_seconds) and self.overhead_seconds >= 0,
             f"tour.overhead_seconds: must be >= 0, got {self.overhead_seconds!r}",

@@ -12,6 +12,7 @@ The planner never talks to a device. ``integrate`` either succeeds or raises
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -23,7 +24,7 @@ from numpy.typing import NDArray
 
 from planner.candidates import propose_candidates
 from planner.config import PlannerConfig
-from planner.evaluators import EvaluationContext, ViewEvaluator, make_evaluator
+from planner.evaluators import Evaluation, EvaluationContext, ViewEvaluator, make_evaluator
 from planner.noise import dropouts_filled, plate_heights, registration_for, without_flying_pixels
 from planner.partitions import (
     azimuth_of,
@@ -214,7 +215,9 @@ class Planner:
     ) -> PlanResult:
         """Score every candidate and pick the next best view.
 
-        reachable: the cell's check; unreachable candidates are ineligible.
+        reachable: the cell's check; unreachable candidates are ineligible. An evaluator with ``lazy_reach`` (the
+        ``tour`` planner, ``tour.lazy_reach``) skips it when ``move_times`` is given: the views it times are
+        checked by their move times (inf: ineligible, "unreachable"), the others stay unchecked.
         move_cost: (candidates, eligible (C,) bool) -> (C,) seconds each move would take (inf = unknown), from
         the caller (the planner never sees the arm); asked only when ``selection.move_cost_weight`` > 0, and
         then the choice trades F against it (:func:`planner.partitions.select_with_move_cost`). With the ``tour``
@@ -259,7 +262,8 @@ class Planner:
             allowed = allowed - {leave}
         in_sector = np.array([c.sector in allowed for c in candidates], dtype=bool)
         reach = np.ones(len(candidates), dtype=bool)
-        if reachable is not None:
+        lazy = reachable is not None and move_times is not None and bool(getattr(self.evaluator, "lazy_reach", False))
+        if reachable is not None and not lazy:
             for i, c in enumerate(candidates):
                 stages("reachability", i, len(candidates))
                 reach[i] = bool(reachable(c.T_world_camera))
@@ -281,7 +285,12 @@ class Planner:
         if callable(choose):
             stages("tour", 0, 1)
             best, tour = cast(ChooseFn, choose)(evaluation.scores, candidates, self.views[-1], move_times)
-            if move_times is not None:  # each eligible candidate's move from here, for the table
+            if lazy:  # only the views it timed have a move (and a reachability answer: inf = unreachable)
+                timed: dict[int, float] = getattr(self.evaluator, "last_move_seconds", {})
+                move_costs = np.full(len(candidates), math.inf)
+                move_costs[list(timed)] = list(timed.values())
+                evaluation, reasons = _unreachable_marked(evaluation, reasons, timed)
+            elif move_times is not None:  # each eligible candidate's move from here, for the table
                 move_costs = moves_from_here(move_times, candidates, [s.eligible for s in evaluation.scores])
             stages("select", 0, 1)
         elif weight > 0 and (move_times is not None or move_cost is not None):
@@ -334,6 +343,20 @@ def moves_from_here(
     out = np.full(len(candidates), math.inf)
     out[idx] = np.asarray(move_times(candidates, idx), dtype=np.float64)[0, 1:]
     return out
+
+
+def _unreachable_marked(
+    evaluation: Evaluation, reasons: tuple[str, ...], timed: dict[int, float]
+) -> tuple[Evaluation, tuple[str, ...]]:
+    """The evaluation and the reasons with every view whose timed move is inf made ineligible ("unreachable"): the
+    reachability answers of an evaluator that asks them itself (``lazy_reach``)."""
+    out = list(reasons)
+    scores = list(evaluation.scores)
+    for i, t in timed.items():
+        if not math.isfinite(t):
+            out[i] = "unreachable"
+            scores[i] = dataclasses.replace(scores[i], eligible=False)
+    return dataclasses.replace(evaluation, scores=tuple(scores)), tuple(out)
 
 
 def ineligible_reasons(

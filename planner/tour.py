@@ -18,6 +18,12 @@ costs; in the simulated UR5 cell the robot's moves are about 97 % of a scan's ti
    start, solved by LKH (``elkai``) from three views on, exactly below.
 4. The first view of the order is the next view; the rest is the predicted tour (``PlanResult.tour``), re-planned
    after every capture.
+
+With ``tour.lazy_reach`` (the default) the plan skips its reachability pass over every candidate
+(:attr:`TourEvaluator.lazy_reach`): the cover's views are the only ones the cell is asked about, through their move
+times (inf: unreachable; the view is left out and the cover made again). With ``tour.score = "projection"`` the
+plan instead scores by the paper's F and takes the shortest exact move among the views within ``tour.slack`` of the
+best F (:func:`near_best`; tried, not the default).
 """
 
 from __future__ import annotations
@@ -31,12 +37,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.config import PlannerConfig, TourConfig
-from planner.evaluators import EVALUATORS, Evaluation, EvaluationContext
+from planner.evaluators import EVALUATORS, Evaluation, EvaluationContext, ProjectionEvaluator
 from planner.types import Candidate, Intrinsics, Pose, TourPlan, ViewScore, VoxelClass
 
-MoveTimes = Callable[[Sequence[Candidate], Sequence[int]], NDArray[np.float64]]
-"""(candidates, K indices) -> (K + 1, K + 1) seconds of the move between every two states; state 0 is the robot's
-current one, state k the candidate ``indices[k - 1]``; inf for a move the cell cannot make."""
+MoveTimes = Callable[..., NDArray[np.float64]]
+"""(candidates, K indices[, exact=bool]) -> (K + 1, K + 1) seconds of the move between every two states; state 0 is
+the robot's current one, state k the candidate ``indices[k - 1]``; inf for a move the cell cannot make. ``exact``
+(``devices.cell.Cell.move_times``): each view's target as a move from the current state would choose it (every
+plate angle and IK branch), not the cached reachability target; asked with ``tour.score = "projection"``."""
 
 FALLBACK_SPEED = 0.25
 """m/s of the camera's straight travel assumed when the caller gives no move times (a cell without an arm model)."""
@@ -177,6 +185,39 @@ def path_seconds(times: NDArray[np.float64], order: Sequence[int]) -> float:
     return float(sum(times[a, b] for a, b in itertools.pairwise(states)))
 
 
+def near_best(
+    ranked: Sequence[tuple[int, float]],
+    seconds: Callable[[list[int]], NDArray[np.float64]],
+    slack: float,
+    near_views: int,
+) -> tuple[int | None, dict[int, float]]:
+    """(the next view, {view: move seconds} of every view timed): the shortest move among the views scoring
+    nearly the best.
+
+    ranked: (candidate index, F) of the eligible views, best F first. seconds: K indices -> (K,) seconds of the
+    move to each from the current state (inf: the cell cannot reach it; this is the views' only reachability
+    check). Views are timed best F first, ``near_views`` at a time, while their F is at least (1 - ``slack``) x the
+    best F (every view when the best F <= 0), until ``near_views`` reachable ones are timed; the next view is the
+    timed reachable one with the shortest move (on a tie the better F). None when none timed is reachable.
+    """
+    if not ranked:
+        return None, {}
+    top = ranked[0][1]
+    threshold = (1.0 - slack) * top if top > 0 else -math.inf
+    timed: dict[int, float] = {}
+    start = 0
+    while start < len(ranked) and ranked[start][1] >= threshold:
+        batch = [i for i, f in ranked[start : start + near_views] if f >= threshold]
+        start += near_views
+        timed.update(zip(batch, (float(t) for t in seconds(batch)), strict=True))
+        if sum(math.isfinite(t) for t in timed.values()) >= near_views:
+            break
+    order = [i for i, _ in ranked if i in timed and math.isfinite(timed[i])]
+    if not order:
+        return None, timed
+    return min(order, key=lambda i: timed[i]), timed  # min keeps the first (better F) on a tie
+
+
 def straight_move_times(start: Pose, poses: Sequence[Pose]) -> NDArray[np.float64]:
     """(K + 1, K + 1) seconds between ``start`` and every two of ``poses`` at :data:`FALLBACK_SPEED` along straight
     lines: the move times of a cell that gives none."""
@@ -193,13 +234,28 @@ class TourEvaluator:
     def __init__(self, config: PlannerConfig) -> None:
         self.config = config
         self.last_seen: NDArray[np.bool_] = np.zeros((0, 0), dtype=bool)
+        self._projection: ProjectionEvaluator | None = None
+        self.last_move_seconds: dict[int, float] = {}
+        """The move seconds from the current state of every view the last :meth:`choose` timed (inf: unreachable)."""
+
+    @property
+    def lazy_reach(self) -> bool:
+        """Whether the plan skips its reachability pass over every candidate (``tour.lazy_reach``): the views
+        :meth:`choose` times are checked by their moves instead (inf: unreachable; :attr:`last_move_seconds`)."""
+        return self.config.tour.lazy_reach
 
     def reset(self) -> None:
-        """Stateless between plans: nothing to forget."""
+        """Stateless between plans: nothing to forget (but the projection score's fitters)."""
+        if self._projection is not None:
+            self._projection.reset()
 
     def evaluate(self, ctx: EvaluationContext) -> Evaluation:
         t0 = time.perf_counter()
         cfg: TourConfig = self.config.tour
+        if cfg.score == "projection":
+            if self._projection is None:
+                self._projection = ProjectionEvaluator(self.config)
+            return self._projection.evaluate(ctx)
         ctx.progress("visibility", 0, len(ctx.candidates))
         eligible = np.asarray(ctx.eligible, dtype=bool)
         frontier = ctx.voxel_map.centers(VoxelClass.FRONTIER)
@@ -231,13 +287,23 @@ class TourEvaluator:
         eligible = np.array([s.eligible for s in scores], dtype=bool)
         if not np.any(eligible):
             return None, None
-        views, gains = greedy_cover(self.last_seen, eligible, cfg.horizon, cfg.min_gain)
-        if not views:
-            return int(max((s for s in scores if s.eligible), key=lambda s: (s.score, -s.index)).index), None
-        if move_times is not None:
-            times = np.asarray(move_times(candidates, views), dtype=np.float64)
-        else:
-            times = straight_move_times(start, [candidates[i].T_world_camera for i in views])
+        if cfg.score == "projection":
+            return self._choose_near_best(scores, candidates, move_times)
+        self.last_move_seconds = {}
+        allowed = eligible.copy()
+        while True:  # with lazy_reach: a view of the cover the cell cannot reach is left out and the cover made again
+            views, gains = greedy_cover(self.last_seen, allowed, cfg.horizon, cfg.min_gain)
+            if not views:
+                return int(max((s for s in scores if s.eligible), key=lambda s: (s.score, -s.index)).index), None
+            if move_times is not None:
+                times = np.asarray(move_times(candidates, views), dtype=np.float64)
+            else:
+                times = straight_move_times(start, [candidates[i].T_world_camera for i in views])
+            self.last_move_seconds.update((v, float(times[0, k + 1])) for k, v in enumerate(views))
+            unreachable = [v for k, v in enumerate(views) if not math.isfinite(times[0, k + 1])]
+            if not unreachable or not self.lazy_reach:
+                break
+            allowed[unreachable] = False
         reachable = [k for k in range(len(views)) if math.isfinite(times[0, k + 1])]
         if not reachable:
             return views[0], None
@@ -261,6 +327,28 @@ class TourEvaluator:
             method=method,
         )
         return plan.views[0], plan
+
+    def _choose_near_best(
+        self, scores: Sequence[ViewScore], candidates: Sequence[Candidate], move_times: MoveTimes | None
+    ) -> tuple[int | None, TourPlan | None]:
+        """:meth:`choose` with ``tour.score = "projection"``: :func:`near_best` under the cell's exact moves from
+        the current state (without ``move_times``: the best F, as ``projection``)."""
+        cfg: TourConfig = self.config.tour
+        ranked = [
+            (s.index, s.score) for s in sorted((s for s in scores if s.eligible), key=lambda s: (-s.score, s.index))
+        ]
+        self.last_move_seconds = {}
+        if move_times is None:
+            return ranked[0][0], None
+        mt = move_times
+
+        def seconds(views: list[int]) -> NDArray[np.float64]:
+            return np.asarray(mt(candidates, views, exact=True), dtype=np.float64)[0, 1:]
+
+        best, self.last_move_seconds = near_best(ranked, seconds, cfg.slack, cfg.near_views)
+        if best is None:
+            return None, None
+        return best, TourPlan(views=(best,), gains=(0,), seconds=(self.last_move_seconds[best],), method="near")
 
 
 EVALUATORS["tour"] = TourEvaluator

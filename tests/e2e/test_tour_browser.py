@@ -14,8 +14,9 @@ from tests.helpers import SMALL
 from tests.servers import LiveServer
 from tests.viewer_wire import session_nodes
 
-CONFIG = {**SMALL, "voxel": {"resolution": 0.01}, "tour": {"min_gain": 0.0, "horizon": 4}}
-"""Few candidates (fast), a map fine enough for several views to add frontier, a tour of all of them (up to 4)."""
+CONFIG = {**SMALL, "voxel": {"resolution": 0.01}, "tour": {"min_gain": 0.0, "horizon": 4, "lazy_reach": False}}
+"""Few candidates (fast), a map fine enough for several views to add frontier, a tour of all of them (up to 4);
+every candidate's reachability asked (not only the tour's), so every row of the table has its move time."""
 
 
 def test_the_page_draws_the_tour_and_its_move_times(live_server: LiveServer, browser_context: BrowserContext) -> None:
