@@ -155,3 +155,27 @@ def test_voxel_downsample_density_and_edge_cases() -> None:
         voxel_downsample(pts, -0.01)
     far = np.array([[0.0, 0.0, 0.0], [1e6, 1e6, 1e6]])  # a huge lattice: falls back to unique rows
     np.testing.assert_array_equal(voxel_downsample(far, 1e-6), far)
+
+
+def test_radius_inliers_equal_counting_the_whole_ball() -> None:
+    """The k-nearest shortcut keeps exactly the points the ball count keeps: random clouds, clouds on a lattice
+    (neighbours exactly at the radius), duplicated points, radius 0."""
+    from scipy.spatial import KDTree
+
+    from planner.preprocess import radius_inliers
+
+    rng = np.random.default_rng(0)
+    flipped = 0
+    for trial in range(120):
+        n = int(rng.integers(1, 300))
+        p = rng.random((n, 3)) * rng.choice([0.01, 0.05, 0.2])
+        if trial % 3 == 0:
+            p = np.round(p / 0.0025) * 0.0025
+        if trial % 5 == 0 and n > 2:
+            p[: n // 3] = p[0]
+        r = float(rng.choice([0.0, 0.0025, 0.005, 0.0075, 0.01]))
+        m = int(rng.integers(1, 6))
+        ball = np.asarray(KDTree(p).query_ball_point(p, r=r, return_length=True)) - 1 >= m
+        np.testing.assert_array_equal(radius_inliers(p, r, m), ball)
+        flipped += int(ball.sum()) not in (0, n)
+    assert flipped > 40  # most cases keep some points and drop others: the comparison has teeth

@@ -44,19 +44,10 @@ def worker_context() -> Any:
     with _context_lock:
         if _context is None:
             ctx = multiprocessing.get_context("forkserver")
-            # open3d and pinocchio are imported here, once (1-2 s of CPU each time a worker imported them itself:
-            # devices.sim and devices.arm.kinematics import them lazily), no thread started by them and no scene
-            # built: a worker builds its own after the fork
-            ctx.set_forkserver_preload(
-                [
-                    "open3d",
-                    "pinocchio",
-                    "workbench.workers.child",
-                    "devices.sim",
-                    "devices.arm.kinematics",
-                    "workbench.sources.mesh_loader",
-                ]
-            )
+            # the worker's libraries imported and the default arm loaded here, once (workbench/workers/preload.py:
+            # each worker importing open3d and pinocchio itself cost 1-2 s of CPU); no thread started by them and no
+            # scene built: a worker builds its own after the fork. threadpoolctl: the fits' BLAS limit (optional)
+            ctx.set_forkserver_preload(["workbench.workers.preload", "threadpoolctl"])
             _context = ctx
         return _context
 
