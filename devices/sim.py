@@ -69,9 +69,7 @@ class SimulatedCamera:
 
         self.config = config if config is not None else CameraConfig()
         self.sensor = sensor_named(self.config.sensor)
-        own = self.config.intrinsics
-        # a preset with its stream's field of view renders at it, unless the config set a pinhole of its own
-        self._intrinsics = self.sensor.intrinsics(own) if own == Intrinsics() else own
+        self._intrinsics = self.config.intrinsics
         self.pose_source = pose_source
         self.fail_next: Exception | None = None
         self.captures = 0

@@ -13,7 +13,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from planner.types import Intrinsics
 from planner.validate import finite, require
 
 
@@ -52,12 +51,6 @@ class SensorModel:
     """Share of the image lost to dropout blobs (specular spots, low texture), 0..1."""
     hole_size_px: int = 6
     """Edge of a dropout blob, pixels."""
-    fov_deg: tuple[float, float] = (0.0, 0.0)
-    """The depth stream's horizontal and vertical field of view, degrees ((0, 0): none given, the simulated camera
-    renders at the cell's own intrinsics)."""
-    render_size: tuple[int, int] = (0, 0)
-    """Width and height of the simulated image when ``fov_deg`` is given, pixels (the stream's or a fraction of it;
-    the depth noise keeps the stream's ``focal_px``)."""
 
     def __post_init__(self) -> None:
         require(isinstance(self.name, str) and self.name != "", f"sensor.name: must be a name, got {self.name!r}")
@@ -76,16 +69,6 @@ class SensorModel:
             isinstance(self.hole_size_px, int) and self.hole_size_px >= 1,
             f"sensor.hole_size_px: must be an integer >= 1, got {self.hole_size_px!r}",
         )
-        hfov, vfov = self.fov_deg
-        require(
-            (hfov, vfov) == (0.0, 0.0) or (0 < hfov < 180 and 0 < vfov < 180),
-            f"sensor.fov_deg: must be (0, 0) or two angles in (0, 180), got {self.fov_deg!r}",
-        )
-        w, h = self.render_size
-        require(
-            (hfov == 0) or (isinstance(w, int) and isinstance(h, int) and w >= 1 and h >= 1),
-            f"sensor.render_size: a field of view needs a width and height >= 1, got {self.render_size!r}",
-        )
         require(
             (self.subpixel == 0) or (self.baseline > 0 and self.focal_px > 0),
             "sensor.subpixel: depth noise needs baseline > 0 and focal_px > 0",
@@ -95,17 +78,6 @@ class SensorModel:
     def is_ideal(self) -> bool:
         """True when the model changes nothing (today's perfect camera)."""
         return self == SensorModel(self.name)
-
-    def intrinsics(self, cell: Intrinsics) -> Intrinsics:
-        """The pinhole model the simulated camera renders with: the stream's field of view (``fov_deg``) at
-        ``render_size``, principal point at the image centre; ``cell`` (the cell's own intrinsics) when the preset
-        gives no field of view."""
-        if self.fov_deg == (0.0, 0.0):
-            return cell
-        (hfov, vfov), (w, h) = self.fov_deg, self.render_size
-        fx = (w / 2) / math.tan(math.radians(hfov) / 2)
-        fy = (h / 2) / math.tan(math.radians(vfov) / 2)
-        return Intrinsics(w, h, fx, fy, (w - 1) / 2, (h - 1) / 2)
 
     def depth_rms(self, z: float) -> float:
         """RMS depth error at planar depth ``z`` metres, metres (0 for a sensor without triangulation noise)."""
@@ -122,8 +94,7 @@ def _focal(half_width_px: float, hfov_deg: float) -> float:
 SENSORS: dict[str, SensorModel] = {
     "ideal": SensorModel("ideal"),
     # Intel RealSense D435: 50 mm stereo baseline, depth FOV 87 x 58 deg, best depth at 848 x 480 (min-Z 0.195 m
-    # there), depth unit 1 mm, subpixel 0.08 typical (datasheet rev. 014 and the depth-tuning white paper); rendered
-    # at that stream (848 x 480, 87 x 58 deg).
+    # there), depth unit 1 mm, subpixel 0.08 typical (datasheet rev. 014 and the depth-tuning white paper).
     "realsense-d435": SensorModel(
         "realsense-d435",
         baseline=0.050,
@@ -136,11 +107,8 @@ SENSORS: dict[str, SensorModel] = {
         max_incidence_deg=75.0,
         flying_probability=0.5,
         hole_fraction=0.01,
-        fov_deg=(87.0, 58.0),
-        render_size=(848, 480),
     ),
-    # Intel RealSense D405: 18 mm baseline, FOV 87 x 58 deg, 1280 x 720, ideal range 7-50 cm, depth unit 0.1 mm;
-    # rendered at half the stream's resolution (640 x 360, the same field of view), the noise at the stream's focal.
+    # Intel RealSense D405: 18 mm baseline, FOV 87 x 58 deg, 1280 x 720, ideal range 7-50 cm, depth unit 0.1 mm.
     "realsense-d405": SensorModel(
         "realsense-d405",
         baseline=0.018,
@@ -153,8 +121,6 @@ SENSORS: dict[str, SensorModel] = {
         max_incidence_deg=75.0,
         flying_probability=0.5,
         hole_fraction=0.01,
-        fov_deg=(87.0, 58.0),
-        render_size=(640, 360),
     ),
     # A projector-camera rig like the paper's (a 2048 px wide camera, 70 deg HFOV, projector 120 mm to its side,
     # phase precision 0.05 px): an assumption in the range of desktop structured-light scanners (docs/method.md).

@@ -46,9 +46,7 @@ def test_noise_band_removes_the_plate_and_keeps_B(noiseless: Planner, camera: Ca
     noisy = first_frame_planner(camera, tuned=True)
     lo, hi = make_builtin("l-block").bounds
     low = noisy.cloud[noisy.cloud[:, 2] < 0.003]
-    # within 5 mm of the foot's outline: the D435's stream (f = 447 px) images 1.2 mm per pixel at 0.55 m, and a
-    # downsampled point at the foot's edge lies up to 3.4 mm out; the plate's points would lie up to 0.2 m away
-    off_object = np.any((low[:, :2] < lo[:2] - 0.005) | (low[:, :2] > hi[:2] + 0.005), axis=1)
+    off_object = np.any((low[:, :2] < lo[:2] - 0.003) | (low[:, :2] > hi[:2] + 0.003), axis=1)
     assert int(np.count_nonzero(off_object)) == 0  # low points are the object's foot, none is plate
     a, b = noiseless.voxel_map.bbox, noisy.voxel_map.bbox
     assert a is not None and b is not None
