@@ -13,6 +13,8 @@ with each seed, projection planner. Printed per preset (mean over runs, at the l
 - views to 95 % of the object's reachable ceiling (the perfect camera's; N + 1 when never);
 - plan time: median ``plan_seconds`` over every view of every run.
 
+``<out>/sensors.json`` also keeps each run's final recall, precision and F@5mm (``per_run``, "model/seed").
+
 ``--bunny-check``: the issue's check, the bunny at 2 mm depth noise (ideal sensor), 10 views, UR5: the first
 frame's plate points and B with the paper's fixed 2 mm band and with the band that follows the noise, and the
 final B of the scan against the noiseless scan's. Results also go to ``<out>/sensors.json``.
@@ -87,6 +89,10 @@ def summarise(outcomes: list[RunOutcome], ceiling: dict[str, float], views: int)
         "chamfer_mm": final("chamfer_mm"),
         "views_to_95": statistics.fmean(v95) if v95 else None,
         "plan_seconds_median": statistics.median(plan) if plan else None,
+        "per_run": {
+            f"{o.label}/{o.seed}": {k: o.rows[-1].get(k) for k in ("recall_5mm", "precision_5mm", "fscore_5mm")}
+            for o in done
+        },
     }
 
 
@@ -135,7 +141,7 @@ def bunny_check(views: int) -> dict[str, Any]:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=(__doc__ or "").split("\n", 1)[0])
     p.add_argument("--models", default="all", help="'all' (the 17 development meshes) or comma-separated paths")
     p.add_argument("--seeds", type=int, default=2)
     p.add_argument("--views", type=int, default=10)

@@ -159,9 +159,19 @@ class ScoringConfig:
     """W = rank_base ** r (paper: 0.5)."""
     area: Literal["analytic", "raster"] = "analytic"
     """How L is counted: exact clipped-ellipse area, or rasterising pixel centres (reference)."""
+    max_incidence_deg: float = 90.0
+    """The sensor returns no depth where the viewing ray is farther than this from the surface normal (90: any
+    angle, the paper). Below 90, a flat frontier ellipsoid (``planner.scoring.FLAT``) seen beyond it earns no L:
+    its smallest axis stands for the normal of the unseen surface. Opt-in: set to a sensor's grazing limit it
+    measured no better over the 17 development meshes (docs/method.md, "Where the D405 and structured light lose
+    recall")."""
 
     def __post_init__(self) -> None:
         require(finite(self.rank_base) and 0 < self.rank_base <= 1, "scoring.rank_base: must be in (0, 1]")
+        require(
+            finite(self.max_incidence_deg) and 0 < self.max_incidence_deg <= 90,
+            f"scoring.max_incidence_deg: must be in (0, 90], got {self.max_incidence_deg!r}",
+        )
         require(self.area in ("analytic", "raster"), f"scoring.area: 'analytic' or 'raster', got {self.area!r}")
 
 

@@ -122,6 +122,21 @@ def dropouts_filled(frame: DepthFrame, radius_px: int) -> DepthFrame:
     return DepthFrame(filled, frame.T_world_camera, frame.intrinsics)
 
 
+def unknown_beyond_range(carve: DepthFrame, measured: DepthFrame, max_range: float) -> DepthFrame:
+    """``carve`` (the frame the voxel map carves) with every pixel that has no return in ``measured`` (the sensor's
+    frame) and none in ``carve`` set to ``max_range``: a sensor says nothing beyond its range, so such a ray is free
+    space up to ``max_range`` (planar depth, metres) and unknown beyond (the paper's rule, "no return is free
+    space", assumes a range beyond B). Pixels ``carve`` already filled (dropouts) or cleared (the plate, which has a
+    return in ``measured``) are left alone. ``max_range`` 0: unchanged."""
+    if max_range <= 0:
+        return carve
+    silent = (measured.depth == 0) & (carve.depth == 0)
+    if not np.any(silent):
+        return carve
+    depth = np.where(silent, np.float32(max_range), carve.depth).astype(np.float32)
+    return DepthFrame(depth, carve.T_world_camera, carve.intrinsics)
+
+
 def registration_for(frame: DepthFrame, config: RegistrationConfig, noise: NoiseConfig) -> RegistrationConfig:
     """``config`` with its rmse gate raised to ``icp_sigmas * sqrt(2) * sigma(median depth)`` when that is larger
     (two noisy clouds: the frame's and the accumulated one's), and the correspondence distance kept above three

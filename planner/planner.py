@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from planner.candidates import propose_candidates
 from planner.config import PlannerConfig
 from planner.evaluators import Evaluation, EvaluationContext, ViewEvaluator, make_evaluator
-from planner.noise import dropouts_filled, plate_heights, registration_for, without_flying_pixels
+from planner.noise import dropouts_filled, plate_heights, registration_for, unknown_beyond_range, without_flying_pixels
 from planner.partitions import (
     azimuth_of,
     default_tolerance,
@@ -143,6 +143,7 @@ class Planner:
             carve = self._plate_as_free_space(dropouts_filled(frame, self.config.noise.dropout_fill_px))
         else:
             carve = self._plate_as_free_space(frame, plate)
+        carve = unknown_beyond_range(carve, frame, self.config.candidates.max_range)
         self.voxel_map.integrate(carve, dense)  # atomic: raises before changing anything
         timings["integrate"] = time.perf_counter() - t0
 

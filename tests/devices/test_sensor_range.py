@@ -76,3 +76,19 @@ def test_icp_only_where_the_pose_error_exceeds_the_noise(camera: CameraConfig, i
     assert planner_config_for(PlannerConfig(), camera).registration.enabled is icp
     assert registration_resolves_nothing(camera, 0.35) is not icp
     assert per_move_pose_error(CameraConfig(calibration="typical"), 0.5) == pytest.approx(6.7e-5, rel=0.05)
+
+
+@pytest.mark.parametrize(
+    ("sensor", "fill"), [("ideal", 0), ("realsense-d435", 6), ("realsense-d405", 6), ("structured-light", 6)]
+)
+def test_dropouts_follow_the_sensor(sensor: str, fill: int) -> None:
+    """A real sensor's dropouts carve only up to the depth around them; the ideal camera keeps the paper's planner
+    exactly; a value set explicitly is kept."""
+    config = planner_config_for(PlannerConfig(), CameraConfig(sensor=sensor))
+    assert config.noise.dropout_fill_px == fill
+    assert config.scoring.max_incidence_deg == 90.0  # opt-in only (measured no better)
+    if sensor == "ideal":
+        assert config == PlannerConfig()
+    own = PlannerConfig().replace(noise={"dropout_fill_px": 2}, scoring={"max_incidence_deg": 60.0})
+    kept = planner_config_for(own, CameraConfig(sensor=sensor))
+    assert (kept.noise.dropout_fill_px, kept.scoring.max_incidence_deg) == (2, 60.0)

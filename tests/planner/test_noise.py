@@ -13,9 +13,11 @@ from planner.noise import (
     fit_plate,
     plate_heights,
     registration_for,
+    unknown_beyond_range,
     without_flying_pixels,
 )
-from planner.types import DepthFrame, Intrinsics, Pose
+from planner.types import DepthFrame, Intrinsics, Pose, VoxelClass
+from planner.voxel_map import observe_projective
 
 K = Intrinsics(64, 48, 60.0, 60.0, 31.5, 23.5)
 DOWN = Pose(np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]]), np.array([0.0, 0.0, 0.5]))
@@ -85,6 +87,26 @@ def test_dropouts_carve_to_the_nearest_depth_around_them() -> None:
     assert far.depth[20, 40] == 0  # far from every return: still free space
     assert far.depth[3, 3] == np.float32(0.3)
     assert dropouts_filled(frame, 0) is frame
+
+
+def test_no_return_is_free_only_up_to_the_sensor_range() -> None:
+    """A camera 0.8 m above the floor looking down, a 0.5 m sensor: the floor returns nothing. The paper's rule
+    carves the whole column EMPTY (for good); with the range, voxels whose far side is beyond 0.5 m of depth
+    (z < 0.3 m) stay UNKNOWN. A pixel the carve frame cleared on purpose (the plate: it had a return) stays free."""
+    eye = Pose(DOWN.rotation, np.array([0.0, 0.0, 0.8]))
+    measured = DepthFrame(np.zeros((K.height, K.width), dtype=np.float32), eye, K)
+    lower, shape = np.array([-0.05, -0.05, 0.0]), (10, 10, 60)  # z from 0 to 0.6 m, 1 cm voxels
+    paper = observe_projective(measured, lower, 0.01, shape)
+    assert np.all(paper[4:6, 4:6] == VoxelClass.EMPTY)
+    carve = unknown_beyond_range(measured, measured, 0.5)
+    assert np.all(carve.depth == np.float32(0.5))
+    obs = observe_projective(carve, lower, 0.01, shape)
+    column = obs[5, 5]  # the voxel column under the camera, k = 0 at z 0..1 cm
+    assert np.all(column[:29] == VoxelClass.UNKNOWN)  # depth 0.8 - z beyond 0.5 m somewhere in the voxel
+    assert np.all(column[30:] == VoxelClass.EMPTY)
+    plate = DepthFrame(np.full((K.height, K.width), 0.8, dtype=np.float32), eye, K)  # returns, cleared as plate
+    assert unknown_beyond_range(measured, plate, 0.5) is measured
+    assert unknown_beyond_range(measured, measured, 0.0) is measured  # no range given: the paper's rule
 
 
 def test_plate_fit_ignores_the_rim_and_the_foot() -> None:
