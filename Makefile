@@ -8,8 +8,9 @@ TSTAMP  := $(VENV)/.installed-test
 HOST    ?= 127.0.0.1
 PORT    ?= 8000
 PYTEST_ARGS ?=
-# two processes on the 2-core machine (tests/conftest.py: a file's tests share one worker)
-PYTEST_WORKERS ?= 2
+# three processes on the 2-core machine (the tests wait on browsers, servers and workers: 2 left a third of
+# the CPU idle, 4 oversubscribe it; measured 336 s, 378-455 s, 378 s); tests/conftest.py: a file shares a worker
+PYTEST_WORKERS ?= 3
 # Plugins by name, not every installed one: pytest rewrites the asserts of every module of a package that has
 # a plugin entry point (dash, 673 files, imported by open3d), on each run when bytecode is not written.
 PYTEST_PLUGINS ?= xdist.plugin,pytest_timeout,_hypothesis_pytestplugin,schemathesis.pytest.plugin

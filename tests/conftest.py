@@ -1,4 +1,4 @@
-"""The suite's one rule for parallel runs (``make test``: pytest-xdist, ``-n 2 --dist loadgroup``): the tests of a
+"""The suite's one rule for parallel runs (``make test``: pytest-xdist, ``-n 3 --dist loadgroup``): the tests of a
 file run in one worker process, so a module's fixtures (a served app, a bench run) are built once; a file marked
 ``xdist_group("name")`` shares its worker with the other files of that group (the long, CPU-heavy ones, which
 must not starve each other's budgets). Every test gets its own node id (xdist runs one test per id)."""
