@@ -73,8 +73,8 @@ def planner_config_for(config: PlannerConfig, camera: CameraConfig) -> PlannerCo
     per voxel of the map) unless already set, and for a sensor with a finite range ``candidates.max_range`` set
     to it unless already set (the candidate sphere shrinks so B's far corner stays in range, and a ray without a
     return is free space only up to it). A non-ideal sensor also gets dropout-aware carving
-    (``DROPOUT_FILL_PX``) and, with a grazing limit, ``scoring.max_incidence_deg`` (no score for a flat frontier
-    it would see beyond that limit), each unless already set."""
+    (``DROPOUT_FILL_PX``) unless already set (``scoring.max_incidence_deg``, the incidence-aware score, stays
+    opt-in: it measured no better)."""
     out = dataclasses.replace(config, noise=noise_config(camera, config.noise))
     sensor = sensor_named(camera.sensor)
     if math.isfinite(sensor.max_range) and config.candidates.max_range == 0:
