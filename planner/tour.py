@@ -293,8 +293,11 @@ class TourEvaluator:
         allowed = eligible.copy()
         while True:  # with lazy_reach: a view of the cover the cell cannot reach is left out and the cover made again
             views, gains = greedy_cover(self.last_seen, allowed, cfg.horizon, cfg.min_gain)
-            if not views:
-                return int(max((s for s in scores if s.eligible), key=lambda s: (s.score, -s.index)).index), None
+            if not views:  # nothing gains: the best score among the views not known to be unreachable
+                left = [s for s in scores if s.eligible and allowed[s.index]]
+                if not left:
+                    return None, None
+                return int(max(left, key=lambda s: (s.score, -s.index)).index), None
             if move_times is not None:
                 times = np.asarray(move_times(candidates, views), dtype=np.float64)
             else:

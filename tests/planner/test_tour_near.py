@@ -150,3 +150,31 @@ def test_lazy_reach_covers_again_without_a_view_the_cell_cannot_reach() -> None:
         assert tour is not None and set(tour.views) == cover and best == tour.views[0]
         assert evaluator.last_move_seconds[0] == math.inf
     # lazy: 0 left out, the cover made again of 1 and 2 (3 voxels each); without: 0 dropped from the cover {0, 2}
+
+
+def test_lazy_reach_never_falls_back_to_a_view_found_unreachable() -> None:
+    """When every view that gains is unreachable the cover empties: the fallback (the best score) skips the views
+    the cell refused, and with none left there is no next view (never one known to be unreachable)."""
+    from planner.baselines.evaluators import gain_scores
+    from planner.tour import TourEvaluator
+    from planner.types import Pose
+
+    seen = np.array([[1, 1, 0], [0, 1, 1], [0, 0, 0]], dtype=bool)  # view 2 sees nothing new
+
+    def move_times(unreachable: set[int]):
+        def f(candidates: object, views: list[int]) -> np.ndarray:
+            t = np.ones((len(views) + 1, len(views) + 1))
+            bad = [k + 1 for k, v in enumerate(views) if v in unreachable]
+            t[bad, :] = math.inf
+            t[:, bad] = math.inf
+            np.fill_diagonal(t, 0.0)
+            return t
+
+        return f
+
+    scores = gain_scores(np.array([5.0, 4.0, 1.0]), np.ones(3, dtype=bool))
+    evaluator = TourEvaluator(PlannerConfig().replace(tour={"lazy_reach": True, "min_gain": 0.0}))
+    evaluator.last_seen = seen
+    assert evaluator.choose(scores, [], Pose.identity(), move_times({0, 1})) == (2, None)  # 0 and 1 refused
+    scores = gain_scores(np.array([5.0, 4.0, 1.0]), np.array([True, True, False]))
+    assert evaluator.choose(scores, [], Pose.identity(), move_times({0, 1})) == (None, None)
