@@ -3,8 +3,8 @@
 The app runs under uvicorn on a free 127.0.0.1 port (one lifespan, so sessions persist between requests).
 Every operation gets up to ``MAX_EXAMPLES`` generated requests (valid and invalid bodies, query and path
 values, and the other HTTP methods). Two thirds of the requests naming a session are pointed at real ones
-(one new, one with a pending plan) instead of generated ids, so the bodies reach the workbench and not only
-the 404 of an unknown session. Checks: never a 5xx, every answer matches its documented schema and content
+(one new, one with a pending plan; the fault route a third of its own, so an injected fault never reaches the
+others) instead of generated ids, so the bodies reach the workbench and not only the 404 of an unknown session. Checks: never a 5xx, every answer matches its documented schema and content
 type. Examples are derandomized (reproducible). The module's budget is ``BUDGET_SECONDS``.
 
 What it found and what was fixed: error answers (``{"detail": "..."}``) did not match the documented 422
@@ -79,7 +79,10 @@ def api() -> Iterator[dict[str, Any]]:
             planned = client.post("/api/sessions", json={"config": config, "seed": 1}).json()["id"]
             client.post(f"/api/sessions/{planned}/capture")
             client.post(f"/api/sessions/{planned}/plan")
-            yield {"sessions": [fresh, planned], "client": client, "url": url}
+            # the fault route's own session: a fault injected into a session the other operations use made their
+            # next device action answer 503 (the simulated fault, by design), in whichever order they ran
+            faulted = client.post("/api/sessions", json={"config": config, "seed": 2}).json()["id"]
+            yield {"sessions": [fresh, planned], "faulted": faulted, "client": client, "url": url}
     finally:
         server.should_exit = True
         thread.join(30)
@@ -100,7 +103,8 @@ def test_the_api_never_fails_and_keeps_its_schema(case: Any, api: dict[str, Any]
     if "session_id" in (case.path_parameters or {}):
         pick = next(_CALLS) % 3  # new session, planned session, a generated id (deterministic order)
         if pick < 2:
-            case.path_parameters["session_id"] = api["sessions"][pick]
+            faults = case.operation.path.endswith("/faults")
+            case.path_parameters["session_id"] = api["faulted"] if faults else api["sessions"][pick]
     case.call_and_validate(base_url=api["url"])  # every default check of schemathesis
 
 
