@@ -23,7 +23,8 @@ and a fresh worker takes up the next job. Jobs:
   own surface stays as it was (a timeline reads the journal only, it changes nothing of the session);
 - ``("warm", (cell_config, q, angle, planner_config))`` once per process, right after it starts (while the person
   captures): the planning cell's arm model built, the planner's modules imported and the reachability of the
-  first plan's candidates cached, so the session's first plan does not pay for them (:meth:`_Worker.warm`);
+  first plan's candidates cached, so the session's first plan does not pay for them (:meth:`_Worker.warm`); cut
+  short when a job is already waiting for it (the server sets the process's ``hurry`` event);
 - ``("fit", (points_world, cluster_config, resolution, kind, t))``: ``(ellipsoids, ClusterFit)`` of one voxel
   kind at exactly T components (``planner.ellipsoids.fit_at_t``: the Fit panel's "fit at another T").
 
@@ -141,6 +142,8 @@ class _Worker:
         """The session's surface, kept between jobs (None in a new process)."""
         self.truth: GroundTruth | None = None
         """What the surface is scored against (the ``truth`` job, once per process), None: not scored."""
+        self.hurry: Callable[[], bool] = lambda: False
+        """True once a job waits for this process: the warm-up stops where it is (:meth:`warm`)."""
 
     def setup(self, spec: RenderSpec) -> None:
         import trimesh
@@ -182,7 +185,9 @@ class _Worker:
         simulated session (a render scene is set up) the candidates about the box the first frame at the cell's
         initial view gives ``planner_config``'s map (the frame rendered here, noise-free); otherwise about a
         nominal box (``WARM_BOX``). Reachability is a pure function of the view and the object box, so the plans
-        are the same as without it; only the first one is faster."""
+        are the same as without it; only the first one is faster. When :attr:`hurry` says a job waits (a capture
+        right after the create), the reachability pass stops there: the plan asks the rest itself, and the job is
+        not kept waiting for views the plan may never ask about."""
         import planner.baselines
         import planner.bic_search
         import planner.tour  # noqa: F401
@@ -195,6 +200,8 @@ class _Worker:
             return
         cfg = planner_config if isinstance(planner_config, PlannerConfig) else PlannerConfig()
         box = BoundingBox(np.array(WARM_BOX[0]), np.array(WARM_BOX[1]))
+        if self.hurry():
+            return
         if self.camera is not None:
             pose = cell.initial_pose()
             scratch = Planner(cfg)
@@ -204,9 +211,13 @@ class _Worker:
                 box = scratch.voxel_map.bbox
         candidates, _, _ = propose_candidates(box, cfg.candidates, cfg.partitions)
         cell.set_object_box(box)
-        for c in candidates:
-            cell.is_reachable(c.T_world_camera)
-        cell.set_object_box(None)
+        try:
+            for c in candidates:
+                if self.hurry():
+                    break
+                cell.is_reachable(c.T_world_camera)
+        finally:
+            cell.set_object_box(None)
 
     def rebuild(self, payload: Any, send: Callable[[Any], None] | None) -> Rebuilt:
         """:func:`workbench.journal.rebuild.rebuild` of a journal in this worker's planning cell; the replayed
@@ -281,9 +292,12 @@ class _Worker:
         raise ValueError(f"worker: unknown job {kind!r}")
 
 
-def serve(conn: Connection) -> None:
-    """The worker process's main loop: one job at a time until the pipe closes."""
+def serve(conn: Connection, hurry: Any = None) -> None:
+    """The worker process's main loop: one job at a time until the pipe closes. ``hurry``: a multiprocessing
+    Event the server sets when a job waits (the warm-up then stops early), None: never."""
     worker = _Worker()
+    if hurry is not None:
+        worker.hurry = hurry.is_set
     while True:
         try:
             kind, payload = conn.recv()

@@ -90,6 +90,8 @@ class SessionWorker:
         self._cancelled = threading.Event()
         self._reason: str | None = None
         self._closed = False
+        self._hurry: Any = None  # the running process's event: a job waits (its warm-up stops early)
+        self._asked = False  # a job was asked of this worker: its warm-ups are cut short from then on
 
     @property
     def pid(self) -> int | None:
@@ -176,6 +178,10 @@ class SessionWorker:
     ) -> Any:
         """Run one job; its result, or the job's own exception, or JobKilled (budget, cancel, a dead worker).
         ``on_progress`` gets what the job reports on the way (``("progress", value)`` messages)."""
+        with self._proc_lock:  # a process still warming up (start_soon holds the job lock meanwhile) stops doing so
+            self._asked = True
+            if self._hurry is not None:
+                self._hurry.set()
         with self._job_lock:
             if self._closed:
                 raise JobKilled(f"{what}: the session is closed")
@@ -249,15 +255,20 @@ class SessionWorker:
         threading.Thread(target=run, name=f"nbv-start-{self.name}", daemon=True).start()
 
     def _started(self) -> tuple[Connection, Any]:
+        """The running process and its pipe, started (with its setup, truth and warm-up jobs) if there is none;
+        once a job was asked of this worker its warm-up stops at once."""
         with self._proc_lock:
             if self._proc is not None and self._proc.is_alive() and self._conn is not None:
                 return self._conn, self._proc
             ctx = worker_context()
             parent, child = ctx.Pipe()
-            proc = ctx.Process(target=serve, args=(child,), name=f"nbv-worker-{self.name}", daemon=True)
+            hurry = ctx.Event()
+            if self._asked:
+                hurry.set()
+            proc = ctx.Process(target=serve, args=(child, hurry), name=f"nbv-worker-{self.name}", daemon=True)
             proc.start()
             child.close()
-            self._proc, self._conn = proc, parent
+            self._proc, self._conn, self._hurry = proc, parent, hurry
         if self._closed:  # closed while this process started: it must not outlive its session
             self._kill()
             raise JobKilled("the session is closed")
