@@ -125,6 +125,10 @@ class CandidateConfig:
     """The depth sensor's farthest return, metres (0: no limit, a perfect camera, the paper's R). When B's far corner,
     ``R + d_b`` from the camera, would lie beyond it, R is cut to ``max(max_range - d_b, d_b + MIN_STANDOFF)``
     (``planner.candidates.sphere_radius``; the cell fills it from its sensor, ``devices.planner_config_for``)."""
+    aim: Literal["bbox", "content"] = "bbox"
+    """What the candidate sphere is built about (its centre, and d_b its half-diagonal): "bbox", B (the paper), or
+    "content", the box of the OCCUPIED and FRONTIER voxels (``Planner.candidate_box``: the object and frontier seen
+    so far, without what B's growth along the first view and the gamma-spheres added)."""
     min_elevation_deg: float = 10.0
     """Lowest parallel's elevation above B's centre, degrees."""
     max_elevation_deg: float = 85.0
@@ -144,6 +148,7 @@ class CandidateConfig:
             finite(self.max_range) and self.max_range >= 0,
             f"candidates.max_range: must be >= 0 (0: no limit), got {self.max_range!r}",
         )
+        require(self.aim in ("bbox", "content"), f"candidates.aim: 'bbox' or 'content', got {self.aim!r}")
         require(
             finite(self.min_elevation_deg, self.max_elevation_deg)
             and -90 < self.min_elevation_deg <= self.max_elevation_deg < 90,
