@@ -463,6 +463,12 @@ class NoiseConfig:
     (a 0.3 degree hand-eye error lifts its rim by 1 mm). Off (the paper): the plate is z = 0."""
     plate_fit_window: float = 0.01
     """Points within this of z = 0 are the plate fit's candidates, metres."""
+    plate_fit_max_tilt_deg: float = 90.0
+    """With ``fit_plate``: only points whose surface normal (from the depth image's neighbours) lies within this
+    angle of the vertical are the fit's candidates, degrees (90: every point, as before). The plate's rim (its
+    vertical side) is then no candidate: from a low view a sensor with a grazing limit sees the rim and not the
+    top, and the fit, on the rim alone, put the plane up to 4 mm low or tilted it 2.5 degrees (the rim's top edge
+    stayed in the cloud, a 0.2 m arc of wrong points)."""
     flying_jump: float = 0.0
     """Opt-in (0 = off): drop the pixels at depth discontinuities, where a 4-neighbour's depth differs by more
     than this fraction of the pixel's (a real sensor's flying pixels sit there). Their rays carve like holes."""
@@ -477,6 +483,10 @@ class NoiseConfig:
             v = getattr(self, name)
             require(finite(v) and v >= 0, f"noise.{name}: must be >= 0, got {v!r}")
         require(isinstance(self.fit_plate, bool), f"noise.fit_plate: must be true or false, got {self.fit_plate!r}")
+        require(
+            finite(self.plate_fit_max_tilt_deg) and 0 < self.plate_fit_max_tilt_deg <= 90,
+            f"noise.plate_fit_max_tilt_deg: must be in (0, 90], got {self.plate_fit_max_tilt_deg!r}",
+        )
         require(finite(self.flying_jump) and self.flying_jump >= 0, "noise.flying_jump: must be >= 0")
         require(
             integer(self.dropout_fill_px) and 0 <= self.dropout_fill_px <= 100,
