@@ -128,9 +128,13 @@ class CandidateConfig:
     aim: Literal["bbox", "content"] = "bbox"
     """What the candidate sphere is built about (its centre, and d_b its half-diagonal): "bbox", B (the paper), or
     "content", the box of the OCCUPIED and FRONTIER voxels (``Planner.candidate_box``: the object and frontier seen
-    so far, without what B's growth along the first view and the gamma-spheres added)."""
+    so far, without what B's growth along the first view and the gamma-spheres added). The cell sets "content" for
+    a sensor with a finite range (``devices.planner_config_for``): with B's centre the bunny's aim lay 10 cm off the
+    object, and the range rule put a D405's cameras 5 cm nearer still (docs/method.md)."""
     min_elevation_deg: float = 10.0
-    """Lowest parallel's elevation above B's centre, degrees."""
+    """Lowest parallel's elevation above the sphere's centre, degrees (negative: below it; the cell's reachability
+    leaves out the views it cannot take). The cell sets -5 for a sensor with a grazing limit
+    (``devices.planner_noise.LOW_ELEVATION_DEG``)."""
     max_elevation_deg: float = 85.0
     """Highest parallel's elevation, degrees (90 is the pole, a parallel of length 0)."""
 
