@@ -113,7 +113,8 @@ class ClusterConfig:
 
 @dataclass(frozen=True)
 class CandidateConfig:
-    """Candidate views on a hemisphere of radius R = d_c + d_b about B's centre (paper §III-B)."""
+    """Candidate views on a hemisphere of radius R = d_c + d_b about B's centre (paper §III-B; ``aim``: or about
+    the box of the object seen)."""
 
     count: int = 400
     """N, candidate views in total (paper: 400)."""
