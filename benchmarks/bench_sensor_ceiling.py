@@ -1,6 +1,7 @@
 """The sensor ceiling: how much of each development mesh a sensor can deliver from any candidate view at all.
 
-Run: ``nice .venv/bin/python benchmarks/bench_sensor_ceiling.py [--models all] [--sensors ideal,realsense-d435,...]``.
+Run: ``nice .venv/bin/python benchmarks/bench_sensor_ceiling.py [--models all] [--sensors ideal,realsense-d435,...]
+[--min-elevation 10]``.
 
 For each mesh (placed as the bench places it, 10,000 surface samples, seed 0) and sensor, the 400 candidates of a B
 3 cm around the mesh (the sensor's range rule, ``planner.candidates``; no reachability, no view budget) are tried
@@ -9,7 +10,9 @@ intrinsics), in line of sight, within range (planar depth), within the grazing l
 sensor, in line of sight of the second viewpoint too. Printed per sensor: the shares of samples by the best check
 they passed (delivered, second-viewpoint shadow, grazing, range, outside every image, occluded) and the recall@5mm
 of the deliverable samples (share of samples within 5 mm of one): what no planner on this candidate set can
-exceed. docs/method.md, "Where the D405 and structured light lose recall".
+exceed. ``--min-elevation``: the candidates' lowest parallel, degrees (10, the paper's cell; the cell gives a sensor
+with a grazing limit -5, ``devices.planner_noise.LOW_ELEVATION_DEG``). docs/method.md, "Where the D405 and structured
+light lose recall" and "The sphere about the object and the low parallels".
 """
 
 from __future__ import annotations
@@ -83,6 +86,7 @@ def main() -> None:
     p = argparse.ArgumentParser(description=(__doc__ or "").split("\n", 1)[0])
     p.add_argument("--models", default="all")
     p.add_argument("--sensors", default="ideal,realsense-d435,realsense-d405,structured-light")
+    p.add_argument("--min-elevation", type=float, default=CandidateConfig().min_elevation_deg)
     args = p.parse_args()
     models = development_meshes() if args.models == "all" else [Path(m) for m in args.models.split(",") if m]
     names = [s for s in args.sensors.split(",") if s]
@@ -101,7 +105,9 @@ def main() -> None:
         for name in names:
             camera = SimulatedCamera(mesh, CameraConfig(sensor=name))
             max_range = sensor_named(name).max_range
-            config = CandidateConfig(max_range=max_range if math.isfinite(max_range) else 0.0)
+            config = CandidateConfig(
+                max_range=max_range if math.isfinite(max_range) else 0.0, min_elevation_deg=args.min_elevation
+            )
             candidates, _, radius = propose_candidates(BoundingBox(lo - 0.03, hi + 0.03), config, PartitionConfig())
             best = best_check(camera, samples, normals, [c.T_world_camera for c in candidates])
             delivered = samples[best == 0]
@@ -111,7 +117,11 @@ def main() -> None:
             shares = " ".join(f"{c} {np.mean(best == i):.3f}" for i, c in enumerate(CHECKS))
             print(f"{path.stem:18} {name:18} R {radius:.3f}  {shares}  recall@5mm ceiling {rec:.4f}", flush=True)
     for name in names:
-        print(f"mean of {len(models)}: {name:18} recall@5mm ceiling {statistics.fmean(recall[name]):.4f}", flush=True)
+        print(
+            f"mean of {len(models)}: {name:18} recall@5mm ceiling {statistics.fmean(recall[name]):.4f} "
+            f"(lowest parallel {args.min_elevation:g} deg)",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

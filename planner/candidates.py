@@ -4,6 +4,8 @@ The hemisphere is centred on B's centre with radius ``R = d_c + d_b``: ``d_c`` t
 camera's working distance, ``d_b`` half of B's diagonal, so every point of B is
 at least ``d_c`` from every candidate (and in front of it: B lies in the ball of
 radius ``d_b`` around the centre, which sits at depth ``R`` on the optical axis).
+The box is B for the paper; with ``candidates.aim = "content"`` the planner passes the box of its
+OCCUPIED and FRONTIER voxels instead (``Planner.candidate_box``), and "B" below means that box.
 
 Layout (documented choices where the paper gives none):
 

@@ -113,7 +113,8 @@ class ClusterConfig:
 
 @dataclass(frozen=True)
 class CandidateConfig:
-    """Candidate views on a hemisphere of radius R = d_c + d_b about B's centre (paper §III-B)."""
+    """Candidate views on a hemisphere of radius R = d_c + d_b about B's centre (paper §III-B; ``aim``: or about
+    the box of the object seen)."""
 
     count: int = 400
     """N, candidate views in total (paper: 400)."""
@@ -125,8 +126,16 @@ class CandidateConfig:
     """The depth sensor's farthest return, metres (0: no limit, a perfect camera, the paper's R). When B's far corner,
     ``R + d_b`` from the camera, would lie beyond it, R is cut to ``max(max_range - d_b, d_b + MIN_STANDOFF)``
     (``planner.candidates.sphere_radius``; the cell fills it from its sensor, ``devices.planner_config_for``)."""
+    aim: Literal["bbox", "content"] = "bbox"
+    """What the candidate sphere is built about (its centre, and d_b its half-diagonal): "bbox", B (the paper), or
+    "content", the box of the OCCUPIED and FRONTIER voxels (``Planner.candidate_box``: the object and frontier seen
+    so far, without what B's growth along the first view and the gamma-spheres added). The cell sets "content" for
+    a sensor with a finite range (``devices.planner_config_for``): with B's centre the bunny's aim lay 10 cm off the
+    object, and the range rule put a D405's cameras 5 cm nearer still (docs/method.md)."""
     min_elevation_deg: float = 10.0
-    """Lowest parallel's elevation above B's centre, degrees."""
+    """Lowest parallel's elevation above the sphere's centre, degrees (negative: below it; the cell's reachability
+    leaves out the views it cannot take). The cell sets -5 for a sensor with a grazing limit
+    (``devices.planner_noise.LOW_ELEVATION_DEG``)."""
     max_elevation_deg: float = 85.0
     """Highest parallel's elevation, degrees (90 is the pole, a parallel of length 0)."""
 
@@ -144,6 +153,7 @@ class CandidateConfig:
             finite(self.max_range) and self.max_range >= 0,
             f"candidates.max_range: must be >= 0 (0: no limit), got {self.max_range!r}",
         )
+        require(self.aim in ("bbox", "content"), f"candidates.aim: 'bbox' or 'content', got {self.aim!r}")
         require(
             finite(self.min_elevation_deg, self.max_elevation_deg)
             and -90 < self.min_elevation_deg <= self.max_elevation_deg < 90,
@@ -458,6 +468,12 @@ class NoiseConfig:
     (a 0.3 degree hand-eye error lifts its rim by 1 mm). Off (the paper): the plate is z = 0."""
     plate_fit_window: float = 0.01
     """Points within this of z = 0 are the plate fit's candidates, metres."""
+    plate_fit_max_tilt_deg: float = 90.0
+    """With ``fit_plate``: only points whose surface normal (from the depth image's neighbours) lies within this
+    angle of the vertical are the fit's candidates, degrees (90: every point, as before). The plate's rim (its
+    vertical side) is then no candidate: from a low view a sensor with a grazing limit sees the rim and not the
+    top, and the fit, on the rim alone, put the plane up to 4 mm low or tilted it 2.5 degrees (the rim's top edge
+    stayed in the cloud, a 0.2 m arc of wrong points)."""
     flying_jump: float = 0.0
     """Opt-in (0 = off): drop the pixels at depth discontinuities, where a 4-neighbour's depth differs by more
     than this fraction of the pixel's (a real sensor's flying pixels sit there). Their rays carve like holes."""
@@ -472,6 +488,10 @@ class NoiseConfig:
             v = getattr(self, name)
             require(finite(v) and v >= 0, f"noise.{name}: must be >= 0, got {v!r}")
         require(isinstance(self.fit_plate, bool), f"noise.fit_plate: must be true or false, got {self.fit_plate!r}")
+        require(
+            finite(self.plate_fit_max_tilt_deg) and 0 < self.plate_fit_max_tilt_deg <= 90,
+            f"noise.plate_fit_max_tilt_deg: must be in (0, 90], got {self.plate_fit_max_tilt_deg!r}",
+        )
         require(finite(self.flying_jump) and self.flying_jump >= 0, "noise.flying_jump: must be >= 0")
         require(
             integer(self.dropout_fill_px) and 0 <= self.dropout_fill_px <= 100,

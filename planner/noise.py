@@ -30,7 +30,41 @@ MIN_PLATE_POINTS = 200
 """Fewer plate candidates than this: no fit, z = 0."""
 
 
-def fit_plate(points_world: NDArray[np.float64], window: float, workspace_radius: float) -> NDArray[np.float64]:
+NORMAL_STENCIL_PX = 3
+""":func:`vertical_cosines` takes a pixel's tangents from the pixels this far to each side (a 2 x 3 px baseline
+averages the depth noise: a D435 at 0.55 m tilts a 5 mm baseline's normal by about 10 degrees)."""
+
+
+def vertical_cosines(frame: DepthFrame, stencil: int = NORMAL_STENCIL_PX) -> NDArray[np.float64]:
+    """(N,) per point of ``frame.points_world``: |cos| of the angle between the surface normal there and the world
+    vertical, the normal from the cross product of the world points ``stencil`` pixels to either side along the row
+    and the column (0 where one of the four has no return: an edge, a hole)."""
+    d = frame.depth
+    h, w = d.shape
+    k = frame.intrinsics
+    v, u = np.mgrid[0:h, 0:w]
+    cam = np.stack([(u - k.cx) * d / k.fx, (v - k.cy) * d / k.fy, d], axis=-1).astype(np.float64)
+    world = cam @ frame.T_world_camera.rotation.T  # (H, W, 3) directions: the translation cancels in differences
+    s = int(stencil)
+    out = np.zeros((h, w))
+    if h > 2 * s and w > 2 * s:
+        du = world[s:-s, 2 * s :] - world[s:-s, : -2 * s]
+        dv = world[2 * s :, s:-s] - world[: -2 * s, s:-s]
+        n = np.cross(du, dv)
+        norm = np.linalg.norm(n, axis=-1)
+        ok = ((d[s:-s, 2 * s :] > 0) & (d[s:-s, : -2 * s] > 0) & (d[2 * s :, s:-s] > 0) & (d[: -2 * s, s:-s] > 0)) & (
+            norm > 0
+        )
+        out[s:-s, s:-s] = np.where(ok, np.abs(n[..., 2]) / np.where(norm > 0, norm, 1.0), 0.0)
+    return out[d > 0]
+
+
+def fit_plate(
+    points_world: NDArray[np.float64],
+    window: float,
+    workspace_radius: float,
+    candidates: NDArray[np.bool_] | None = None,
+) -> NDArray[np.float64]:
     """(3,) (a, b, c) of the plate plane ``z = a x + b y + c`` seen in one frame, from the points within ``window``
     of z = 0 and ``workspace_radius`` of the axis.
 
@@ -40,10 +74,14 @@ def fit_plate(points_world: NDArray[np.float64], window: float, workspace_radius
     the densest 1 mm height bin, the first inliers the points within 2 mm of it; then four times a least-squares
     fit to the inliers and new inliers within 3 robust stds (1.4826 MAD of the inliers' residuals, at least
     0.5 mm). (A least-squares start on every point of the window, as before, put the plane 4 mm below the top
-    or tilted it by 2 degrees on such views.) (0, 0, 0) when there are too few points or the plane is
-    implausible."""
+    or tilted it by 2 degrees on such views.) ``candidates`` (N,) bool, when given, also limits the fit to those
+    points (:func:`plate_heights`: the points on a near-horizontal surface, so a view that sees the rim but not the
+    top, beyond a sensor's grazing limit, is left with too few). (0, 0, 0) when there are too few points or the
+    plane is implausible."""
     p = points_world
     near = (np.abs(p[:, 2]) <= window) & (p[:, 0] ** 2 + p[:, 1] ** 2 <= workspace_radius**2)
+    if candidates is not None:
+        near &= candidates
     q = p[near]
     zero = np.zeros(3)
     if len(q) < MIN_PLATE_POINTS:
@@ -71,7 +109,8 @@ def plate_heights(frame: DepthFrame, preprocess: PreprocessConfig, noise: NoiseC
     The plate's surface (z = 0, or the frame's fitted plane with ``noise.fit_plate``) plus
     ``max(plate_clearance, plate_sigmas * sigma_z)``, where sigma_z is the depth std at the point's depth times
     the vertical component of its ray (a ray along the vertical moves the point up and down by its whole error,
-    a grazing one hardly at all)."""
+    a grazing one hardly at all). With ``noise.plate_fit_max_tilt_deg`` < 90 only points whose surface normal
+    (:func:`vertical_cosines`) is within that angle of the vertical are fitted."""
     n = int(np.count_nonzero(frame.valid))
     if noise.exact:
         return np.full(n, preprocess.plate_clearance)
@@ -81,7 +120,10 @@ def plate_heights(frame: DepthFrame, preprocess: PreprocessConfig, noise: NoiseC
     band = np.maximum(preprocess.plate_clearance, noise.plate_sigmas * depth_std(depth, noise) * vertical)
     if not noise.fit_plate:
         return band
-    a, b, c = fit_plate(points, noise.plate_fit_window, preprocess.workspace_radius)
+    horizontal = None
+    if noise.plate_fit_max_tilt_deg < 90:
+        horizontal = vertical_cosines(frame) >= math.cos(math.radians(noise.plate_fit_max_tilt_deg))
+    a, b, c = fit_plate(points, noise.plate_fit_window, preprocess.workspace_radius, horizontal)
     return band + a * points[:, 0] + b * points[:, 1] + c
 
 

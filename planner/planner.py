@@ -40,7 +40,7 @@ from planner.partitions import select_best as select_best_view
 from planner.preprocess import preprocess_frame, voxel_downsample
 from planner.progress import ProgressFn, Stages
 from planner.registration import RegistrationResult, register
-from planner.types import Candidate, DepthFrame, Intrinsics, PlanResult, Pose, TourPlan, VoxelClass
+from planner.types import BoundingBox, Candidate, DepthFrame, Intrinsics, PlanResult, Pose, TourPlan, VoxelClass
 from planner.voxel_map import VoxelMap
 
 ChooseFn = Callable[..., tuple[int | None, TourPlan | None]]
@@ -191,6 +191,22 @@ class Planner:
 
     # ------------------------------------------------------------------ plan
 
+    def candidate_box(self) -> BoundingBox:
+        """The box the candidate sphere is built about (``candidates.aim``): B, or the box of the OCCUPIED and
+        FRONTIER voxels (B when there are none). ValueError before the first frame."""
+        bbox = self.voxel_map.bbox
+        if bbox is None:
+            raise ValueError("candidate_box: no frame has been integrated yet")
+        if self.config.candidates.aim == "bbox":
+            return bbox
+        classes = self.voxel_map.classes
+        idx = np.argwhere((classes == VoxelClass.OCCUPIED) | (classes == VoxelClass.FRONTIER))
+        if len(idx) == 0:
+            return bbox
+        res = self.voxel_map.resolution
+        origin = self.voxel_map.origin
+        return BoundingBox(origin + idx.min(axis=0) * res, origin + (idx.max(axis=0) + 1) * res)
+
     def _not_revisited(
         self, candidates: Sequence[Candidate], center: NDArray[np.float64], allowed: NDArray[np.bool_]
     ) -> NDArray[np.bool_]:
@@ -249,7 +265,7 @@ class Planner:
         t0 = time.perf_counter()
         stages("candidates", 0, 1)
         bbox = self.voxel_map.bbox
-        candidates, center, radius = propose_candidates(bbox, cfg.candidates, cfg.partitions)
+        candidates, center, radius = propose_candidates(self.candidate_box(), cfg.candidates, cfg.partitions)
         timings["candidates"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()

@@ -92,3 +92,24 @@ def test_dropouts_follow_the_sensor(sensor: str, fill: int) -> None:
     own = PlannerConfig().replace(noise={"dropout_fill_px": 2}, scoring={"max_incidence_deg": 60.0})
     kept = planner_config_for(own, CameraConfig(sensor=sensor))
     assert (kept.noise.dropout_fill_px, kept.scoring.max_incidence_deg) == (2, 60.0)
+
+
+@pytest.mark.parametrize(
+    ("sensor", "aim", "elevation", "tilt"),
+    [
+        ("ideal", "bbox", 10.0, 90.0),
+        ("realsense-d435", "content", -5.0, 30.0),
+        ("realsense-d405", "content", -5.0, 30.0),
+        ("structured-light", "content", -5.0, 30.0),
+    ],
+)
+def test_candidates_follow_the_sensor(sensor: str, aim: str, elevation: float, tilt: float) -> None:
+    """A sensor with a finite range gets the sphere about the object seen, one with a grazing limit the low
+    parallels and the plate fitted on horizontal points; the perfect camera keeps the paper's sphere; values set
+    explicitly are kept."""
+    config = planner_config_for(PlannerConfig(), CameraConfig(sensor=sensor, calibration="typical"))
+    assert (config.candidates.aim, config.candidates.min_elevation_deg) == (aim, elevation)
+    assert config.noise.plate_fit_max_tilt_deg == tilt
+    own = PlannerConfig().replace(candidates={"min_elevation_deg": 20.0}, noise={"plate_fit_max_tilt_deg": 45.0})
+    kept = planner_config_for(own, CameraConfig(sensor=sensor, calibration="typical"))
+    assert (kept.candidates.min_elevation_deg, kept.noise.plate_fit_max_tilt_deg) == (20.0, 45.0)

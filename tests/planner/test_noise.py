@@ -3,6 +3,8 @@ paper's fixed thresholds."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -14,6 +16,7 @@ from planner.noise import (
     plate_heights,
     registration_for,
     unknown_beyond_range,
+    vertical_cosines,
     without_flying_pixels,
 )
 from planner.types import DepthFrame, Intrinsics, Pose, VoxelClass
@@ -125,3 +128,61 @@ def test_plate_fit_ignores_the_rim_and_the_foot() -> None:
         for y in (-0.05, 0.05):
             assert a * x + b * y + c == pytest.approx(0.002 + slope * x, abs=0.0005)
     assert np.all(fit_plate(rim[:100], 0.01, 0.3) == 0)  # too few points: z = 0
+
+
+SMALL_K = Intrinsics(160, 120, 150.0, 150.0, 79.5, 59.5)
+
+
+def plate_frame(eye: tuple[float, float, float], top_height: float, with_top: bool) -> DepthFrame:
+    """A depth frame (exact ray casts) of the turntable plate seen from ``eye`` looking at the origin: its top, a
+    disk of radius 0.2 m at ``top_height`` (left out with ``with_top`` False, as a sensor whose grazing limit the
+    view exceeds returns nothing there), and its rim, the vertical side r = 0.2 m from the top down to -20 mm."""
+    pose = Pose.look_at(np.array(eye, dtype=np.float64), np.zeros(3))
+    v, u = np.mgrid[0 : SMALL_K.height, 0 : SMALL_K.width].astype(np.float64)
+    rays = np.stack([(u - SMALL_K.cx) / SMALL_K.fx, (v - SMALL_K.cy) / SMALL_K.fy, np.ones_like(u)], axis=-1)
+    d = rays @ pose.rotation.T  # world directions with camera z = 1: the ray parameter is the planar depth
+    o = pose.translation
+    depth = np.full(u.shape, np.inf)
+    if with_top:
+        t = (top_height - o[2]) / d[..., 2]
+        p = o + t[..., None] * d
+        depth = np.where((t > 0) & (np.hypot(p[..., 0], p[..., 1]) <= 0.2), t, depth)
+    a = d[..., 0] ** 2 + d[..., 1] ** 2  # the cylinder r = 0.2: the nearer root
+    b = 2 * (o[0] * d[..., 0] + o[1] * d[..., 1])
+    c = o[0] ** 2 + o[1] ** 2 - 0.04
+    disc = b * b - 4 * a * c
+    t = (-b - np.sqrt(np.maximum(disc, 0.0))) / (2 * a)
+    z = o[2] + t * d[..., 2]
+    rim = (disc > 0) & (t > 0) & (z <= top_height) & (z >= -0.02)
+    depth = np.where(rim & (t < depth), t, depth)
+    return DepthFrame(np.where(np.isfinite(depth), depth, 0.0).astype(np.float32), pose, SMALL_K)
+
+
+def test_vertical_cosines_tell_the_plate_top_from_its_rim() -> None:
+    frame = plate_frame((0.45, 0.0, 0.1), 0.0, with_top=True)
+    cos = vertical_cosines(frame)
+    p = frame.points_world
+    r = np.hypot(p[:, 0], p[:, 1])
+    inner = (r < 0.18) & (cos > 0)  # the top away from the rim (pixels within the stencil of an edge are 0)
+    rim = (p[:, 2] < -0.007) & (p[:, 2] > -0.013) & (cos > 0)  # the rim's middle: its stencil stays on it
+    assert np.count_nonzero(inner) > 1000 and np.count_nonzero(rim) > 100
+    assert np.all(cos[inner] > 0.999)
+    assert np.all(cos[rim] < 0.05)
+
+
+def test_a_low_view_without_the_plate_top_fits_no_plane() -> None:
+    """From 3 degrees above the plate a sensor with a grazing limit returns the rim and not the top. The rim alone
+    is no plane to fit: with every point a candidate the fit put a tilted plane through it; with only points on a
+    near-horizontal surface there are none, and the plate is z = 0. Where the top is in view (20 degrees), both
+    fit the top (raised 1.5 mm as a calibration error would)."""
+    low = plate_frame((0.5, 0.0, 0.03), 0.0015, with_top=False)
+    rim_fit = fit_plate(low.points_world, 0.01, 0.3)
+    assert np.any(rim_fit != 0)  # the failure: the rim taken for the plate
+    noise = NoiseConfig(depth_z2=0.001, fit_plate=True, plate_fit_max_tilt_deg=30.0)
+    heights = plate_heights(low, PreprocessConfig(), noise)
+    flat = plate_heights(low, PreprocessConfig(), dataclasses.replace(noise, fit_plate=False))
+    np.testing.assert_array_equal(heights, flat)  # no fit: the band above z = 0
+    high = plate_frame((0.45, 0.0, 0.17), 0.0015, with_top=True)
+    horizontal = vertical_cosines(high) >= np.cos(np.radians(30.0))
+    a, b, c = fit_plate(high.points_world, 0.01, 0.3, horizontal)
+    assert (a, b) == pytest.approx((0.0, 0.0), abs=1e-4) and c == pytest.approx(0.0015, abs=1e-4)

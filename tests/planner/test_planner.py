@@ -60,8 +60,8 @@ def test_loop_respects_partitions_and_terminates(cell) -> None:
         cell.move_to(pose)
         planner.integrate(cell.capture())
         plan = planner.plan(reachable=cell.is_reachable)
-        assert plan.best is not None
-        best = plan.candidates[plan.best_index]
+        best = plan.best
+        assert best is not None and best.index == plan.best_index
         # only unscanned sectors next to the scanned arc, until all are scanned
         if len(plan.scanned_sectors) < SMALL.partitions.sectors:
             assert best.sector in plan.eligible_sectors
@@ -69,7 +69,7 @@ def test_loop_respects_partitions_and_terminates(cell) -> None:
             for s in plan.eligible_sectors:
                 assert (s - 1) % 4 in plan.scanned_sectors or (s + 1) % 4 in plan.scanned_sectors
         eligible = [s for s in plan.scores if s.eligible]
-        assert plan.scores[plan.best_index].score == max(s.score for s in eligible)
+        assert plan.scores[best.index].score == max(s.score for s in eligible)
         sectors_visited.append(best.sector)
         pose = best.T_world_camera
     assert planner.terminated == "max_views"
@@ -193,3 +193,32 @@ def test_a_stalled_view_makes_its_sector_ineligible(cell) -> None:
     assert stalled.best_index is not None and stalled.candidates[stalled.best_index].sector != 3
     assert all(not s.eligible for s, c in zip(stalled.scores, stalled.candidates, strict=True) if c.sector == 3)
     assert results[0.0][1].eligible_sectors == frozenset(range(4))
+
+
+def test_content_aim_builds_the_sphere_about_the_object_seen_not_all_of_b(cell) -> None:
+    """After the first frame B has grown along the view (paper §III-C) far past the object; with
+    ``candidates.aim = "content"`` the sphere is about the box of the OCCUPIED and FRONTIER voxels instead: a
+    smaller radius, a centre on the object. The paper's aim (the default) keeps B."""
+    from planner.candidates import sphere_radius
+
+    frame = first_frame(cell)
+    paper, content = Planner(SMALL), Planner(SMALL.replace(candidates={"aim": "content"}))
+    for planner in (paper, content):
+        planner.integrate(frame)
+    b = paper.voxel_map.bbox
+    assert b is not None
+    np.testing.assert_array_equal(paper.candidate_box().lower, b.lower)
+    np.testing.assert_array_equal(paper.candidate_box().upper, b.upper)
+    box = content.candidate_box()
+    res = content.voxel_map.resolution
+    seen = np.concatenate(
+        [content.voxel_map.centers(VoxelClass.OCCUPIED), content.voxel_map.centers(VoxelClass.FRONTIER)]
+    )
+    np.testing.assert_allclose(box.lower, seen.min(axis=0) - res / 2, atol=1e-9)
+    np.testing.assert_allclose(box.upper, seen.max(axis=0) + res / 2, atol=1e-9)
+    assert np.all(box.lower >= b.lower - 1e-9) and np.all(box.upper <= b.upper + 1e-9)
+    assert box.diagonal < 0.8 * b.diagonal  # B's growth along the view is not in it
+    plan = content.plan()
+    np.testing.assert_allclose(plan.hemisphere_center, box.center)
+    assert plan.hemisphere_radius == pytest.approx(sphere_radius(SMALL.candidates, 0.5 * box.diagonal))
+    np.testing.assert_allclose(paper.plan().hemisphere_center, b.center)

@@ -199,7 +199,7 @@ class _Worker:
         if cell.kinematics is None:
             return
         cfg = planner_config if isinstance(planner_config, PlannerConfig) else PlannerConfig()
-        box = BoundingBox(np.array(WARM_BOX[0]), np.array(WARM_BOX[1]))
+        box = aim = BoundingBox(np.array(WARM_BOX[0]), np.array(WARM_BOX[1]))
         if self.hurry():
             return
         if self.camera is not None:
@@ -208,8 +208,8 @@ class _Worker:
             with contextlib.suppress(ValueError):  # nothing on the object from there: the nominal box
                 scratch.integrate(DepthFrame(self.camera.render(pose), pose, self.camera.intrinsics))
             if scratch.voxel_map.bbox is not None:
-                box = scratch.voxel_map.bbox
-        candidates, _, _ = propose_candidates(box, cfg.candidates, cfg.partitions)
+                box, aim = scratch.voxel_map.bbox, scratch.candidate_box()
+        candidates, _, _ = propose_candidates(aim, cfg.candidates, cfg.partitions)
         cell.set_object_box(box)
         try:
             for c in candidates:
