@@ -89,6 +89,7 @@ def _execute(task: RunTask, mesh: MeshPayload | None, t0: float) -> RunOutcome:
         pose_noise=task.pose_noise,
         reachable=False,
         arm=task.arm,
+        turn_while_moving=task.turn_while_moving,
         mesh=None if mesh is None else mesh.to_trimesh(),
         sensor=task.sensor,
         calibration=task.calibration,
