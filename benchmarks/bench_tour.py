@@ -4,9 +4,13 @@ Reads the results.csv and runs.json of one or more bench directories (e.g. one w
 mesh and one with ``raycast-apora`` on fewer), pairs the runs by (model, seed, placement), and prints for every
 planner against ``--reference`` (and ``--also``): the mean robot seconds to 95 % / 90 % of the ceiling, the
 relative change of the mean, the paired mean difference with its 95 % t-interval, the AUC over views and final
-coverage / ceiling differences (points), and the median plan time; and the robot seconds to 95 % without the plan's
-seconds (moves, captures, motion planning), which the machine's load does not inflate. (``nbv bench`` writes the same robot-time
-rows into its own summary.md; this script pairs runs of several benches.)
+coverage / ceiling differences (points), and the median plan time. Plan seconds count in robot time and grow with
+the machine's load, so three load-independent variants of the robot seconds to 95 % follow (the reported metric
+itself is unchanged): without the plan's seconds (moves, captures, motion planning); with the plan's CPU seconds in
+place of its wall seconds (``plan_cpu_seconds``); and the moves alone (``move_seconds``: turns, retracts and
+trajectories, no computing at all: what the robot itself does). The last two need benches that wrote those
+columns (their runs are left out otherwise). (``nbv bench`` writes the same robot-time rows into its own
+summary.md; this script pairs runs of several benches.)
 
     nbv bench --models ../shared/models/*.{obj,ply} ../shared/models/extra/*.{obj,off} \\
         --planners projection,tour --seeds 2 --yaws 0,90 --out out/tour-ideal
@@ -58,23 +62,40 @@ def load(directory: Path) -> tuple[list[RunOutcome], dict[tuple[str, float], flo
     return outcomes, ceilings
 
 
+SECONDS = ("robot", "less plan", "plan cpu", "moves")
+"""What :func:`metrics_of` counts as a view's seconds: ``robot_seconds`` (the reported metric); less the plan's
+wall seconds; with the plan's CPU seconds in place of its wall seconds; the move's duration alone."""
+
+
+def view_seconds(row: dict[str, Any], kind: str) -> float | None:
+    """A results.csv row's seconds of ``kind`` (:data:`SECONDS`); None when the bench did not write them."""
+    robot, plan = float(row["robot_seconds"] or 0.0), float(row["plan_seconds"] or 0.0)
+    if kind == "robot":
+        return robot
+    if kind == "less plan":
+        return robot - plan
+    if kind == "plan cpu":
+        cpu = row.get("plan_cpu_seconds")
+        return None if cpu is None else robot - plan + float(cpu)
+    move = row.get("move_seconds")
+    return None if move is None else float(move)
+
+
 def metrics_of(
-    outcomes: list[RunOutcome], ceilings: dict[tuple[str, float], float], views: int, without_plan: bool = False
+    outcomes: list[RunOutcome], ceilings: dict[tuple[str, float], float], views: int, kind: str = "robot"
 ) -> dict[tuple[str, str, int, float], RunMetrics]:
-    """(model, planner, seed, yaw) -> the run's metrics with its robot times, for finished runs with a ceiling.
-    without_plan: robot seconds less the plan's (moves, captures, motion planning: what the machine's load does not
-    inflate)."""
+    """(model, planner, seed, yaw) -> the run's metrics with its robot times counted as ``kind`` (:data:`SECONDS`),
+    for finished runs with a ceiling (and, for the variants that need them, the columns)."""
     out = {}
     for o in outcomes:
         ceiling = ceilings.get((o.label, o.yaw))
         rows = [r for r in o.rows if r["coverage"] is not None]
         if o.error is None and rows and ceiling:
-            seconds = [
-                float(r["robot_seconds"] or 0.0) - (float(r["plan_seconds"] or 0.0) if without_plan else 0.0)
-                for r in rows
-            ]
+            seconds = [view_seconds(r, kind) for r in rows]
+            if any(s is None for s in seconds):
+                continue
             out[(o.label, o.planner, o.seed, o.yaw)] = run_metrics(
-                [r["coverage"] for r in rows], ceiling, views, seconds
+                [r["coverage"] for r in rows], ceiling, views, [float(s or 0.0) for s in seconds]
             )
     return out
 
@@ -82,7 +103,7 @@ def metrics_of(
 def compare(outcomes: list[RunOutcome], ceilings: dict[tuple[str, float], float], views: int, reference: str) -> None:
     """Print every planner against ``reference`` over their shared (model, seed, yaw) runs."""
     metrics = metrics_of(outcomes, ceilings, views)
-    bare = metrics_of(outcomes, ceilings, views, without_plan=True)
+    variants = {kind: metrics_of(outcomes, ceilings, views, kind) for kind in SECONDS[1:]}
     planners = sorted({p for (_, p, _, _) in metrics})
     plan_seconds = {
         p: statistics.median(r["plan_seconds"] for o in outcomes if o.planner == p for r in o.rows) for p in planners
@@ -97,25 +118,32 @@ def compare(outcomes: list[RunOutcome], ceilings: dict[tuple[str, float], float]
         if not keys:
             continue
         print(f"\n{p} vs {reference}: {len(keys)} pairs; median plan {plan_seconds[p]:.3f} s")
-        mine_bare = {(m, s, y): v for (m, q, s, y), v in bare.items() if q == p}
-        ref_bare = {(m, s, y): v for (m, q, s, y), v in bare.items() if q == reference}
-        for label, get, scale, (x, y) in (
-            ("robot s to 95 %", lambda v: v.time_to[1], 1.0, (mine, ref)),
-            ("  to 95 % less plan s", lambda v: v.time_to[1], 1.0, (mine_bare, ref_bare)),
+        lines = [("robot s to 95 %", lambda v: v.time_to[1], 1.0, (mine, ref))]
+        for kind, label in zip(SECONDS[1:], ("less plan s", "plan as CPU s", "moves only"), strict=True):
+            mine_v = {(m, s, y): v for (m, q, s, y), v in variants[kind].items() if q == p}
+            ref_v = {(m, s, y): v for (m, q, s, y), v in variants[kind].items() if q == reference}
+            lines.append((f"  to 95 %, {label}", lambda v: v.time_to[1], 1.0, (mine_v, ref_v)))
+        lines += [
             ("robot s to 90 %", lambda v: v.time_to[0], 1.0, (mine, ref)),
+            ("  to 90 %, moves only", lambda v: v.time_to[0], 1.0, lines[3][3]),
             ("AUC over views (points)", lambda v: v.auc, 100.0, (mine, ref)),
             ("final / ceiling (points)", lambda v: v.final_ratio, 100.0, (mine, ref)),
-        ):
-            a = {k: scale * get(x[k]) for k in keys}
-            b = {k: scale * get(y[k]) for k in keys}
+        ]
+        for label, get, scale, (x, y) in lines:
+            shared = [k for k in keys if k in x and k in y]
+            if not shared:
+                continue
+            a = {k: scale * get(x[k]) for k in shared}
+            b = {k: scale * get(y[k]) for k in shared}
             c = paired_comparison(a, b, higher_is_better=scale != 1.0)
             assert c is not None
             mean_a, mean_b = statistics.fmean(a.values()), statistics.fmean(b.values())
             change = f", {100 * (mean_a / mean_b - 1):+.1f} %" if scale == 1.0 else ""
             interval = "-" if c.low is None else f"[{c.low:+.2f}, {c.high:+.2f}]{' *' if c.significant else ''}"
+            pairs = "" if len(shared) == len(keys) else f" ({len(shared)} pairs)"
             print(
                 f"  {label:<26} {mean_a:8.2f} vs {mean_b:8.2f}{change}; paired {c.mean:+.2f} {interval}; "
-                f"wins / ties / losses {c.wins} / {c.ties} / {c.losses}"
+                f"wins / ties / losses {c.wins} / {c.ties} / {c.losses}{pairs}"
             )
 
 

@@ -27,6 +27,7 @@ In both, the arm moves the camera to ``T_base_camera = Rz(theta) @ T_table_camer
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -80,6 +81,9 @@ class Motion:
     retract: JointTrajectory | None = None
     """URDF arm: the trajectory to the retracted configuration that runs before the plate turns, when the turn
     would sweep the object's box into the standing arm (None: the arm stands still while the plate turns)."""
+    overlapped: bool = False
+    """URDF arm: the plate turns while the arm runs ``trajectory`` (``ArmConfig.turn_while_moving``, the whole path
+    clear of the turning object); ``duration`` then counts the longer of the two, not their sum."""
 
     @property
     def path_length(self) -> float:
@@ -97,6 +101,7 @@ class Motion:
             "path_method": self.path_method or None,
             "motion_planning_seconds": float(self.planning_seconds),
             "retracted": self.retract is not None,
+            "turn_overlapped": self.overlapped,
         }
 
 
@@ -209,6 +214,7 @@ class Cell:
                 move.path_method,
                 move.planning_seconds,
                 move.retract,
+                move.overlapped,
             )
         x, y, z = T_table_camera.translation
         cfg = self.config
@@ -282,8 +288,9 @@ class Cell:
     ) -> NDArray[np.float64]:
         """(K + 1, K + 1) estimated seconds of the move between every two of the current state and the K views
         ``candidates[indices]`` (``.T_world_camera``; inf to and from an unreachable one): the ``move_times`` of
-        ``Planner.plan``. URDF arm: plate turn + the slowest joint's trapezoid between the views' cached
-        reachability targets (:meth:`ArmReach.nearest_target`, :meth:`ArmReach.move_matrix`; no IK of their own).
+        ``Planner.plan``. URDF arm: plate turn and the slowest joint's trapezoid (:meth:`ArmReach.move_seconds`:
+        one after the other, or together when the arm stands clear of the turning object and the arm's config
+        says so) between the views' cached reachability targets at every plate angle (:meth:`_cached_move_times`).
         exact: each view's target is instead the one a move from the current state would take (every plate angle
         the turn allows and every IK branch from the current joints, :meth:`ArmReach.best_target`; about 20 ms of
         IK per view), so row 0 is the move's own estimate; a few views only (the tour's cover).
@@ -294,22 +301,21 @@ class Cell:
         if self.kinematics is not None:
             kinematics = self.kinematics
             reach = kinematics.reach
-            q0, a0 = self.arm.joint_positions(), self.turntable.angle
-            qs, angles = [np.asarray(q0, dtype=np.float64)], [a0]
+            q0, a0 = np.asarray(self.arm.joint_positions(), dtype=np.float64), self.turntable.angle
+            if exact:
 
-            def turn_check(a: float) -> str | None:
-                return kinematics.turn_blocked(q0, a0, a)
+                def turn_check(a: float) -> str | None:
+                    return kinematics.turn_blocked(q0, a0, a)
 
-            for k, T in enumerate(poses, start=1):
-                if exact:
+                qs, angles = [q0], [a0]
+                for k, T in enumerate(poses, start=1):
                     best, _ = reach.best_target(T, q0, a0, turn_check)
-                    target = None if best is None else (best.q, best.angle)
-                else:
-                    target = reach.nearest_target(T, q0, a0)
-                ok[k] = target is not None
-                qs.append(qs[0] if target is None else target[0])
-                angles.append(a0 if target is None else target[1])
-            times = reach.move_matrix(np.stack(qs), np.array(angles))
+                    ok[k] = best is not None
+                    qs.append(q0 if best is None else best.q)
+                    angles.append(a0 if best is None else best.angle)
+                times = reach.seconds_between(np.stack(qs), np.array(angles), np.stack(qs), np.array(angles))
+            else:
+                times = self._cached_move_times(poses, q0, a0, ok)
         else:
             xyz, angles = [self.arm.pose.translation], [self.turntable.angle]
             for k, T in enumerate(poses, start=1):
@@ -331,6 +337,42 @@ class Cell:
         times[~ok, :] = math.inf
         times[:, ~ok] = math.inf
         np.fill_diagonal(times, 0.0)
+        return times
+
+    def _cached_move_times(
+        self, poses: Sequence[Pose], q0: NDArray[np.float64], a0: float, ok: NDArray[np.bool_]
+    ) -> NDArray[np.float64]:
+        """:meth:`move_times` from the cached reachability targets (``ok`` (K + 1,) is set False for the views none
+        of whose plate angles has a free target). Each view's entry target: of its free targets at every plate
+        angle (:meth:`ArmReach.free_targets`), the one with the shortest move from the current state (q0 (n,),
+        plate angle a0); the move from view i to view j: from i's entry target to the nearest of j's targets."""
+        assert self.kinematics is not None
+        reach = self.kinematics.reach
+        options = [reach.free_targets(T, q0, a0) for T in poses]
+        owner = np.array([k for k, opts in enumerate(options, start=1) for _ in opts], dtype=np.int64)
+        n = len(poses) + 1
+        times = np.full((n, n), math.inf)
+        if len(owner) == 0:
+            ok[1:] = False
+            return times
+        q_all = np.stack([q for opts in options for q, _ in opts])  # (M, n) every view's free targets
+        a_all = np.array([a for opts in options for _, a in opts])
+        from_here = reach.seconds_between(q0[None, :], np.array([a0]), q_all, a_all)[0]  # (M,)
+        entry_q, entry_a = [q0], [a0]
+        for k in range(1, n):
+            mine = np.flatnonzero(owner == k)
+            ok[k] = len(mine) > 0
+            best = int(mine[np.argmin(from_here[mine])]) if len(mine) else -1
+            entry_q.append(q0 if best < 0 else q_all[best])
+            entry_a.append(a0 if best < 0 else float(a_all[best]))
+        legs = reach.seconds_between(np.stack(entry_q), np.array(entry_a), q_all, a_all)  # (K + 1, M)
+        for k in range(1, n):
+            mine = owner == k
+            if np.any(mine):
+                times[:, k] = legs[:, mine].min(axis=1)
+        times[1:, 0] = reach.seconds_between(np.stack(entry_q[1:]), np.array(entry_a[1:]), q0[None, :], np.array([a0]))[
+            :, 0
+        ]
         return times
 
     def is_reachable(self, T_table_camera: Pose) -> bool:
@@ -384,7 +426,8 @@ class Cell:
 
     def move_to(self, T_table_camera: Pose, plate_angle: float | None = None) -> Motion:
         """Turn the plate, then move the arm, so the camera is at ``T_table_camera`` (a URDF arm retracts first
-        when the turn would sweep the object's box into it: ``Motion.retract``).
+        when the turn would sweep the object's box into it: ``Motion.retract``; with ``Motion.overlapped`` the plate
+        turns while the arm moves).
 
         Plans first (``plate_angle``: as in :meth:`plan_motion`): an unreachable view raises UnreachableError and
         moves nothing.
@@ -395,12 +438,43 @@ class Cell:
         self.last_motion = motion
         if motion.retract is not None:
             self.arm.execute(motion.retract)
+        if motion.overlapped and motion.trajectory is not None:
+            self._turn_during(motion.angle, motion.trajectory)
+            return motion
         self.turntable.rotate_to(motion.angle)
         if motion.trajectory is not None:
             self.arm.execute(motion.trajectory)
         else:
             self.arm.move_to(motion.T_base_camera)
         return motion
+
+    def _turn_during(self, angle: float, trajectory: JointTrajectory) -> None:
+        """Turn the plate to ``angle`` (a thread of its own) while the arm runs ``trajectory`` (this thread); both
+        have ended when it returns. A fault of either stops the other and is raised (the turntable's first)."""
+        failed: list[BaseException] = []
+
+        def turn() -> None:
+            try:
+                self.turntable.rotate_to(angle)
+            except BaseException as exc:  # handed to the caller's thread
+                failed.append(exc)
+                self.arm.stop()
+
+        turning = threading.Thread(target=turn, name="turntable", daemon=True)
+        turning.start()
+        try:
+            self.arm.execute(trajectory)
+        except BaseException:
+            stop = getattr(self.turntable, "stop", None)
+            if callable(stop):
+                stop()
+            turning.join()
+            if failed:
+                raise failed[0] from None
+            raise
+        turning.join()
+        if failed:
+            raise failed[0]
 
     def capture(self) -> DepthFrame:
         """A depth image with ``T_world_camera`` = the camera pose in the table frame.

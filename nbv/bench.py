@@ -186,6 +186,7 @@ def make_tasks(args: argparse.Namespace, models: Sequence[tuple[str, str, Any]] 
                             pose_noise=args.pose_noise,
                             threads=threads,
                             arm=args.arm,
+                            turn_while_moving=args.turn_while_moving,
                             sensor=args.sensor,
                             calibration=args.calibration,
                         )

@@ -11,7 +11,10 @@ ceilings of its (model, placement) pairs. results.csv, per iteration:
   reaches 90 / 95 %, the run's total plus its mean per view when never), repeated on each of its rows (filter on
   the last iteration for one a run);
 - ``robot_seconds``: the view's robot time (move, plate turn, capture, planning); ``cumulative_robot_seconds``
-  its running sum over the run;
+  its running sum over the run; its parts ``move_seconds`` (the move's duration: turn, retract, trajectory; robot
+  motion only, no computing), ``capture_seconds`` and ``motion_planning_seconds`` (wall times), and besides the
+  plan's wall time ``plan_seconds`` its CPU time ``plan_cpu_seconds`` (``time.process_time``, which the machine's
+  load inflates less);
 - ``plan_seconds``: frame in -> next view out (integration, candidates, clustering, ellipsoids,
   scoring, selection), as in ``nbv scan``; preprocessing and ICP are timed apart;
 - ``eval_seconds``: the candidate-evaluation stage alone (``timings["score"]``): for
@@ -58,6 +61,10 @@ COLUMNS = (
     "eval_seconds",
     "fit_seconds",
     "robot_seconds",
+    "move_seconds",
+    "capture_seconds",
+    "motion_planning_seconds",
+    "plan_cpu_seconds",
     "auc",
     "views_to_90",
     "views_to_95",

@@ -61,6 +61,12 @@ def add_scan_options(p: argparse.ArgumentParser, *, model_required: bool = True)
         help="the cell's arm: the UR5 model with IK, collisions and trajectories (default) or the reach sphere",
     )
     p.add_argument(
+        "--turn-while-moving",
+        action="store_true",
+        help="the UR5 cell turns the plate while the arm moves when the arm's path stays clear of the turning "
+        "object (arm.turn_while_moving; default: the turn, then the arm)",
+    )
+    p.add_argument(
         "--move-cost-weight",
         type=float,
         default=None,

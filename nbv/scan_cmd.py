@@ -171,6 +171,7 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
         on_start=start,
         on_iteration=lambda record, plan: console.print(_row(record), highlight=False),
         arm=args.arm,
+        turn_while_moving=args.turn_while_moving,
         on_frame=per_view.add,
         sensor=args.sensor,
         calibration=args.calibration,

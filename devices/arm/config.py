@@ -79,6 +79,11 @@ class ArmConfig:
     """Joint acceleration limit, degrees/s^2, every joint (URDFs do not give one)."""
     turntable_speed_deg: float = 45.0
     """Turntable speed, degrees/s (for the move duration; the simulated plate turns at once)."""
+    turn_while_moving: bool = False
+    """Turn the plate while the arm runs its trajectory when every configuration on the arm's path stands clear of
+    the vertical cylinder the padded object box sweeps about the plate's axis (no plate angle can bring the box
+    into the arm, ``CollisionWorld.sweep_free``): the move then takes the longer of the turn and the trajectory,
+    not their sum. False (the default): the plate turns, then the arm moves."""
     plate_offsets_deg: tuple[float, ...] = (0.0, -30.0, 30.0, -60.0, 60.0, -90.0, 90.0)
     """Plate angles tried per view: the view's azimuth minus the arm's azimuth after turning, degrees.
     The first reachable one decides reachability; a move takes the one with the shortest move."""
@@ -152,6 +157,10 @@ class ArmConfig:
         require(
             finite(self.planning_time) and 0 < self.planning_time <= 60,
             f"arm.planning_time: must be in (0, 60] seconds, got {self.planning_time!r}",
+        )
+        require(
+            isinstance(self.turn_while_moving, bool),
+            f"arm.turn_while_moving: true or false, got {self.turn_while_moving!r}",
         )
         require(
             finite(self.table_height) and self.table_height <= 0, "arm.table_height: must be <= 0 (below the plate)"

@@ -8,6 +8,8 @@ of any configuration by forward kinematics. It moves nothing: the cell sends the
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import math
 import time
 from dataclasses import dataclass
@@ -41,7 +43,9 @@ class ArmMove:
     after the plate has turned). turn_seconds: the plate's turn. path_method: 'straight' or 'rrt_connect'.
     planning_seconds: time spent choosing the target and planning the path. retract: when the turn would sweep
     the object's box into the standing arm, the trajectory to the retracted (home) configuration that runs
-    before the turn (the main trajectory then starts there); None otherwise.
+    before the turn (the main trajectory then starts there); None otherwise. overlapped: the plate turns while
+    the main trajectory runs (``ArmConfig.turn_while_moving`` and every configuration of its path clear of the
+    turning object, :meth:`ArmKinematics.path_sweep_free`); False: the turn, then the trajectory.
     """
 
     target: ArmTarget
@@ -50,11 +54,15 @@ class ArmMove:
     path_method: str
     planning_seconds: float
     retract: JointTrajectory | None = None
+    overlapped: bool = False
 
     @property
     def duration(self) -> float:
-        """Seconds of the whole move: the retract (if any), the plate's turn, then the arm's trajectory."""
+        """Seconds of the whole move: the retract (if any), then the plate's turn and the arm's trajectory, one
+        after the other (their sum) or together (the longer, when ``overlapped``)."""
         before = self.retract.duration if self.retract is not None else 0.0
+        if self.overlapped:
+            return before + max(self.turn_seconds, self.trajectory.duration)
         return before + self.turn_seconds + self.trajectory.duration
 
 
@@ -68,13 +76,13 @@ class ArmKinematics:
                 "put the arm beside the turntable"
             )
         self.config = config
-        self.model: ArmModel = load_arm(config, config.base)
+        # the model (cached per config) does not depend on how the cell times its moves: one model for both
+        self.model: ArmModel = load_arm(dataclasses.replace(config, turn_while_moving=False), config.base)
         self.world = CollisionWorld(self.model, plate_radius, plate_thickness)
         home = np.radians(config.home_deg) if len(config.home_deg) == self.model.nq else np.zeros(self.model.nq)
         self.home: NDArray[np.float64] = np.clip(home, self.model.lower, self.model.upper)
-        self.reach = ArmReach(self.model, self.world, self.home)
+        self.reach = ArmReach(self.model, self.world, self.home, turn_while_moving=config.turn_while_moving)
         self._turn_hits: dict[tuple[bytes, float], str | None] = {}
-        self._sweep_free: dict[bytes, bool] = {}
         self.use_sweep_test = True
         """False: every turn is checked on its grid (the reference the sweep test is tested against)."""
 
@@ -90,7 +98,6 @@ class ArmKinematics:
         """The object's box (table frame, (3,) corners) the arm must keep clear of; None = no object model yet."""
         self.world.set_object_box(lower_table, upper_table)
         self._turn_hits.clear()
-        self._sweep_free.clear()
 
     def turn_collision(self, q: NDArray[np.float64], angle: float, turn: float) -> str | None:
         """The first collision of the arm standing at (n,) ``q`` while the plate turns from ``angle`` by ``turn``
@@ -98,12 +105,7 @@ class ArmKinematics:
         (``TURN_CHECKS_PER_RADIAN``) plus the end, cached per configuration: the planner's reachability of 400
         views and the move ask the same question with the same answer."""
         q = np.asarray(q, dtype=np.float64)
-        sweep_key = q.tobytes()
-        if self.use_sweep_test and sweep_key not in self._sweep_free:
-            if len(self._sweep_free) >= 10_000:
-                self._sweep_free.clear()
-            self._sweep_free[sweep_key] = self.world.sweep_free(q)
-        if self.use_sweep_test and self._sweep_free[sweep_key]:
+        if self.use_sweep_test and self.reach.sweep_free(q):
             return None  # clear of everything the box sweeps: no turn collides (the same answer as the checks)
         step = 1.0 / TURN_CHECKS_PER_RADIAN
         n = math.floor(abs(turn) / step)
@@ -127,6 +129,22 @@ class ArmKinematics:
             return None
         hit = self.turn_collision(self.home, angle, turn)
         return None if hit is None else f"turn:{hit}"
+
+    def path_sweep_free(self, waypoints: NDArray[np.float64]) -> bool:
+        """Whether every configuration of the joint path (K, n) ``waypoints``, checked every
+        ``arm.path_resolution_deg`` of the largest joint step as the path itself was, stands clear of the cylinder
+        the padded object box sweeps (:meth:`ArmReach.sweep_free`): then the plate may turn while the arm runs
+        the path, whatever the timing of the two."""
+        resolution = math.radians(self.config.path_resolution_deg)
+        waypoints = np.asarray(waypoints, dtype=np.float64)
+        if not self.reach.sweep_free(waypoints[0]):
+            return False
+        for a, b in itertools.pairwise(waypoints):
+            steps = max(1, math.ceil(float(np.max(np.abs(b - a))) / resolution))
+            for t in np.linspace(0.0, 1.0, steps + 1)[1:]:
+                if not self.reach.sweep_free(a + t * (b - a)):
+                    return False
+        return True
 
     def reachability(self, T_table_camera: Pose, q: NDArray[np.float64], angle: float) -> tuple[bool, str | None]:
         """(reachable, reason) of a view from the state (q, plate angle): a free IK target at some plate angle,
@@ -200,4 +218,5 @@ class ArmKinematics:
             raise UnreachableError(f"unreachable: {exc}", reason="no_path") from None
         trajectory = time_path(self.model, path.waypoints)
         turn_seconds = abs(turn) / math.radians(self.config.turntable_speed_deg)
-        return ArmMove(target, trajectory, turn_seconds, path.method, time.perf_counter() - t0, retract)
+        overlapped = self.config.turn_while_moving and turn_seconds > 0 and self.path_sweep_free(path.waypoints)
+        return ArmMove(target, trajectory, turn_seconds, path.method, time.perf_counter() - t0, retract, overlapped)

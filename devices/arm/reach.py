@@ -100,9 +100,12 @@ class ArmReach:
 
     arm: the loaded model. world: its collision world (plate, table, object box). home: (n,) the configuration
     reachability's IK solutions are wrapped towards (joint turns), so they do not depend on the current state.
+    turn_while_moving: :attr:`turn_while_moving` (``ArmConfig.turn_while_moving``).
     """
 
-    def __init__(self, arm: ArmModel, world: CollisionWorld, home: NDArray[np.float64]) -> None:
+    def __init__(
+        self, arm: ArmModel, world: CollisionWorld, home: NDArray[np.float64], *, turn_while_moving: bool = False
+    ) -> None:
         self.arm = arm
         self.home = np.asarray(home, dtype=np.float64)
         self.world = world
@@ -120,6 +123,11 @@ class ArmReach:
         self._acceleration: list[float] = arm.acceleration.tolist()
         self.use_attempt_cache = True
         """False: every reachability attempt is computed afresh (the reference the cache is tested against)."""
+        self.turn_while_moving = bool(turn_while_moving)
+        """Move estimates take the plate's turn and the arm's trajectory as running together (their longer) when
+        both ends of the move stand clear of the turning object (:meth:`sweep_free`), as the cell then moves
+        (``ArmConfig.turn_while_moving``); else one after the other."""
+        self._sweep: dict[tuple[bytes, bytes], bool] = {}
 
     # ------------------------------------------------------------------ helpers
 
@@ -200,6 +208,58 @@ class ArmReach:
         v, a = self.arm.velocity, self.arm.acceleration
         t = np.where(dq > v * v / a, dq / v + v / a, 2.0 * np.sqrt(dq / a))
         return turn / math.radians(self.arm.config.turntable_speed_deg) + t.max(axis=2, initial=0.0)
+
+    def sweep_free(self, q: NDArray[np.float64]) -> bool:
+        """:meth:`CollisionWorld.sweep_free` of (n,) ``q`` with the current object box, cached per (q, box): the arm
+        standing at ``q`` is clear of the cylinder the padded box sweeps at every plate angle."""
+        key = (np.asarray(q, dtype=np.float64).tobytes(), self._box_key())
+        hit = self._sweep.get(key)
+        if hit is None:
+            if len(self._sweep) >= CACHE_SIZE:
+                self._sweep.clear()
+            hit = self._sweep[key] = self.world.sweep_free(np.asarray(q, dtype=np.float64))
+        return hit
+
+    def move_seconds(
+        self, q_from: NDArray[np.float64], q_to: NDArray[np.float64], angle_from: float, angle_to: float
+    ) -> float:
+        """Seconds of the move as the cell makes it: :meth:`move_estimate` (turn, then arm), or with
+        :attr:`turn_while_moving` and both ends clear of the turning object (:meth:`sweep_free`) the longer of the
+        plate's turn and the arm's trajectory (they run together)."""
+        sequential = self.move_estimate(q_from, q_to, angle_from, angle_to)
+        if not self.turn_while_moving or not (self.sweep_free(q_from) and self.sweep_free(q_to)):
+            return sequential
+        turn = abs(wrap(angle_to - angle_from)) / math.radians(self.arm.config.turntable_speed_deg)
+        return max(turn, sequential - turn)
+
+    def seconds_between(
+        self,
+        q_from: NDArray[np.float64],
+        angles_from: NDArray[np.float64],
+        q_to: NDArray[np.float64],
+        angles_to: NDArray[np.float64],
+    ) -> NDArray[np.float64]:
+        """(A, B) :meth:`move_seconds` from each of A states to each of B states: q_from (A, n), angles_from (A,),
+        q_to (B, n), angles_to (B,) (joints in radians, plate angles in radians)."""
+        q_from = np.asarray(q_from, dtype=np.float64).reshape(-1, self.arm.nq)
+        q_to = np.asarray(q_to, dtype=np.float64).reshape(-1, self.arm.nq)
+        a_from = np.asarray(angles_from, dtype=np.float64).reshape(-1)
+        a_to = np.asarray(angles_to, dtype=np.float64).reshape(-1)
+        turn = np.abs(np.remainder(a_from[:, None] - a_to[None, :] + math.pi, 2 * math.pi) - math.pi)
+        turn = turn / math.radians(self.arm.config.turntable_speed_deg)
+        dq = np.abs(q_from[:, None, :] - q_to[None, :, :])
+        v, a = self.arm.velocity, self.arm.acceleration
+        arm = np.where(dq > v * v / a, dq / v + v / a, 2.0 * np.sqrt(dq / a)).max(axis=2, initial=0.0)
+        if not self.turn_while_moving:
+            return turn + arm
+        clear_from = np.array([self.sweep_free(q) for q in q_from], dtype=bool)
+        clear_to = np.array([self.sweep_free(q) for q in q_to], dtype=bool)
+        together = clear_from[:, None] & clear_to[None, :]
+        return np.where(together, np.maximum(turn, arm), turn + arm)
+
+    def _box_key(self) -> bytes:
+        box = self.world.box
+        return b"" if box is None else box[0].tobytes() + box[1].tobytes()
 
     def _ik(
         self, T_base_camera: Pose, reference: NDArray[np.float64], *, first: bool
@@ -300,8 +360,12 @@ class ArmReach:
                 assert reason is not None
                 if _severity(reason) > _severity(worst):
                     worst = reason
-            elif best is None or target.move_estimate < best.move_estimate:
-                best = target
+            else:
+                if self.turn_while_moving:  # the move as the cell makes it (turn and arm together when clear)
+                    seconds = self.move_seconds(q_current, target.q, angle_current, target.angle)
+                    target = ArmTarget(target.angle, target.q, target.T_base_camera, seconds)
+                if best is None or target.move_estimate < best.move_estimate:
+                    best = target
         return (best, None) if best is not None else (None, worst)
 
     def _try(
@@ -324,9 +388,7 @@ class ArmReach:
         return ArmTarget(angle, q, T_base_camera, self.move_estimate(q_current, q, angle_current, angle)), None
 
     def _attempt_key(self, T_table_camera: Pose, angle: float) -> tuple[bytes, bytes, float, bytes]:
-        box = self.world.box
-        padded = b"" if box is None else box[0].tobytes() + box[1].tobytes()
-        return T_table_camera.translation.tobytes(), T_table_camera.rotation.tobytes(), float(angle), padded
+        return T_table_camera.translation.tobytes(), T_table_camera.rotation.tobytes(), float(angle), self._box_key()
 
     def cached_target(self, T_table_camera: Pose, angle: float) -> tuple[NDArray[np.float64], Pose] | None:
         """(q (n,), T_base_camera) of the reachability attempt at plate ``angle`` with the current object box, if
@@ -335,21 +397,19 @@ class ArmReach:
         hit = self._attempts.get(key)
         return None if hit is None or isinstance(hit, str) else hit
 
-    def nearest_target(
+    def free_targets(
         self, T_table_camera: Pose, q_current: NDArray[np.float64], angle_current: float
-    ) -> tuple[NDArray[np.float64], float] | None:
-        """(q (n,), plate angle) of the cached reachability target of a view with the shortest move from the
-        current state (the view's reachability is asked first if no attempt of it is cached); None if unreachable.
-        No IK of its own: the tour's move times come from the same cache as reachability."""
+    ) -> list[tuple[NDArray[np.float64], float]]:
+        """(q (n,), plate angle) of the reachability attempt at each plate angle the view is tried at
+        (:meth:`plate_angles`) that found a free target: the same state-independent, cached attempts as
+        :meth:`reachability`, every plate angle instead of the first that serves (a few ms of IK per view when
+        cold, microseconds when cached). Empty when the view is unreachable."""
         found: list[tuple[NDArray[np.float64], float]] = []
         for angle in self.plate_angles(T_table_camera, angle_current):
-            hit = self.cached_target(T_table_camera, angle)
-            if hit is not None:
-                found.append((hit[0], angle))
-        if not found:
-            target, _ = self.reachability(T_table_camera, q_current, angle_current)
-            return None if target is None else (target.q, target.angle)
-        return min(found, key=lambda f: self.move_estimate(q_current, f[0], angle_current, f[1]))
+            target, _ = self._try(T_table_camera, angle, q_current, angle_current, first=True)
+            if target is not None:
+                found.append((target.q, angle))
+        return found
 
     def _attempt(
         self, T_table_camera: Pose, angle: float, q_current: NDArray[np.float64], angle_current: float, *, first: bool

@@ -45,6 +45,8 @@ def test_every_view_reports_the_arm(scan: dict) -> None:
     for it in its[1:]:  # every move after the first view goes somewhere
         assert it["move"]["path_length"] > 0.01 and it["move"]["move_duration"] > 0.1
         assert it["move"]["path_method"] in ("straight", "rrt_connect")
+        assert it["move"]["turn_overlapped"] is False  # the default cell turns, then moves the arm
+    assert all(it["plan_cpu_seconds"] > 0 for it in its)  # the plan's CPU time beside its wall time
     parts = sum(
         it["move"]["move_duration"] + it["capture_seconds"] + it["plan_seconds"] + it["move"]["motion_planning_seconds"]
         for it in its

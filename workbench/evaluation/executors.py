@@ -89,6 +89,7 @@ def _execute(task: RunTask, mesh: MeshPayload | None, t0: float) -> RunOutcome:
         pose_noise=task.pose_noise,
         reachable=False,
         arm=task.arm,
+        turn_while_moving=task.turn_while_moving,
         mesh=None if mesh is None else mesh.to_trimesh(),
         sensor=task.sensor,
         calibration=task.calibration,
@@ -111,6 +112,10 @@ def _execute(task: RunTask, mesh: MeshPayload | None, t0: float) -> RunOutcome:
                 "eval_seconds": r.timings.get("score", 0.0),
                 "fit_seconds": r.timings.get("cluster", 0.0) + r.timings.get("ellipsoids", 0.0),
                 "robot_seconds": r.robot_seconds,
+                "move_seconds": r.move_seconds,
+                "capture_seconds": r.capture_seconds,
+                "motion_planning_seconds": r.motion_planning_seconds,
+                "plan_cpu_seconds": r.plan_cpu_seconds,
                 **{k: None if r.accuracy is None else r.accuracy[k] for k in ACCURACY_COLUMNS},
                 "surface_fscore_5mm": None,
             }

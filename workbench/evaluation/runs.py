@@ -69,6 +69,9 @@ class RunTask:
     """BLAS/OpenMP threads of the worker (None: library default)."""
     arm: str = "urdf"
     """The cell's arm (``--arm``): 'urdf' (the UR5) or 'reach_sphere'."""
+    turn_while_moving: bool = False
+    """The UR5 cell turns the plate while the arm moves when it may (``--turn-while-moving``,
+    ``ArmConfig.turn_while_moving``)."""
     sensor: str = "ideal"
     """The depth sensor's model (``--sensor``)."""
     calibration: str = "none"

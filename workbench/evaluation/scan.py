@@ -49,6 +49,9 @@ class IterationRecord:
     move duration (None when the cell reports no motion)."""
     capture_seconds: float = 0.0
     """Wall time of the capture of this view."""
+    plan_cpu_seconds: float = 0.0
+    """CPU seconds of this process during the plan made after this view (``time.process_time``, every thread):
+    its computing, which a loaded machine inflates less than the wall time ``plan_seconds``."""
     refused_moves: list[dict[str, Any]] = field(default_factory=list)
     """Views the cell refused before it reached this one (``candidate`` index, ``reason``, ``message``)."""
     accuracy: dict[str, Any] | None = None
@@ -72,9 +75,20 @@ class IterationRecord:
             "bic": {k: [[t, b] for t, b in v] for k, v in self.bic.items()},
             "move": self.move,
             "capture_seconds": self.capture_seconds,
+            "plan_cpu_seconds": self.plan_cpu_seconds,
             "refused_moves": self.refused_moves,
             "accuracy": self.accuracy,
         }
+
+    @property
+    def move_seconds(self) -> float:
+        """The move's duration (plate turn, retract, trajectory), 0 without one: robot motion only."""
+        return float((self.move or {}).get("move_duration") or 0.0)
+
+    @property
+    def motion_planning_seconds(self) -> float:
+        """Wall time the cell spent planning this view's move (IK, path), 0 without a move."""
+        return float((self.move or {}).get("motion_planning_seconds") or 0.0)
 
     @property
     def robot_seconds(self) -> float:
@@ -223,10 +237,13 @@ def run_scan(
         refused, pending, tried = pending, [], set()
         if on_frame is not None:
             on_frame(frame.with_pose(report.T_world_camera))
+        cpu0 = time.process_time()
         plan = plan_in(cell, planner)
+        plan_cpu_seconds = time.process_time() - cpu0
         cov = coverage(surface_samples, planner.cloud) if surface_samples is not None else None
         record = make_record(report, plan, voxel_counts(planner), cov)
         record.capture_seconds = capture_seconds
+        record.plan_cpu_seconds = plan_cpu_seconds
         record.refused_moves = refused
         if truth is not None:
             record.accuracy = accuracy(truth, planner.cloud).to_json()

@@ -54,6 +54,7 @@ def simulate(
     on_frame: Callable[[DepthFrame], None] | None = None,
     sensor: str = "ideal",
     calibration: str = "none",
+    turn_while_moving: bool = False,
 ) -> SimScan:
     """Load ``model``, build the simulated cell, run Algorithm 1, measure coverage.
 
@@ -65,11 +66,14 @@ def simulate(
     ``on_start``: told the model's display name before the scan; ``on_iteration``: called after every
     iteration with its record and plan. ``arm``: 'urdf' (the UR5 with IK, collision checks and joint trajectories) or 'reach_sphere'
     (``CellConfig.kinematics``). ``on_frame``: hears each frame with its registered pose (``run_scan``).
+    ``turn_while_moving``: the UR5 cell turns the plate while the arm moves when the arm's path stays clear of the
+    turning object (``ArmConfig.turn_while_moving``).
     ``sensor``, ``calibration``: the camera's sensor model and the cell's calibration error by name
     (``CameraConfig.sensor`` / ``.calibration``); the planner's noise settings follow them
     (``devices.planner_noise.planner_config_for``). Accuracy per view against the mesh is in
     ``IterationRecord.accuracy``.
     """
+    from devices.arm.config import ArmConfig
     from devices.builtins import resolve_model
     from devices.config import CameraConfig, CellConfig
     from devices.mesh import sample_surface, turned_about_plate_axis
@@ -95,7 +99,8 @@ def simulate(
     config = planner_config_for(config, camera)
     if arm not in ("urdf", "reach_sphere"):
         raise ValueError(f"--arm: 'urdf' or 'reach_sphere', got {arm!r}")
-    cell = make_sim_cell(mesh, camera, CellConfig(kinematics=arm), seed=seed)  # type: ignore[arg-type]
+    cell_config = CellConfig(kinematics=arm, arm=ArmConfig(turn_while_moving=turn_while_moving))  # type: ignore[arg-type]
+    cell = make_sim_cell(mesh, camera, cell_config, seed=seed)
     samples = sample_surface(mesh, 10_000, seed=seed)
     planner = Planner(config, evaluator=planner_name)
 
