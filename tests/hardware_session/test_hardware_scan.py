@@ -32,6 +32,7 @@ from tests.devices.drivers.rigfixtures import cell_toml, fake_hardware_cell
 from tests.devices.drivers.rsfixtures import DEPTH_UNIT, rendered_views
 from tests.helpers import SMALL as SMALL_PLANNER
 from workbench.journal.store import read_journal, sessions_dir
+from workbench.session.session import STOP_WAIT
 
 BASE_URL = "http://127.0.0.1"
 VIEWS = 3
@@ -205,11 +206,17 @@ def test_supervised_scan_on_hardware_drivers(tmp_path: Path, rig: Any) -> None:
             assert time.monotonic() < deadline and thread.is_alive(), "the arm never started"
             time.sleep(0.01)
         time.sleep(0.1)
+        asked = time.monotonic()
         r = c.post(f"/api/sessions/{sid}/stop")
+        waited = time.monotonic() - asked
         thread.join(20)
-        assert r.status_code == 200 and r.json()["state"] == "error", r.text
+        assert r.status_code == 200, r.text
+        # the stop answers once the session is in error, or after STOP_WAIT s (a busy machine's slow devices)
+        assert r.json()["state"] == "error" or waited >= STOP_WAIT, (waited, r.text)
         assert answer["r"].status_code == 503
-        error = r.json()["error"]
+        status = c.get(f"/api/sessions/{sid}").json()
+        assert status["state"] == "error", status
+        error = status["error"]
         assert "stopped on request" in error and "last joints" in error, error
         assert ("stopJ", 2.0, False) in rig.controller.calls or any(call[0] == "stopJ" for call in rig.controller.calls)
         journal, _ = captures(settings.data_dir, sid)

@@ -42,7 +42,9 @@ def cell_toml(
     port: str, intrinsics: Intrinsics, *, arm: bool = True, arm_speed: str = "max_joint_speed_deg = 30"
 ) -> str:
     """A cell file for the recording ``scan.db3`` next to it, the GRBL on ``port`` and (if ``arm``) the fake UR
-    (``arm_speed``: lines for its section) mounted like the simulator's UR5, beside the plate."""
+    (``arm_speed``: lines for its section) mounted like the simulator's UR5, beside the plate. The fake firmware
+    answers from a thread of the test's process, which a busy machine can hold for longer than half a second:
+    a status request may take up to 5 s (the tests of a silent GRBL wait for its banner, ``startup_s``)."""
     k = intrinsics
     text = f"""
 [devices]
@@ -60,7 +62,7 @@ playback = "scan.db3"
 [devices.turntable]
 driver = "grbl"
 port = "{port}"
-command_timeout_s = 0.5
+command_timeout_s = 5.0
 poll_s = 0.01
 """
     if arm:
