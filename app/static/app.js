@@ -316,6 +316,7 @@ async function onStatus(st, event) {
     S.selectedShown = st.selected;
     if (st.selected !== null) P.pageOf(st.selected);
     P.renderTable(st.selected, pick);
+    updateButtons();
     await loadInspector(st.selected);
     await FitPanel.load();
   }
@@ -344,7 +345,8 @@ function updateButtons() {
   const busy = S.inFlight || TL.view !== null || ["capturing", "planning", "moving", "auto", "discarding"].includes(state);
   $("capture").disabled = busy || !st || !(state === "new" || (state === "error" && it === 0));
   $("plan").disabled = busy || !st || it === 0 || !["ready", "planned", "done", "error"].includes(state);
-  $("approve").disabled = busy || !st || state !== "planned" || st.selected === null;
+  // approve acts on the candidate the table and the inspector show: off until the page shows the selected one
+  $("approve").disabled = busy || !st || state !== "planned" || st.selected === null || S.selectedShown !== st.selected;
   const target = S.arm && S.arm.target;
   $("preview").hidden = !(S.arm && S.arm.has_arm);
   $("preview").disabled = busy || !st || state !== "planned" || !target || !target.reachable;
