@@ -23,7 +23,8 @@ CHROMIUM_ARGS = [
     "--disable-component-update",
     "--no-first-run",
     "--disable-sync",
-]
+    "--disable-gpu-compositing",  # the page composited in software: SwiftShader's GPU process 51 -> 34 CPU-s over
+]  # the browser tests (the renderers and the browser the same), WebGL (the 3D view) still on SwiftShader
 
 
 HOLD_VIEWER_FRAMES = """
@@ -33,30 +34,65 @@ HOLD_VIEWER_FRAMES = """
   const raf = window.requestAnimationFrame.bind(window);
   const caf = window.cancelAnimationFrame.bind(window);
   const held = new Map();
-  let next = 1e9, live = false;
+  let next = 1e9, live = false, timer = null, drawn = 0;
+  const waiters = [];
+  const flush = () => {  // the frames asked for since the last one, run in one animation frame
+    timer = null;
+    const cbs = [...held.values()];
+    held.clear();
+    raf((t) => {
+      cbs.forEach((cb) => cb(t));
+      drawn += 1;
+      waiters.splice(0).forEach((check) => check());
+    });
+  };
+  window.__nbvFrames = (n) => new Promise((done) => {  // true once the page has drawn n more frames (false: 60 s)
+    const goal = drawn + n;
+    const check = () => {
+      if (drawn >= goal) return done(true);
+      waiters.push(check);
+      if (live && timer === null) timer = setTimeout(flush, FRAME_MS);
+    };
+    check();
+    setTimeout(() => done(false), 60000);
+  });
   window.requestAnimationFrame = (cb) => {
-    if (live) return raf(cb);
     held.set(++next, cb);
+    if (live && timer === null) timer = setTimeout(flush, FRAME_MS);
     return next;
   };
   window.cancelAnimationFrame = (id) => (held.delete(id) ? undefined : caf(id));
   window.__nbvDraw = (on) => {
     live = on;
-    if (on) { const cbs = [...held.values()]; held.clear(); cbs.forEach((cb) => raf(cb)); }
+    if (timer !== null) clearTimeout(timer);
+    timer = null;
+    if (on) flush();
   };
 })();
-"""
+""".replace("FRAME_MS", "500")
 """The browser tests hold the viewer's render loop (``requestAnimationFrame`` in its iframe): SwiftShader spends
 0.3 core-s per frame of a session's scene, 0.6-0.7 of a core per open tab, on frames no test looks at. The scene
 graph still follows every message (React commits without animation frames) and the tests read the websocket
-frames, the page and the scene; a test that looks at pixels or picks in the 3D view calls :func:`draw_viewer`."""
+frames, the page and the scene; a test that looks at pixels or picks in the 3D view calls :func:`draw_viewer`, and
+the viewer then draws a frame every 500 ms at most (SwiftShader drew as many as two cores allowed: the timeline
+test's two drawing views took 22 of the browser tests' 34 GPU-process CPU-seconds, 17 at one frame a second; most
+of the rest is the first frame, its shaders compiled)."""
 
 
 def draw_viewer(page: Any, on: bool = True) -> None:
-    """Let the viewer of ``page`` draw frames again (or hold them, ``on=False``)."""
+    """Let the viewer of ``page`` draw frames again (or hold them, ``on=False``); drawing, return once it has drawn
+    :data:`DRAWN_FRAMES` frames (SwiftShader compiles the scene's shaders for its first: 10-15 s on a busy machine,
+    longer than a PNG's 15 s budget on the server)."""
     for frame in page.frames:
         if frame is not page.main_frame:
             frame.evaluate("(on) => window.__nbvDraw && window.__nbvDraw(on)", on)
+            if on:
+                frame.evaluate(f"() => window.__nbvFrames && window.__nbvFrames({DRAWN_FRAMES})")
+
+
+DRAWN_FRAMES = 3
+"""Frames a page has run when :func:`draw_viewer` and :func:`draw_page` return: the third's callback runs after
+the first two have been drawn."""
 
 
 HOLD_PAGE_FRAMES = "window.__nbvHoldTop = true;" + HOLD_VIEWER_FRAMES
@@ -65,8 +101,11 @@ before ``goto``, and let it draw with :func:`draw_page`."""
 
 
 def draw_page(page: Any, on: bool = True) -> None:
-    """Let a page held by :data:`HOLD_PAGE_FRAMES` draw frames again (or hold them, ``on=False``)."""
+    """Let a page held by :data:`HOLD_PAGE_FRAMES` draw frames again (or hold them, ``on=False``); drawing, return
+    once it has drawn :data:`DRAWN_FRAMES` frames."""
     page.main_frame.evaluate("(on) => window.__nbvDraw && window.__nbvDraw(on)", on)
+    if on:
+        page.main_frame.evaluate(f"() => window.__nbvFrames && window.__nbvFrames({DRAWN_FRAMES})")
 
 
 def chromium_path() -> str:
