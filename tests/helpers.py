@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import math
 import socket
 import threading
 from collections.abc import Callable, Iterable
 from typing import Any
 
-from planner import PlannerConfig
+import numpy as np
+from numpy.typing import ArrayLike
+
+from planner import PlannerConfig, Pose
 
 SMALL: dict[str, Any] = {
     "voxel": {"resolution": 0.02},
@@ -63,3 +67,13 @@ def wait_until(predicate: Callable[[], Any], timeout: float = 30.0, what: str = 
         done.wait(0.05)
         deadline -= 0.05
     raise AssertionError(f"{what}: not reached after {timeout} s")
+
+
+def orbit_view(target: ArrayLike, elevation_deg: float, azimuth_deg: float, distance: float = 0.45) -> Pose:
+    """A camera ``distance`` m from ``target`` (3,) at ``elevation_deg`` above the table plane and
+    ``azimuth_deg`` about its z axis (table frame), looking at ``target``."""
+    e, a = math.radians(elevation_deg), math.radians(azimuth_deg)
+    at = np.asarray(target, dtype=float)
+    return Pose.look_at(
+        at + distance * np.array([math.cos(e) * math.cos(a), math.cos(e) * math.sin(a), math.sin(e)]), at
+    )

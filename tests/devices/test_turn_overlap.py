@@ -18,6 +18,7 @@ from devices.faults import FaultConfig, FaultInjector, with_faults
 from devices.protocols import DeviceError, UnreachableError
 from devices.sim import make_sim_cell
 from planner.types import BoundingBox, Pose
+from tests.helpers import orbit_view
 
 TARGET = np.array([0.0, 0.0, 0.08])
 SMALL_BOX = BoundingBox(np.array([-0.1, -0.1, 0.0]), np.array([0.1, 0.1, 0.2]))
@@ -27,9 +28,7 @@ SPEED = math.radians(ArmConfig().turntable_speed_deg)
 
 
 def view(elevation_deg: float, azimuth_deg: float, distance: float = 0.45) -> Pose:
-    e, a = math.radians(elevation_deg), math.radians(azimuth_deg)
-    eye = TARGET + distance * np.array([math.cos(e) * math.cos(a), math.cos(e) * math.sin(a), math.sin(e)])
-    return Pose.look_at(eye, TARGET)
+    return orbit_view(TARGET, elevation_deg, azimuth_deg, distance)
 
 
 def overlap_cell(box: BoundingBox, *, on: bool = True) -> Cell:

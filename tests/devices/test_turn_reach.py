@@ -15,14 +15,13 @@ from devices.config import CameraConfig, CellConfig
 from devices.protocols import UnreachableError
 from devices.sim import make_sim_cell
 from planner.types import BoundingBox, Pose
+from tests.helpers import orbit_view
 
 TARGET = np.array([0.0, 0.0, 0.05])
 
 
 def view(azimuth_deg: float, elevation_deg: float, distance: float) -> Pose:
-    a, e = math.radians(azimuth_deg), math.radians(elevation_deg)
-    eye = TARGET + distance * np.array([math.cos(e) * math.cos(a), math.cos(e) * math.sin(a), math.sin(e)])
-    return Pose.look_at(eye, TARGET)
+    return orbit_view(TARGET, elevation_deg, azimuth_deg, distance)
 
 
 @pytest.fixture(scope="module")
