@@ -10,6 +10,7 @@ One TOML file (other top-level tables, e.g. the planner's, are left to their rea
     width = 848
     height = 480
     filters = ["spatial", "temporal"]
+    noise_model = "realsense-d435"  # what the planner assumes of its noise (default "ideal")
 
     [devices.arm]
     driver = "ur"

@@ -222,6 +222,13 @@ class HardwareCell(Cell):
     def halting(self) -> bool:
         return self.stop_requested.is_set()
 
+    @property
+    def noise_model(self) -> str:
+        """The sensor model the planner assumes for this cell's camera: its config's ``noise_model`` ("ideal" for
+        a camera driver without one)."""
+        camera = self.cellfile.camera
+        return str(getattr(camera.config, "noise_model", "ideal")) if camera is not None else "ideal"
+
     def restore_device_state(self, state: dict[str, Any]) -> None:
         """A resumed session on real devices moves nothing: the next plan starts from where they really are."""
         if self.dry_run:

@@ -62,9 +62,20 @@ class RealSenseConfig:
     """Returns nearer than this are dropped (depth 0), metres."""
     max_depth: float = 1.5
     """Returns farther than this are dropped (depth 0), metres."""
+    noise_model: str = "ideal"
+    """The depth noise the planner assumes for this camera: a sensor model of ``nbv scan --sensor`` (e.g.
+    "realsense-d435", "realsense-d405"). It sets the planner's plate band, ICP gate and the real sensors' candidate
+    settings (``devices.planner_noise.planner_config_for``) as for that simulated sensor; the images are the
+    camera's own. "ideal": the planner assumes a perfect sensor (the paper's fixed thresholds)."""
 
     def __post_init__(self) -> None:
+        from devices.sensors import SENSORS
+
         p = "devices.camera."
+        require(
+            isinstance(self.noise_model, str) and self.noise_model in SENSORS,
+            f"{p}noise_model: one of {', '.join(SENSORS)}, got {self.noise_model!r}",
+        )
         for name in ("width", "height", "fps", "average"):
             v = getattr(self, name)
             require(integer(v) and v >= 1, f"{p}{name}: must be an integer >= 1, got {v!r}")

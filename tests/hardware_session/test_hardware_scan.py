@@ -21,12 +21,15 @@ from fastapi.testclient import TestClient
 from app.main import create_app
 from app.settings import AppSettings
 from devices.cell import rz
+from devices.cellfile import load_cell_file
 from devices.config import CameraConfig, DeviceConfig
 from devices.drivers.limits import JointLimits
 from devices.drivers.rsrecord import write_depth_recording
 from devices.faults import FaultConfig
 from devices.hwcell import HardwareCell
+from devices.planner_noise import planner_config_for
 from nbv.cli import main
+from planner import PlannerConfig
 from planner.types import Pose
 from tests.devices.drivers.rigfixtures import cell_toml, fake_hardware_cell
 from tests.devices.drivers.rsfixtures import DEPTH_UNIT, rendered_views
@@ -317,3 +320,36 @@ def test_simulated_sensor_errors_never_reach_the_real_camera(tmp_path: Path, rig
         camera = header["devices"]["camera"]
         assert (camera["sensor"], camera["calibration"]) == ("ideal", "none")
         assert header["config"]["noise"]["depth_z2"] == 0 and header["config"]["noise"]["fit_plate"] is False
+
+
+def test_the_planner_assumes_the_noise_the_cell_file_names_for_its_camera(tmp_path: Path, rig: Any) -> None:
+    """A real camera's images are its own, but the planner's plate band, ICP gate and candidate settings follow the
+    ``noise_model`` of the cell file's camera (the same as for that simulated sensor); without one, a perfect
+    sensor's; an unknown name is refused naming the field."""
+    ideal = PlannerConfig().replace(**SMALL_PLANNER)
+
+    def header_of_a_session(name: str) -> dict[str, Any]:
+        with TestClient(create_app(app_settings(tmp_path, rig.path, name)), base_url=BASE_URL) as c:
+            r = c.post("/api/sessions", json={"seed": 0, "source": {"kind": "hardware"}})
+            assert r.status_code == 201, r.text
+            sid = r.json()["id"]
+            header = read_journal(sessions_dir(tmp_path / name) / sid).header
+            assert c.delete(f"/api/sessions/{sid}").status_code in (200, 204)
+        return header
+
+    header = header_of_a_session("perfect")
+    assert header["devices"]["camera"]["sensor"] == "ideal"
+    assert PlannerConfig.from_dict(header["config"]).noise == ideal.noise
+
+    text = rig.path.read_text()
+    rig.path.write_text(text.replace('driver = "realsense"', 'driver = "realsense"\nnoise_model = "realsense-d435"'))
+    header = header_of_a_session("d435")
+    assert header["devices"]["camera"]["sensor"] == "realsense-d435"
+    config = PlannerConfig.from_dict(header["config"])
+    expected = planner_config_for(ideal, dataclasses.replace(CAMERA, sensor="realsense-d435"))
+    assert config.noise == expected.noise and config.noise.depth_z2 > 0  # the D435's range-dependent noise
+    assert config.candidates == expected.candidates and config.candidates.aim == "content"
+
+    rig.path.write_text(text.replace('driver = "realsense"', 'driver = "realsense"\nnoise_model = "kinect"'))
+    with pytest.raises(ValueError, match=r"devices\.camera\.noise_model: one of ideal, realsense-d435"):
+        load_cell_file(rig.path)

@@ -175,7 +175,8 @@ class SessionRegistry:
         )
         if parts.injector is None:
             fault_config = FaultConfig()  # real hardware: none injected (the journal says so)
-            camera = {"sensor": "ideal", "calibration": "none"}  # nor the server's simulated sensor: its own noise
+            # nor the server's simulated sensor: the planner assumes the noise the cell file names for its camera
+            camera = {"sensor": getattr(parts.cell, "noise_model", "ideal"), "calibration": "none"}
         try:
             creation.stage("starting the session")
         except Conflict:
