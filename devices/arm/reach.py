@@ -64,10 +64,12 @@ def wrap(angle: float) -> float:
     return math.pi if a == -math.pi else a
 
 
-def turn_matrix(angles: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(K, K) the shorter plate turn (rad, in [0, pi]) between every two of the K plate ``angles`` (rad)."""
-    angles = np.asarray(angles, dtype=np.float64)
-    return np.abs(np.remainder(angles[:, None] - angles[None, :] + math.pi, 2 * math.pi) - math.pi)
+def turn_matrix(angles: NDArray[np.float64], angles_to: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
+    """(A, B) the shorter plate turn (rad, in [0, pi]) from each of the A plate ``angles`` to each of the B
+    ``angles_to`` (rad; default ``angles``: (K, K) between every two)."""
+    a = np.asarray(angles, dtype=np.float64).reshape(-1)
+    b = a if angles_to is None else np.asarray(angles_to, dtype=np.float64).reshape(-1)
+    return np.abs(np.remainder(a[:, None] - b[None, :] + math.pi, 2 * math.pi) - math.pi)
 
 
 @dataclass(frozen=True, eq=False)
@@ -191,23 +193,14 @@ class ArmReach:
         self, q_from: NDArray[np.float64], q_to: NDArray[np.float64], angle_from: float, angle_to: float
     ) -> float:
         """Seconds of a rest-to-rest move: turntable at its speed, then the slowest joint (trapezoid profile).
-        Plain floats (it runs for every candidate of every plan); :meth:`move_matrix` is the same for many pairs."""
+        Plain floats (it runs for every candidate of every plan); :meth:`seconds_between` is the same for many
+        pairs."""
         turn = abs(wrap(angle_to - angle_from)) / math.radians(self.arm.config.turntable_speed_deg)
         slowest = 0.0
         for a_from, a_to, v, a in zip(q_from.tolist(), q_to.tolist(), self._velocity, self._acceleration, strict=True):
             dq = abs(a_to - a_from)
             slowest = max(slowest, dq / v + v / a if dq > v * v / a else 2.0 * math.sqrt(dq / a))
         return turn + slowest
-
-    def move_matrix(self, q: NDArray[np.float64], angles: NDArray[np.float64]) -> NDArray[np.float64]:
-        """(K, K) seconds of the rest-to-rest move between every two of K states (:meth:`move_estimate`'s model):
-        q (K, n) joints, angles (K,) plate angles (rad). Symmetric, 0 on the diagonal."""
-        q = np.asarray(q, dtype=np.float64)
-        turn = turn_matrix(angles)
-        dq = np.abs(q[:, None, :] - q[None, :, :])
-        v, a = self.arm.velocity, self.arm.acceleration
-        t = np.where(dq > v * v / a, dq / v + v / a, 2.0 * np.sqrt(dq / a))
-        return turn / math.radians(self.arm.config.turntable_speed_deg) + t.max(axis=2, initial=0.0)
 
     def sweep_free(self, q: NDArray[np.float64]) -> bool:
         """:meth:`CollisionWorld.sweep_free` of (n,) ``q`` with the current object box, cached per (q, box): the arm
@@ -243,10 +236,7 @@ class ArmReach:
         q_to (B, n), angles_to (B,) (joints in radians, plate angles in radians)."""
         q_from = np.asarray(q_from, dtype=np.float64).reshape(-1, self.arm.nq)
         q_to = np.asarray(q_to, dtype=np.float64).reshape(-1, self.arm.nq)
-        a_from = np.asarray(angles_from, dtype=np.float64).reshape(-1)
-        a_to = np.asarray(angles_to, dtype=np.float64).reshape(-1)
-        turn = np.abs(np.remainder(a_from[:, None] - a_to[None, :] + math.pi, 2 * math.pi) - math.pi)
-        turn = turn / math.radians(self.arm.config.turntable_speed_deg)
+        turn = turn_matrix(angles_from, angles_to) / math.radians(self.arm.config.turntable_speed_deg)
         dq = np.abs(q_from[:, None, :] - q_to[None, :, :])
         v, a = self.arm.velocity, self.arm.acceleration
         arm = np.where(dq > v * v / a, dq / v + v / a, 2.0 * np.sqrt(dq / a)).max(axis=2, initial=0.0)

@@ -84,12 +84,12 @@ def test_sweep_test_agrees_with_the_turn_grid(pair) -> None:
     assert blocked > 0  # some turns do sweep the box into the arm: the fallback to the grid is exercised
 
 
-def test_move_matrix_is_move_estimate_for_every_pair(pair) -> None:
+def test_seconds_between_is_move_estimate_for_every_pair(pair) -> None:
     reach = pair[0].reach
     rng = np.random.default_rng(0)
     q = reach.home + rng.normal(0, 0.8, (5, reach.arm.nq))
     angles = rng.uniform(-math.pi, math.pi, 5)
-    m = reach.move_matrix(q, angles)
+    m = reach.seconds_between(q, angles, q, angles)
     for i in range(5):
         for j in range(5):
             assert m[i, j] == pytest.approx(reach.move_estimate(q[i], q[j], angles[i], angles[j]), rel=1e-12)
