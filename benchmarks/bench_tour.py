@@ -118,14 +118,18 @@ def compare(outcomes: list[RunOutcome], ceilings: dict[tuple[str, float], float]
         if not keys:
             continue
         print(f"\n{p} vs {reference}: {len(keys)} pairs; median plan {plan_seconds[p]:.3f} s")
+        pairs_of = {
+            kind: tuple(
+                {(m, s, y): v for (m, q, s, y), v in variants[kind].items() if q == who} for who in (p, reference)
+            )
+            for kind in SECONDS[1:]
+        }
         lines = [("robot s to 95 %", lambda v: v.time_to[1], 1.0, (mine, ref))]
         for kind, label in zip(SECONDS[1:], ("less plan s", "plan as CPU s", "moves only"), strict=True):
-            mine_v = {(m, s, y): v for (m, q, s, y), v in variants[kind].items() if q == p}
-            ref_v = {(m, s, y): v for (m, q, s, y), v in variants[kind].items() if q == reference}
-            lines.append((f"  to 95 %, {label}", lambda v: v.time_to[1], 1.0, (mine_v, ref_v)))
+            lines.append((f"  to 95 %, {label}", lambda v: v.time_to[1], 1.0, pairs_of[kind]))
         lines += [
             ("robot s to 90 %", lambda v: v.time_to[0], 1.0, (mine, ref)),
-            ("  to 90 %, moves only", lambda v: v.time_to[0], 1.0, lines[3][3]),
+            ("  to 90 %, moves only", lambda v: v.time_to[0], 1.0, pairs_of["moves"]),
             ("AUC over views (points)", lambda v: v.auc, 100.0, (mine, ref)),
             ("final / ceiling (points)", lambda v: v.final_ratio, 100.0, (mine, ref)),
         ]
