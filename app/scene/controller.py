@@ -32,6 +32,7 @@ from app.scene.drawing import SessionDrawing
 from app.scene.fit_view import FitViews, viewer_message
 from app.scene.geometry import COLORS, DEFAULT_LAYERS, SCALE_PERCENTILES, VIRIDIS, candidate_colors, outward_camera
 from app.scene.guard import install_guard
+from app.scene.lighting import configure_lighting
 from app.scene.robot import RobotScene
 from app.scene.tickets import Ticket, TicketBook
 from planner import Pose
@@ -104,8 +105,7 @@ class SceneController:
         self.other_viewers: list[Callable[[viser.ClientHandle, str], bool]] = []
         """Viewers of something else than a session (a calibration: app/scene/calibration.py): each is asked with
         a newly connected client and its viewer's key, and returns True when it draws it."""
-        server.scene.set_up_direction("+z")
-        server.scene.configure_default_lights(enabled=True, cast_shadow=False)
+        configure_lighting(server)
         server.initial_camera.position = (0.95, -0.8, 0.75)
         server.initial_camera.look_at = (0.0, 0.0, 0.08)
         server.initial_camera.near = 0.01

@@ -34,6 +34,7 @@ import viser
 
 from app.scene.drawing import SessionDrawing
 from app.scene.geometry import DEFAULT_LAYERS
+from app.scene.lighting import configure_lighting
 from workbench import SceneData, TimelineStep, jsonable
 
 STEP_SECONDS = 2.0
@@ -66,7 +67,7 @@ def record_scene(steps: Sequence[TimelineStep], now: SceneData, step_seconds: fl
     with contextlib.redirect_stdout(io.StringIO()):  # viser prints its address: nobody connects to this one
         server = viser.ViserServer(host="127.0.0.1", port=_free_port(), verbose=False)
     try:
-        server.scene.set_up_direction("+z")
+        configure_lighting(server)
         server.initial_camera.position = (0.95, -0.8, 0.75)
         server.initial_camera.look_at = (0.0, 0.0, 0.08)
         serializer = server.get_scene_serializer()

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from app.scene.lighting import configure_lighting
 from devices.arm.model import ArmModel
 from devices.trajectory import JointTrajectory
 from planner.types import Pose
@@ -239,7 +240,7 @@ def demo(port: int = 0, model: str = "mug") -> tuple[Any, RobotScene, Any]:
     cell = make_sim_cell(mesh)
     assert cell.kinematics is not None
     server = viser.ViserServer(host="127.0.0.1", port=port)
-    server.scene.set_up_direction("+z")
+    configure_lighting(server)
     server.scene.add_mesh_simple(
         "/object", np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces), color=(200, 190, 170)
     )

@@ -79,6 +79,11 @@ def test_a_viewer_draws_its_session_under_stable_names(scene_client: TestClient,
         received = session_nodes(raw.messages())
         assert {"/candidates", "/map/occupied", "/views/1/frustum", "/context/session"} <= received
         assert session_labels(raw.messages()) == {f"session {sid}"}
+        # lit by lights only (app/scene/lighting.py): no environment map for a software renderer to prefilter
+        by_type = {m.get("type"): m for m in raw.messages()}
+        assert by_type["EnvironmentMapMessage"]["hdri_data"] is None
+        assert by_type["EnableLightsMessage"] == {"type": "EnableLightsMessage", "enabled": True, "cast_shadow": False}
+        assert by_type["HemisphereLightMessage"]["name"] == "/lights/hemisphere"
         # the colour bar: 5th..95th percentile of the eligible scores
         info = scene_client.get(f"/api/scene/{vid}").json()
         eligible = [c["score"] for c in scene_client.get(f"/api/sessions/{sid}/candidates").json() if c["eligible"]]

@@ -123,6 +123,11 @@ def test_the_recording_plays_one_step_per_view(scanned, tmp_path: Path) -> None:
     }
     occupied = [m for t, m in messages if m.get("name") == "/map/occupied" and "points" in m.get("props", {})]
     assert len(occupied) == 3  # each step's own map
+    # lit like the live viewers (app/scene/lighting.py): no environment map to prefilter, the hemisphere light
+    environment = [m for _, m in messages if m.get("type") == "EnvironmentMapMessage"]
+    assert environment and environment[-1]["hdri_data"] is None
+    lights = [m for _, m in messages if m.get("type") == "HemisphereLightMessage"]
+    assert [m["name"] for m in lights] == ["/lights/hemisphere"] and lights[0]["props"]["intensity"] > 0
 
 
 def test_nbv_record_writes_the_recording_of_a_journal(scanned, tmp_path: Path, capsys) -> None:

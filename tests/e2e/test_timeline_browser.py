@@ -154,6 +154,13 @@ def test_scrub_the_timeline_and_play_the_recording_offline(
         assert set(shown) <= {1, 2, 3, 4, 5}, shown
         expect(steps.locator("#nbv-now")).to_have_text(re.compile(r"^view [1-5] of 5$"))
         assert steps.locator("tr").count() == 5
+        # paused (space, the player's own key) before it draws: each loop resets viser's environment to its
+        # default image-based light until the recording's own light arrives again, and a software renderer
+        # prefilters that image anew (seconds of CPU a loop); a paused player shows its scene as it stands
+        player.keyboard.press("Space")
+        paused_at = time_box.input_value()
+        player.wait_for_timeout(600)  # a playing player moves its time box on within a tick (120 a second)
+        assert time_box.input_value() == paused_at
         draw_page(player)  # the player draws from here: viser's scene tree and the canvas need its frames
         player.get_by_label("Show scene tree").click()  # viser's own scene tree: the nodes its player decoded
         player.get_by_text("/views", exact=True).click()
