@@ -62,7 +62,13 @@ def fit_sphere(
             r = radius if radius is not None else v[3]
             return np.linalg.norm(q - v[:3], axis=1) - r
 
-        x = least_squares(residual, x, loss="soft_l1", f_scale=LOSS_SCALE, method="trf").x
+        def jacobian(v: NDArray[np.float64], q: NDArray[np.float64] = q) -> NDArray[np.float64]:
+            """(M, 3) or (M, 4): d residual / d centre = -(q - c) / |q - c|, d residual / d radius = -1."""
+            d = q - v[:3]
+            unit = d / np.maximum(np.linalg.norm(d, axis=1), 1e-12)[:, None]
+            return -unit if radius is not None else np.hstack([-unit, -np.ones((len(q), 1))])
+
+        x = least_squares(residual, x, jac=jacobian, loss="soft_l1", f_scale=LOSS_SCALE, method="trf").x  # pyright: ignore[reportArgumentType]  (its stubs type jac as a str)
     q = p[keep]
     r = float(radius if radius is not None else x[3])
     res = np.linalg.norm(q - x[:3], axis=1) - r

@@ -50,6 +50,33 @@ def test_sphere_fit_on_a_noisy_cap_recovers_centre_and_radius() -> None:
         fit_sphere(points[:10])
 
 
+def test_the_sphere_fit_agrees_with_a_fit_by_numerical_derivatives() -> None:
+    """fit_sphere gives least_squares its residuals' analytic Jacobian; the same robust fit with scipy's finite
+    differences (its default, before) lands on the same sphere."""
+    from scipy.optimize import least_squares
+
+    from devices.calibration.spheres import LOSS_SCALE, TRIM
+
+    rng = np.random.default_rng(5)
+    centre, radius = np.array([-0.03, 0.02, 0.5]), 0.025
+    d = rng.normal(size=(4000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d = d[d @ (-centre / np.linalg.norm(centre)) > 0.4]
+    points = centre + radius * d + rng.normal(0.0, 0.001, (len(d), 3))
+    start = points.mean(axis=0)
+    fit = fit_sphere(points, start=start)  # one pass over every point, then the points near that fit
+    x = np.append(start, np.linalg.norm(points - start, axis=1).mean())
+    for trim in (None, TRIM):
+        q = points if trim is None else points[np.abs(np.linalg.norm(points - x[:3], axis=1) - x[3]) < trim]
+
+        def residual(v: np.ndarray, q: np.ndarray = q) -> np.ndarray:
+            return np.linalg.norm(q - v[:3], axis=1) - v[3]
+
+        x = least_squares(residual, x, loss="soft_l1", f_scale=LOSS_SCALE, method="trf").x
+    assert np.linalg.norm(fit.centre - x[:3]) < 1e-7 and abs(fit.radius - x[3]) < 1e-7
+    assert np.linalg.norm(fit.centre - centre) < 5e-4  # and it is the sphere
+
+
 def _synthetic(
     X: Pose, A: Pose, flange_rotvecs: list[np.ndarray], angles_deg: list[float], P: np.ndarray
 ) -> list[Capture]:
