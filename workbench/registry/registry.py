@@ -176,7 +176,7 @@ class SessionRegistry:
         if parts.injector is None:
             fault_config = FaultConfig()  # real hardware: none injected (the journal says so)
             # nor the server's simulated sensor: the planner assumes the noise the cell file names for its camera
-            camera = {"sensor": getattr(parts.cell, "noise_model", "ideal"), "calibration": "none"}
+            camera = {"sensor": parts.noise_model, "calibration": "none"}
         try:
             creation.stage("starting the session")
         except Conflict:

@@ -57,6 +57,9 @@ class SessionParts:
     source: dict[str, Any]
     injector: FaultInjector | None
     """Decides the simulated faults of the devices; None for real hardware (never injected there)."""
+    noise_model: str = "ideal"
+    """Real hardware: the sensor model the planner assumes for the cell's camera (its cell file's
+    ``noise_model``, ``HardwareCell.noise_model``); the other sources simulate their camera's own."""
 
 
 def recordings_dir(settings: WorkbenchSettings) -> Path:
@@ -190,7 +193,7 @@ def build_parts(
         cell = hardware_cell(source, mesh if source["dry_run"] else None, devices.camera, devices.cell, seed)
         name, model_kind = truth or f"hardware:{Path(source['cell']).stem}", "hardware"
         if not source["dry_run"]:
-            return SessionParts(name, model_kind, mesh, cell, samples, source, None)
+            return SessionParts(name, model_kind, mesh, cell, samples, source, None, cell.noise_model)
     else:
         raise Invalid(f"source.kind: 'sim', 'replay' or 'hardware', got {kind!r}")
     injector = FaultInjector(faults)
