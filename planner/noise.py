@@ -41,9 +41,8 @@ def vertical_cosines(frame: DepthFrame, stencil: int = NORMAL_STENCIL_PX) -> NDA
     and the column (0 where one of the four has no return: an edge, a hole)."""
     d = frame.depth
     h, w = d.shape
-    k = frame.intrinsics
-    v, u = np.mgrid[0:h, 0:w]
-    cam = np.stack([(u - k.cx) * d / k.fx, (v - k.cy) * d / k.fy, d], axis=-1).astype(np.float64)
+    cam = np.zeros((h, w, 3))
+    cam[d > 0] = frame.points_camera  # the frame's own back-projection (cached), in the mask's row-major order
     world = cam @ frame.T_world_camera.rotation.T  # (H, W, 3) directions: the translation cancels in differences
     s = int(stencil)
     out = np.zeros((h, w))
