@@ -205,12 +205,13 @@ class ArmReach:
     def sweep_free(self, q: NDArray[np.float64]) -> bool:
         """:meth:`CollisionWorld.sweep_free` of (n,) ``q`` with the current object box, cached per (q, box): the arm
         standing at ``q`` is clear of the cylinder the padded box sweeps at every plate angle."""
-        key = (np.asarray(q, dtype=np.float64).tobytes(), self._box_key())
+        q = np.asarray(q, dtype=np.float64)
+        key = (q.tobytes(), self._box_key())
         hit = self._sweep.get(key)
         if hit is None:
             if len(self._sweep) >= CACHE_SIZE:
                 self._sweep.clear()
-            hit = self._sweep[key] = self.world.sweep_free(np.asarray(q, dtype=np.float64))
+            hit = self._sweep[key] = self.world.sweep_free(q)
         return hit
 
     def move_seconds(
