@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from devices.config import CameraConfig
 from planner import PlannerConfig, Pose
 
 SMALL: dict[str, Any] = {
@@ -22,6 +23,11 @@ SMALL: dict[str, Any] = {
 
 SMALL_CONFIG = PlannerConfig().replace(**SMALL)
 """``SMALL`` as a PlannerConfig."""
+
+SMALL_CAMERA = CameraConfig(width=320, height=240, fx=305.0, fy=305.0, cx=159.5, cy=119.5)
+"""The simulated camera of the API and browser tests' servers: the default's field of view at half its resolution
+(a quarter of the rays, points and frame bytes of a view). What those tests check does not depend on the pixel
+count; the tests of the camera, the surface and the sensors run at the default's."""
 
 SMALL_FLAGS = ["--resolution", "0.02", "--candidates", "60", "--t-min", "2", "--t-max", "6"]
 """``SMALL`` as ``nbv scan`` / ``nbv bench`` flags (the default 10 parallels)."""

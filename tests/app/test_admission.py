@@ -68,6 +68,11 @@ class HealthProbe:
         return max(self.samples)
 
 
+FROZEN = 2.0
+"""An answer slower than this, seconds, is a server that stopped answering (the bombs' loads took minutes). Not a
+speed goal: on the 2-core machine with the whole suite running, an answer took up to 1.07 s during an upload."""
+
+
 def test_the_fan_bomb_is_refused_and_health_answers_throughout(live_server) -> None:
     with HealthProbe(live_server.url) as probe, httpx.Client(base_url=live_server.url, timeout=60) as api:
         r = api.post("/api/models", files={"file": ("bomb.obj", fan_bomb(), "application/octet-stream")})
@@ -75,7 +80,7 @@ def test_the_fan_bomb_is_refused_and_health_answers_throughout(live_server) -> N
         r = api.post("/api/models", files={"file": ("fans.obj", flat_fans(60_000), "application/octet-stream")})
         assert r.status_code == 413 and "triangles per vertex" in r.json()["detail"], r.text
         time.sleep(0.3)
-    assert len(probe.samples) >= 3 and not probe.failures and probe.worst < 1.0, (probe.worst, probe.failures)
+    assert len(probe.samples) >= 3 and not probe.failures and probe.worst < FROZEN, (probe.worst, probe.failures)
     assert [m for m in httpx.get(f"{live_server.url}/api/models").json() if m["kind"] == "upload"] == []
 
 
@@ -91,7 +96,7 @@ def test_an_honest_mesh_renders_in_the_worker_while_health_answers(live_server) 
         with HealthProbe(live_server.url) as probe:
             assert api.post(f"/api/sessions/{sid}/capture").status_code == 200
             assert api.post(f"/api/sessions/{sid}/plan").status_code == 200
-    assert len(probe.samples) >= 2 and not probe.failures and probe.worst < 1.0, (probe.worst, probe.failures)
+    assert len(probe.samples) >= 2 and not probe.failures and probe.worst < FROZEN, (probe.worst, probe.failures)
 
 
 def test_a_large_honest_mesh_is_refused_on_upload_and_on_use(settings: AppSettings, models_dir: Path) -> None:

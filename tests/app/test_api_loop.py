@@ -9,6 +9,7 @@ from apphelpers import SMALL, registry_of
 from fastapi.testclient import TestClient
 from PIL import Image
 
+from app.settings import AppSettings
 from devices.ply import read_ply
 from planner import Pose
 from planner.clustering import t_range
@@ -24,7 +25,7 @@ def test_health_and_models(client: TestClient) -> None:
     assert "notes.txt" not in names
 
 
-def test_whole_loop(client: TestClient, tmp_path, new_session, small_config) -> None:
+def test_whole_loop(client: TestClient, tmp_path, new_session, small_config, settings: AppSettings) -> None:
     sid = new_session(client)
     st = client.get(f"/api/sessions/{sid}").json()
     assert (st["id"], st["state"], st["iteration"], st["coverage"], st["pending_plan"]) == (sid, "new", 0, None, None)
@@ -67,7 +68,7 @@ def test_whole_loop(client: TestClient, tmp_path, new_session, small_config) -> 
     png = client.get(f"/api/sessions/{sid}/candidates/{best}/projection.png")
     assert png.headers["content-type"] == "image/png"
     image = Image.open(io.BytesIO(png.content))
-    assert image.size == (640, 480)
+    assert image.size == (settings.devices.camera.width, settings.devices.camera.height)  # the camera's image
     colours = np.unique(np.asarray(image.convert("RGB")).reshape(-1, 3), axis=0)
     assert len(colours) > 10  # ellipses were drawn, not just a background
 

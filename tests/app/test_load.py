@@ -9,20 +9,15 @@ specs differ.
 
 from __future__ import annotations
 
-import dataclasses
 import threading
 import time
-from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import httpx
 import numpy as np
 import pytest
-from apphelpers import SMALL, Live, free_port, running_server
-
-from app.settings import AppSettings
-from devices.config import CameraConfig
+from apphelpers import SMALL, Live
 
 pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("heavy")]  # tests/conftest.py
 
@@ -68,17 +63,8 @@ def run_session(url: str, model: str, seed: int, start: threading.Barrier | None
     }
 
 
-@pytest.fixture
-def small_camera_server(settings: AppSettings) -> Iterator[Live]:
-    """A live server whose simulated camera is 320 x 240 (same field of view): a quarter of the rays per capture."""
-    camera = CameraConfig(width=320, height=240, fx=305.0, fy=305.0, cx=159.5, cy=119.5)
-    devices = dataclasses.replace(settings.devices, camera=camera)
-    with running_server(settings.replace(port=free_port(), devices=devices)) as live:
-        yield live
-
-
-def test_ten_sessions_at_once_without_cross_talk(small_camera_server: Live) -> None:
-    live_server = small_camera_server
+def test_ten_sessions_at_once_without_cross_talk(live_server: Live) -> None:
+    # the server's camera is the tests' small one (tests/helpers.py SMALL_CAMERA): a quarter of the rays a view
     assert live_server.url.startswith("http://127.0.0.1:")
     t0 = time.perf_counter()
     jobs = [spec for spec in SPECS for _ in range(2)]
