@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import socket
 import threading
@@ -28,6 +29,12 @@ SMALL_CAMERA = CameraConfig(width=320, height=240, fx=305.0, fy=305.0, cx=159.5,
 """The simulated camera of the API and browser tests' servers: the default's field of view at half its resolution
 (a quarter of the rays, points and frame bytes of a view). What those tests check does not depend on the pixel
 count; the tests of the camera, the surface and the sensors run at the default's."""
+
+
+def with_small_camera(settings: Any) -> Any:
+    """``settings`` (an ``AppSettings``) with :data:`SMALL_CAMERA` as its simulated camera."""
+    return dataclasses.replace(settings, devices=dataclasses.replace(settings.devices, camera=SMALL_CAMERA))
+
 
 SMALL_FLAGS = ["--resolution", "0.02", "--candidates", "60", "--t-min", "2", "--t-max", "6"]
 """``SMALL`` as ``nbv scan`` / ``nbv bench`` flags (the default 10 parallels)."""

@@ -6,11 +6,11 @@ from typing import Any
 
 from fastapi.testclient import TestClient
 
-from tests.helpers import SMALL, SMALL_CAMERA, free_port
+from tests.helpers import SMALL, free_port
 from tests.servers import LiveServer as Live
 from tests.servers import running_server
 
-__all__ = ["BASE_URL", "CUBE_OBJ", "SMALL", "SMALL_CAMERA", "Live", "free_port", "registry_of", "running_server"]
+__all__ = ["BASE_URL", "CUBE_OBJ", "SMALL", "Live", "free_port", "registry_of", "running_server"]
 
 BASE_URL = "http://127.0.0.1"
 """The Host the API answers to when bound to loopback (app/security.py refuses others)."""

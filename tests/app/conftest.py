@@ -3,17 +3,17 @@
 from __future__ import annotations
 
 import copy
-import dataclasses
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
-from apphelpers import BASE_URL, CUBE_OBJ, SMALL, SMALL_CAMERA, Live, free_port, running_server
+from apphelpers import BASE_URL, CUBE_OBJ, SMALL, Live, free_port, running_server
 from fastapi.testclient import TestClient
 
 from app.main import create_app
 from app.settings import AppSettings
+from tests.helpers import with_small_camera
 
 
 @pytest.fixture
@@ -28,8 +28,9 @@ def models_dir(tmp_path: Path) -> Path:
 @pytest.fixture
 def settings(tmp_path: Path, models_dir: Path) -> AppSettings:
     # fault_api: the tests inject faults through the API (a server refuses them without this test flag)
-    base = AppSettings(viser_port=0, scene=False, models_dir=models_dir, data_dir=tmp_path / "data", fault_api=True)
-    return base.replace(devices=dataclasses.replace(base.devices, camera=SMALL_CAMERA))
+    return with_small_camera(
+        AppSettings(viser_port=0, scene=False, models_dir=models_dir, data_dir=tmp_path / "data", fault_api=True)
+    )
 
 
 @pytest.fixture

@@ -47,11 +47,10 @@ def test_every_step_is_journaled_as_it_happens(client: TestClient, settings: App
     wb = registry_of(client).get(sid)
     assert captures[-1]["points"] == wb.planner.cloud.shape[0]
     assert captures[-1]["voxels"] == client.get(f"/api/sessions/{sid}").json()["voxels"]
+    camera = settings.devices.camera
     for c in captures:
         frame = load_frame(settings.data_dir / "sessions" / sid / c["frame"], c["frame_sha256"])
-        assert frame.depth.shape == (settings.devices.camera.height, settings.devices.camera.width) and set(
-            c["pose"]
-        ) == {"position", "wxyz"}
+        assert frame.depth.shape == (camera.height, camera.width) and set(c["pose"]) == {"position", "wxyz"}
     plans = [e for e in events if e["kind"] == "plan"]
     assert plans[0]["plan_id"] == plan["plan_id"] and plans[0]["best"]["index"] == plan["best"]["index"]
     assert plans[0]["best"]["score"] == plan["best"]["score"] and plans[0]["timings"]["score"] > 0

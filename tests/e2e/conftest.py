@@ -3,7 +3,6 @@ headless Debian Chromium page. The helpers are plain functions so ``tests/e2e/sc
 
 from __future__ import annotations
 
-import dataclasses
 import shutil
 from collections.abc import Iterator
 from pathlib import Path
@@ -12,7 +11,7 @@ from typing import Any
 import pytest
 
 from app.settings import AppSettings
-from tests.helpers import SMALL_CAMERA, free_port
+from tests.helpers import free_port, with_small_camera
 from tests.servers import LiveServer, running_server
 
 CHROMIUM_ARGS = [
@@ -141,8 +140,7 @@ def output_dir() -> Path:
 @pytest.fixture
 def live_server(tmp_path: Path) -> Iterator[LiveServer]:
     settings = AppSettings(port=free_port(), viser_port=0, data_dir=tmp_path / "data", models_dir=tmp_path)
-    settings = settings.replace(devices=dataclasses.replace(settings.devices, camera=SMALL_CAMERA))
-    with running_server(settings) as server:
+    with running_server(with_small_camera(settings)) as server:
         yield server
 
 

@@ -15,11 +15,10 @@ from devices.mesh import turned_about_plate_axis
 from devices.sim import make_sim_cell
 from planner.config import PlannerConfig
 from planner.types import Pose
-from tests.helpers import SMALL_CAMERA
+from tests.helpers import SMALL_CAMERA  # the reference renders four times faster, the footprint still ~2 mm
 from workbench.evaluation.ceiling import CeilingConfig, OcclusionScene, samples_with_normals, seen_by_any, spread_order
 from workbench.evaluation.object_ceiling import cached_ceiling, ceiling_key, ceiling_mask, reference_mask
 
-"""Half the default resolution: the reference renders four times faster, the footprint is still ~2 mm."""
 FEW_VIEWS = PlannerConfig().replace(candidates={"count": 30, "parallels": 4})
 SAMPLES = CeilingConfig(samples=3000)
 
