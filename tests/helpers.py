@@ -36,6 +36,12 @@ def with_small_camera(settings: Any) -> Any:
     return dataclasses.replace(settings, devices=dataclasses.replace(settings.devices, camera=SMALL_CAMERA))
 
 
+def small_camera_toml() -> str:
+    """:data:`SMALL_CAMERA` as the ``[devices]`` table of an ``nbv serve --config`` file (a server process's)."""
+    c = SMALL_CAMERA
+    return f"[devices]\ncamera = {{ width = {c.width}, height = {c.height}, fx = {c.fx}, fy = {c.fy}, cx = {c.cx}, cy = {c.cy} }}\n"
+
+
 SMALL_FLAGS = ["--resolution", "0.02", "--candidates", "60", "--t-min", "2", "--t-max", "6"]
 """``SMALL`` as ``nbv scan`` / ``nbv bench`` flags (the default 10 parallels)."""
 

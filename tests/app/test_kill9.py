@@ -19,8 +19,11 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+import numpy as np
 import pytest
 from apphelpers import SMALL, free_port
+
+from tests.helpers import SMALL_CAMERA, small_camera_toml
 
 pytestmark = pytest.mark.slow
 REPO = Path(__file__).resolve().parents[2]
@@ -29,7 +32,9 @@ REPO = Path(__file__).resolve().parents[2]
 @contextmanager
 def nbv_serve(data_dir: Path, models_dir: Path, log: Path) -> Iterator[tuple[subprocess.Popen, httpx.Client]]:
     port = free_port()
-    cmd = [sys.executable, "-m", "nbv.cli", "serve", "--port", str(port), "--viser-port", "0"]
+    config = data_dir.parent / "serve.toml"  # the API tests' small camera (tests/helpers.py SMALL_CAMERA)
+    config.write_text(small_camera_toml())
+    cmd = [sys.executable, "-m", "nbv.cli", "serve", "--port", str(port), "--viser-port", "0", "--config", str(config)]
     cmd += ["--data-dir", str(data_dir), "--models-dir", str(models_dir), "--log-level", "warning"]
     with open(log, "ab") as out:
         proc = subprocess.Popen(cmd, cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
@@ -92,6 +97,8 @@ def test_kill_9_mid_session_then_resume(tmp_path: Path, models_dir: Path) -> Non
     captures_b = [e for e in journal_b if e["kind"] == "capture"]
     plans_b = [e for e in journal_b if e["kind"] == "plan"]
     assert journal_b[-1]["kind"] != "auto_stop"  # killed, not stopped
+    with np.load(data / "sessions" / b / captures_b[0]["frame"]) as frame:  # the config file's camera was used
+        assert frame["depth"].shape == (SMALL_CAMERA.height, SMALL_CAMERA.width)
 
     with nbv_serve(data, models_dir, log) as (_, api):
         listed = {s["id"]: s for s in api.get("/api/sessions").json()}

@@ -22,7 +22,7 @@ from apphelpers import SMALL, free_port, running_server
 from test_admission import FROZEN, HealthProbe
 
 from app.settings import AppSettings
-from tests.helpers import wait_until
+from tests.helpers import small_camera_toml, wait_until
 from workbench.planning import plan_in
 
 REPO = Path(__file__).resolve().parents[2]
@@ -152,7 +152,9 @@ def test_idle_workers_are_evicted_and_come_back(settings: AppSettings) -> None:
 @pytest.mark.slow
 def test_sigterm_stops_the_server_within_5_s_during_a_plan(tmp_path: Path, models_dir: Path) -> None:
     port = free_port()
-    cmd = [sys.executable, "-m", "nbv.cli", "serve", "--port", str(port), "--viser-port", "0"]
+    config = tmp_path / "serve.toml"  # the API tests' small camera (tests/helpers.py SMALL_CAMERA)
+    config.write_text(small_camera_toml())
+    cmd = [sys.executable, "-m", "nbv.cli", "serve", "--port", str(port), "--viser-port", "0", "--config", str(config)]
     cmd += ["--data-dir", str(tmp_path / "data"), "--models-dir", str(models_dir), "--log-level", "warning"]
     log = tmp_path / "serve.log"
     with open(log, "wb") as out:
