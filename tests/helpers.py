@@ -37,9 +37,12 @@ def with_small_camera(settings: Any) -> Any:
 
 
 def small_camera_toml() -> str:
-    """:data:`SMALL_CAMERA` as the ``[devices]`` table of an ``nbv serve --config`` file (a server process's)."""
-    c = SMALL_CAMERA
-    return f"[devices]\ncamera = {{ width = {c.width}, height = {c.height}, fx = {c.fx}, fy = {c.fy}, cx = {c.cx}, cy = {c.cy} }}\n"
+    """:data:`SMALL_CAMERA` as the ``[devices]`` table of an ``nbv serve --config`` file (a server process's): the
+    fields where it differs from the default camera."""
+    default = CameraConfig()
+    fields = [f.name for f in dataclasses.fields(CameraConfig)]
+    changed = [f"{k} = {getattr(SMALL_CAMERA, k)!r}" for k in fields if getattr(SMALL_CAMERA, k) != getattr(default, k)]
+    return f"[devices]\ncamera = {{ {', '.join(changed)} }}\n"
 
 
 SMALL_FLAGS = ["--resolution", "0.02", "--candidates", "60", "--t-min", "2", "--t-max", "6"]

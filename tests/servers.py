@@ -1,18 +1,26 @@
-"""A real uvicorn serving the workbench on 127.0.0.1 in a thread of the test process."""
+"""A real workbench server on 127.0.0.1: uvicorn in a thread of the test process (:func:`running_server`), or an
+``nbv serve`` process of its own (:func:`serve_process`) for the tests that signal or kill it."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
+import httpx
 import uvicorn
 
 from app.main import create_app
 from app.settings import AppSettings
+from tests.helpers import free_port, small_camera_toml
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 @dataclass
@@ -45,3 +53,37 @@ def running_server(settings: AppSettings) -> Iterator[LiveServer]:
     finally:
         server.should_exit = True
         thread.join(30)
+
+
+@contextmanager
+def serve_process(
+    data_dir: Path, models_dir: Path, log: Path, timeout: float = 60.0
+) -> Iterator[tuple[subprocess.Popen, httpx.Client]]:
+    """An ``nbv serve`` process on a free port with the tests' small camera (a ``--config`` file beside
+    ``data_dir``), its output appended to ``log``; yields it once ``/api/health`` answers, with a client of
+    ``timeout`` seconds. Killed on exit if still running."""
+    port = free_port()
+    config = data_dir.parent / "serve.toml"  # tests/helpers.py SMALL_CAMERA, as the in-process servers
+    config.write_text(small_camera_toml())
+    cmd = [sys.executable, "-m", "nbv.cli", "serve", "--port", str(port), "--viser-port", "0", "--config", str(config)]
+    cmd += ["--data-dir", str(data_dir), "--models-dir", str(models_dir), "--log-level", "warning"]
+    with open(log, "ab") as out:
+        proc = subprocess.Popen(cmd, cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
+    client = httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=timeout)
+    try:
+        deadline = time.time() + 90
+        while True:
+            try:
+                if client.get("/api/health").status_code == 200:
+                    break
+            except httpx.TransportError:
+                pass
+            if proc.poll() is not None or time.time() > deadline:
+                raise RuntimeError(f"nbv serve did not start: {log.read_text()[-2000:]}")
+            time.sleep(0.1)
+        yield proc, client
+    finally:
+        client.close()
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait(30)

@@ -10,52 +10,19 @@ from __future__ import annotations
 import json
 import os
 import signal
-import subprocess
-import sys
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import httpx
 import numpy as np
 import pytest
-from apphelpers import SMALL, free_port
+from apphelpers import SMALL
 
-from tests.helpers import SMALL_CAMERA, small_camera_toml
+from tests.helpers import SMALL_CAMERA
+from tests.servers import serve_process
 
 pytestmark = pytest.mark.slow
-REPO = Path(__file__).resolve().parents[2]
-
-
-@contextmanager
-def nbv_serve(data_dir: Path, models_dir: Path, log: Path) -> Iterator[tuple[subprocess.Popen, httpx.Client]]:
-    port = free_port()
-    config = data_dir.parent / "serve.toml"  # the API tests' small camera (tests/helpers.py SMALL_CAMERA)
-    config.write_text(small_camera_toml())
-    cmd = [sys.executable, "-m", "nbv.cli", "serve", "--port", str(port), "--viser-port", "0", "--config", str(config)]
-    cmd += ["--data-dir", str(data_dir), "--models-dir", str(models_dir), "--log-level", "warning"]
-    with open(log, "ab") as out:
-        proc = subprocess.Popen(cmd, cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
-    client = httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=60)
-    try:
-        deadline = time.time() + 90
-        while True:
-            try:
-                if client.get("/api/health").status_code == 200:
-                    break
-            except httpx.TransportError:
-                pass
-            if proc.poll() is not None or time.time() > deadline:
-                raise RuntimeError(f"nbv serve did not start: {log.read_text()[-2000:]}")
-            time.sleep(0.1)
-        yield proc, client
-    finally:
-        client.close()
-        if proc.poll() is None:
-            proc.kill()
-        proc.wait(30)
 
 
 def snapshot(client: httpx.Client, sid: str) -> dict[str, Any]:
@@ -74,7 +41,7 @@ def snapshot(client: httpx.Client, sid: str) -> dict[str, Any]:
 
 def test_kill_9_mid_session_then_resume(tmp_path: Path, models_dir: Path) -> None:
     data, log = tmp_path / "data", tmp_path / "serve.log"
-    with nbv_serve(data, models_dir, log) as (proc, api):
+    with serve_process(data, models_dir, log) as (proc, api):
         a = api.post("/api/sessions", json={"config": SMALL, "seed": 11}).json()["id"]
         api.post(f"/api/sessions/{a}/capture")
         plan = api.post(f"/api/sessions/{a}/plan").json()
@@ -100,7 +67,7 @@ def test_kill_9_mid_session_then_resume(tmp_path: Path, models_dir: Path) -> Non
     with np.load(data / "sessions" / b / captures_b[0]["frame"]) as frame:  # the config file's camera was used
         assert frame["depth"].shape == (SMALL_CAMERA.height, SMALL_CAMERA.width)
 
-    with nbv_serve(data, models_dir, log) as (_, api):
+    with serve_process(data, models_dir, log) as (_, api):
         listed = {s["id"]: s for s in api.get("/api/sessions").json()}
         assert set(listed) == {a, b} and {s["state"] for s in listed.values()} == {"interrupted"}
         assert listed[a]["iteration"] == 2 and listed[b]["iteration"] == len(captures_b) >= 3

@@ -8,8 +8,6 @@ from __future__ import annotations
 import copy
 import os
 import signal
-import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -22,10 +20,10 @@ from apphelpers import SMALL, free_port, running_server
 from test_admission import FROZEN, HealthProbe
 
 from app.settings import AppSettings
-from tests.helpers import small_camera_toml, wait_until
+from tests.helpers import wait_until
+from tests.servers import serve_process
 from workbench.planning import plan_in
 
-REPO = Path(__file__).resolve().parents[2]
 HEAVIEST: dict[str, Any] = {
     "voxel": {"resolution": 0.0034, "max_extent": 1.0},
     "cluster": {"search": "exhaustive", "t_min": 1, "t_max": 60, "max_iter": 1000, "tol": 1e-8},
@@ -151,37 +149,17 @@ def test_idle_workers_are_evicted_and_come_back(settings: AppSettings) -> None:
 
 @pytest.mark.slow
 def test_sigterm_stops_the_server_within_5_s_during_a_plan(tmp_path: Path, models_dir: Path) -> None:
-    port = free_port()
-    config = tmp_path / "serve.toml"  # the API tests' small camera (tests/helpers.py SMALL_CAMERA)
-    config.write_text(small_camera_toml())
-    cmd = [sys.executable, "-m", "nbv.cli", "serve", "--port", str(port), "--viser-port", "0", "--config", str(config)]
-    cmd += ["--data-dir", str(tmp_path / "data"), "--models-dir", str(models_dir), "--log-level", "warning"]
     log = tmp_path / "serve.log"
-    with open(log, "wb") as out:
-        proc = subprocess.Popen(cmd, cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
-    api = httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=120)
-    try:
-        deadline = time.time() + 90
-        while True:
-            try:
-                if api.get("/api/health").status_code == 200:
-                    break
-            except httpx.TransportError:
-                pass
-            assert proc.poll() is None and time.time() < deadline, log.read_text()[-2000:]
-            time.sleep(0.1)
+    with serve_process(tmp_path / "data", models_dir, log, timeout=120) as (proc, api):
         sid = api.post("/api/sessions", json={"config": PLAN_HEAVY}).json()["id"]
         assert api.post(f"/api/sessions/{sid}/capture").status_code == 200
-        in_thread(lambda: httpx.post(f"http://127.0.0.1:{port}/api/sessions/{sid}/plan", timeout=120))
+        url = str(api.base_url).rstrip("/")
+        in_thread(lambda: httpx.post(f"{url}/api/sessions/{sid}/plan", timeout=120))
         wait_until(lambda: api.get(f"/api/sessions/{sid}").json()["progress"] is not None, 30.0, "the plan runs")
         t0 = time.monotonic()
         proc.send_signal(signal.SIGTERM)
         proc.wait(10)
         assert time.monotonic() - t0 < 5.0, log.read_text()[-2000:]
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(10)
     journal = (tmp_path / "data" / "sessions" / sid / "journal.jsonl").read_text().splitlines()
     assert any('"capture"' in line for line in journal)  # what happened before the signal is on disk
 
