@@ -33,6 +33,7 @@ from app.docs_ui import install_docs
 from app.errors import status_of
 from app.scene.calibration import CalibrationViews
 from app.scene.controller import SceneController
+from app.schemas import document_error_bodies
 from app.security import SecurityMiddleware, install_log_redaction, openapi_security
 from app.serialize import SafeJSONResponse
 from app.settings import AppSettings, check_exposure, viewer_host
@@ -146,15 +147,15 @@ def create_app(settings: AppSettings | None = None) -> FastAPI:
             allow_methods=["GET", "POST", "PUT", "PATCH", "DELETE"],
             allow_headers=["Authorization", "Content-Type"],
         )
-    if settings.token:
-        default_openapi = app.openapi
+    default_openapi = app.openapi
 
-        def openapi() -> dict[str, Any]:
-            if app.openapi_schema is None:
-                app.openapi_schema = openapi_security(default_openapi())
-            return app.openapi_schema
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema is None:
+            schema = document_error_bodies(default_openapi())
+            app.openapi_schema = openapi_security(schema) if settings.token else schema
+        return app.openapi_schema
 
-        app.openapi = openapi  # type: ignore[method-assign]
+    app.openapi = openapi  # type: ignore[method-assign]
 
     @app.get("/", include_in_schema=False)
     def index() -> FileResponse:

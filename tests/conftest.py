@@ -5,6 +5,8 @@ must not starve each other's budgets). Every test gets its own node id (xdist ru
 
 from __future__ import annotations
 
+import gc
+
 import pytest
 
 
@@ -16,3 +18,13 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
             item._id = item.parent.id.child(item.name)  # type: ignore[attr-defined]
         if item.get_closest_marker("xdist_group") is None:
             item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """What collection built (the imported libraries, the test modules) moves to the collector's permanent
+    generation: the full collections during the tests and pytest's at exit no longer walk it. Measured on the
+    whole suite (three workers): their full collections 21.7 -> 16.6 CPU-s, the final ones 1.0-1.4 -> 0.5-1.0 s
+    each."""
+    gc.collect()
+    gc.freeze()

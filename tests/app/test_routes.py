@@ -8,7 +8,7 @@ from pathlib import Path
 
 from app.api import loop, sessions
 from app.main import create_app
-from app.schemas import SessionOut
+from app.schemas import ERROR_RESPONSES, ErrorOut, SessionOut
 from app.settings import AppSettings
 from workbench import SessionStatus
 
@@ -48,6 +48,23 @@ def test_every_json_route_has_a_response_model_and_a_tag() -> None:
             missing.append(f"{method} {path}")  # no response model: a plain dict or nothing
     assert missing == []
     assert [f"{m} {p}" for m, p, op in ops if not op.get("tags")] == []
+
+
+def test_every_error_answer_is_documented_as_an_error_out() -> None:
+    """The router gives FastAPI the error answers' descriptions only (app/schemas.py ERROR_RESPONSES, no model: a
+    model there is built again per app); the document still gives every one of them ErrorOut's body."""
+    codes = [str(c) for c in ERROR_RESPONSES]
+    doc = create_app(AppSettings(scene=False)).openapi()
+    body = {"application/json": {"schema": {"$ref": "#/components/schemas/ErrorOut"}}}
+    for method, path, op in operations():
+        assert [c for c in op["responses"] if c in codes] == codes, (method, path)  # all nine, in their order
+        assert all(op["responses"][c]["content"] == body for c in codes), (method, path)
+    error_out = doc["components"]["schemas"]["ErrorOut"]
+    assert error_out["required"] == ["detail"] and set(error_out["properties"]) == set(ErrorOut.model_fields)
+    assert "default" not in error_out["properties"]["error_id"]  # as FastAPI writes a model (None left out)
+    assert list(doc["components"]["schemas"]) == sorted(doc["components"]["schemas"])
+    surface = doc["paths"]["/api/sessions/{session_id}/surface.ply"]["get"]["responses"]["409"]
+    assert surface["description"].startswith("no surface yet")  # a route's own description stays
 
 
 def test_every_router_has_its_prefix() -> None:
