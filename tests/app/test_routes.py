@@ -15,9 +15,9 @@ from workbench import SessionStatus
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def operations() -> list[tuple[str, str, dict]]:
-    """(method, path, operation) of every documented REST operation."""
-    doc = create_app(AppSettings(scene=False)).openapi()
+def operations(doc: dict | None = None) -> list[tuple[str, str, dict]]:
+    """(method, path, operation) of every documented REST operation (of ``doc``, default a new app's document)."""
+    doc = create_app(AppSettings(scene=False)).openapi() if doc is None else doc
     return [(m, path, op) for path, item in doc["paths"].items() for m, op in item.items()]
 
 
@@ -56,7 +56,7 @@ def test_every_error_answer_is_documented_as_an_error_out() -> None:
     codes = [str(c) for c in ERROR_RESPONSES]
     doc = create_app(AppSettings(scene=False)).openapi()
     body = {"application/json": {"schema": {"$ref": "#/components/schemas/ErrorOut"}}}
-    for method, path, op in operations():
+    for method, path, op in operations(doc):
         assert [c for c in op["responses"] if c in codes] == codes, (method, path)  # all nine, in their order
         assert all(op["responses"][c]["content"] == body for c in codes), (method, path)
     error_out = doc["components"]["schemas"]["ErrorOut"]
