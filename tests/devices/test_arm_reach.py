@@ -125,3 +125,51 @@ def test_cells_of_one_arm_and_plate_share_one_seed_library_equal_to_a_fresh_one(
     assert all(np.array_equal(p, q) for p, q in zip(fresh.reach._library, a.reach._library, strict=True))
     assert fresh.reach.reach == a.reach.reach
     assert all(wider.world.collision(q, 0.0) is None for q in wider.reach._library)  # checked in its own world
+
+
+@pytest.mark.parametrize("turn_while_moving", [False, True])
+def test_best_target_is_the_shortest_of_every_angle_while_skipping_the_turns_that_cannot_win(
+    turn_while_moving: bool,
+) -> None:
+    k = ArmKinematics(ArmConfig(), plate_radius=0.2, plate_thickness=0.02)
+    k.set_object_box(np.array([-0.08, -0.08, 0.0]), np.array([0.08, 0.08, 0.2]))
+    reach = k.reach
+    reach.turn_while_moving = turn_while_moving
+    speed = math.radians(ArmConfig().turntable_speed_deg)
+    starts = [(k.home, 0.0)]
+    for elevation, azimuth in [(30, 40), (55, -120)]:
+        start, _ = reach.reachability(view(elevation, azimuth), k.home, 0.0)
+        assert start is not None
+        starts.append((start.q, start.angle))
+    tried: list[float] = []
+    attempt = reach._attempt
+
+    def counted(T: Pose, angle: float, q: np.ndarray, a: float, *, first: bool) -> tuple:
+        tried.append(angle)
+        return attempt(T, angle, q, a, first=first)
+
+    reach._attempt = counted  # type: ignore[method-assign]
+    skipped = 0
+    for q, a in starts:
+        for elevation, azimuth in [(15, 0), (35, 75), (50, 160), (65, -100), (25, -30), (45, 120)]:
+            T = view(elevation, azimuth)
+            angles = reach.plate_angles(T, a)
+            every = []  # the oracle: every plate angle's shortest free branch, the earlier angle among equals
+            for angle in angles:
+                target, _ = attempt(T, angle, q, a, first=False)
+                if target is not None:
+                    seconds = reach.move_seconds(q, target.q, a, angle) if turn_while_moving else target.move_estimate
+                    every.append((seconds, angles.index(angle), target))
+            tried.clear()
+            best, reason = reach.best_target(T, q, a)
+            if not every:
+                assert best is None and reason is not None
+                continue
+            seconds, _, target = min(every, key=lambda e: e[:2])
+            assert best is not None and reason is None
+            assert (best.angle, best.move_estimate) == (target.angle, seconds)
+            np.testing.assert_array_equal(best.q, target.q)
+            for angle in set(angles) - set(tried):  # an angle left out turns for longer than the best move takes
+                assert abs(math.remainder(angle - a, 2 * math.pi)) / speed > seconds - 1e-12
+            skipped += len(angles) - len(tried)
+    assert skipped > 0  # the nearest turns first: some angles never needed their IK
