@@ -7,13 +7,16 @@ from pathlib import Path
 
 import pytest
 
+from tests.helpers import with_small_camera
 from workbench.registry.registry import SessionRegistry
 from workbench.settings import WorkbenchSettings
 
 
 @pytest.fixture
 def settings(tmp_path: Path) -> WorkbenchSettings:
-    return WorkbenchSettings(models_dir=tmp_path / "models", data_dir=tmp_path / "data")
+    """The API tests' small camera (tests/helpers.py ``SMALL_CAMERA``): these tests check the session's loop, not
+    the pixels (their three files: 20.8 -> 16.8 CPU-s); the surface and sensor tests build their own settings."""
+    return with_small_camera(WorkbenchSettings(models_dir=tmp_path / "models", data_dir=tmp_path / "data"))
 
 
 @pytest.fixture
