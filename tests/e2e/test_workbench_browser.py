@@ -24,6 +24,8 @@ from tests.servers import LiveServer
 from tests.viewer_wire import decode_frame, session_labels, session_nodes
 
 LONG = {**SMALL, "termination": {"max_views": 30, "stop_without_frontier": False}}
+AUTO_STEPS = 6
+"""Steps of the auto run whose every step the page must show (each one pushed, none polled)."""
 
 
 class Tab:
@@ -121,14 +123,14 @@ def test_the_page_is_pushed_every_step_of_auto_without_polling(
           .observe(document.getElementById('iteration'), {childList: true, characterData: true, subtree: true}); }"""
     )
     tab.requests.clear()
-    tab.page.fill("#auto-count", "10")
+    tab.page.fill("#auto-count", str(AUTO_STEPS))
     tab.page.click("#auto")
     expect(tab.page.locator("#busy")).to_contain_text("auto: step", timeout=10_000)
-    expect(tab.page.locator("#iteration")).to_have_text("11", timeout=120_000)
+    expect(tab.page.locator("#iteration")).to_have_text(str(1 + AUTO_STEPS), timeout=120_000)
     expect(tab.page.locator("#state")).not_to_have_text("auto", timeout=30_000)
     steps = tab.page.evaluate("window.__steps")
     shown = [s for i, s in enumerate(steps) if (i == 0 or s != steps[i - 1]) and s != "1"]
-    assert shown == [str(k) for k in range(2, 12)]  # every step, in order
+    assert shown == [str(k) for k in range(2, 2 + AUTO_STEPS)]  # every step, in order
     status_route = re.compile(rf"/api/sessions/{sid}(\?|$)")
     assert not [u for u in tab.requests if status_route.search(u)], "the page polled the status route"
 
