@@ -32,7 +32,7 @@ count; the tests of the camera, the surface and the sensors run at the default's
 
 
 def with_small_camera(settings: Any) -> Any:
-    """``settings`` (an ``AppSettings``) with :data:`SMALL_CAMERA` as its simulated camera."""
+    """``settings`` (an ``AppSettings`` or ``WorkbenchSettings``) with :data:`SMALL_CAMERA` as its simulated camera."""
     return dataclasses.replace(settings, devices=dataclasses.replace(settings.devices, camera=SMALL_CAMERA))
 
 

@@ -217,6 +217,6 @@ class ArmKinematics:
         except NoPathError as exc:
             raise UnreachableError(f"unreachable: {exc}", reason="no_path") from None
         trajectory = time_path(self.model, path.waypoints)
-        turn_seconds = abs(turn) / math.radians(self.config.turntable_speed_deg)
+        turn_seconds = self.reach.turn_seconds(angle, target.angle)
         overlapped = self.config.turn_while_moving and turn_seconds > 0 and self.path_sweep_free(path.waypoints)
         return ArmMove(target, trajectory, turn_seconds, path.method, time.perf_counter() - t0, retract, overlapped)

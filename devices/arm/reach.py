@@ -189,13 +189,18 @@ class ArmReach:
             return [wrap(current_angle + o) for o in self._offsets]
         return [wrap(self.arm_azimuth + o - math.atan2(y, x)) for o in self._offsets]
 
+    def turn_seconds(self, angle_from: float, angle_to: float) -> float:
+        """Seconds the turntable takes from ``angle_from`` to ``angle_to`` (rad) the short way at its speed: the
+        turn of every move's estimate (:meth:`move_estimate`, :meth:`move_seconds`) and so a lower bound of it."""
+        return abs(wrap(angle_to - angle_from)) / math.radians(self.arm.config.turntable_speed_deg)
+
     def move_estimate(
         self, q_from: NDArray[np.float64], q_to: NDArray[np.float64], angle_from: float, angle_to: float
     ) -> float:
         """Seconds of a rest-to-rest move: turntable at its speed, then the slowest joint (trapezoid profile).
         Plain floats (it runs for every candidate of every plan); :meth:`seconds_between` is the same for many
         pairs."""
-        turn = abs(wrap(angle_to - angle_from)) / math.radians(self.arm.config.turntable_speed_deg)
+        turn = self.turn_seconds(angle_from, angle_to)
         slowest = 0.0
         for a_from, a_to, v, a in zip(q_from.tolist(), q_to.tolist(), self._velocity, self._acceleration, strict=True):
             dq = abs(a_to - a_from)
@@ -223,7 +228,7 @@ class ArmReach:
         sequential = self.move_estimate(q_from, q_to, angle_from, angle_to)
         if not self.turn_while_moving or not (self.sweep_free(q_from) and self.sweep_free(q_to)):
             return sequential
-        turn = abs(wrap(angle_to - angle_from)) / math.radians(self.arm.config.turntable_speed_deg)
+        turn = self.turn_seconds(angle_from, angle_to)
         return max(turn, sequential - turn)
 
     def seconds_between(
@@ -351,8 +356,7 @@ class ArmReach:
         best_order = -1
         worst = "no_ik"
         angles = self.plate_angles(T_table_camera, angle_current)
-        speed = math.radians(self.arm.config.turntable_speed_deg)
-        turns = [abs(wrap(angle - angle_current)) / speed for angle in angles]
+        turns = [self.turn_seconds(angle_current, angle) for angle in angles]
         for order in sorted(range(len(angles)), key=lambda i: (turns[i], i)):
             if best is not None and turns[order] > best.move_estimate:
                 break  # this turn, and every later one, outlasts the best move

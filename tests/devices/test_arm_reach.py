@@ -155,11 +155,11 @@ def test_best_target_is_the_shortest_of_every_angle_while_skipping_the_turns_tha
             T = view(elevation, azimuth)
             angles = reach.plate_angles(T, a)
             every = []  # the oracle: every plate angle's shortest free branch, the earlier angle among equals
-            for angle in angles:
+            for order, angle in enumerate(angles):
                 target, _ = attempt(T, angle, q, a, first=False)
                 if target is not None:
                     seconds = reach.move_seconds(q, target.q, a, angle) if turn_while_moving else target.move_estimate
-                    every.append((seconds, angles.index(angle), target))
+                    every.append((seconds, order, target))
             tried.clear()
             best, reason = reach.best_target(T, q, a)
             if not every:
