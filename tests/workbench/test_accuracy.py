@@ -52,3 +52,32 @@ def test_empty_cloud_and_bad_input(cube: tuple[trimesh.Trimesh, GroundTruth]) ->
     assert empty.fscore_5mm == 0.0 and empty.to_json()["chamfer_mm"] is None
     with pytest.raises(ValueError, match="cloud: expected shape"):
         accuracy(truth, np.zeros((4, 2)))
+
+
+def test_the_recall_query_in_spatial_order_gives_each_sample_its_own_distance(
+    cube: tuple[trimesh.Trimesh, GroundTruth],
+) -> None:
+    """The samples are queried cell by cell (``spatial_order``) and each distance is put back at its sample: the
+    distances equal brute force's sample for sample, and recall and chamfer are made of them."""
+    from workbench.evaluation.accuracy import QUERY_CELL, spatial_order
+
+    _, truth = cube
+    order = truth.query_order
+    assert sorted(order.tolist()) == list(range(len(truth.samples)))  # a permutation of the samples
+    cells = np.floor(truth.samples[order] / QUERY_CELL).astype(np.int64)
+    keys = [tuple(c) for c in cells]
+    assert keys == sorted(keys) and len(set(keys)) > 100  # visited cell by cell, many cells
+    assert np.array_equal(spatial_order(truth.samples), order)
+    cloud = np.random.default_rng(3).uniform(-0.06, 0.06, (400, 3))  # all over the cube, some far from samples
+    nearest = np.concatenate(
+        [
+            np.sqrt(((chunk[:, None, :] - cloud[None]) ** 2).sum(axis=2)).min(axis=1)
+            for chunk in truth.samples.reshape(10, -1, 3)
+        ]
+    )  # (M,) brute force, in the samples' order
+    got = truth.samples_distance(cloud)
+    np.testing.assert_allclose(got, nearest, rtol=1e-12, atol=0)
+    assert got.max() > 5 * got.min() > 0  # distances differ from sample to sample: a misplaced one would show
+    acc = accuracy(truth, cloud)
+    assert acc.recall_5mm == float(np.mean(got <= 0.005))
+    assert acc.chamfer_mm == pytest.approx((truth.distance(cloud).mean() + got.mean()) / 2 * 1000, rel=1e-12)

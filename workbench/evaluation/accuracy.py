@@ -79,6 +79,8 @@ class GroundTruth:
         self.samples = as_points("samples", samples)
         if len(self.samples) == 0:
             raise ValueError("samples: need at least one sample")
+        self.query_order = spatial_order(self.samples)
+        """(M,) the samples' order for nearest-neighbour queries (:func:`spatial_order`), computed once."""
         self._scene = o3d.t.geometry.RaycastingScene()
         self._scene.add_triangles(o3d.core.Tensor.from_numpy(self._vertices), o3d.core.Tensor.from_numpy(self._faces))
 
@@ -97,6 +99,31 @@ class GroundTruth:
         query = o3d.core.Tensor.from_numpy(np.ascontiguousarray(p, dtype=np.float32))
         return self._scene.compute_distance(query).numpy().astype(np.float64)
 
+    def samples_distance(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(M,) distance of each sample (in the order of :attr:`samples`) to the nearest of ``points`` (N, 3),
+        N >= 1, metres. The samples are queried in :attr:`query_order` (:func:`spatial_order`)."""
+        # compact_nodes and balanced_tree off: with them, scipy's unbounded query from samples far from a partial
+        # cloud (the unseen side of an object, the second of two boxes) took 40 s for 10k samples on 100k points
+        tree = KDTree(points, compact_nodes=False, balanced_tree=False)
+        out = np.empty(len(self.samples))
+        out[self.query_order] = tree.query(self.samples[self.query_order], k=1)[0]
+        return out
+
+
+QUERY_CELL = 0.005
+"""Edge of the grid cells :func:`spatial_order` visits the samples by, metres."""
+
+
+def spatial_order(points: NDArray[np.float64], cell: float = QUERY_CELL) -> NDArray[np.intp]:
+    """(N,) an order of ``points`` (N, 3) that visits them cell by cell of a ``cell``-metre grid (x, then y, then z).
+
+    Nearest-neighbour queries asked in this order walk the same branches of the tree one after another: the
+    recall's KD-tree query of 20,000 samples against a 100,000-point surface takes about a third less time than
+    in the samples' own (random) order, with the same distances.
+    """
+    cells = np.floor(points / cell).astype(np.int64)
+    return np.lexsort((cells[:, 2], cells[:, 1], cells[:, 0]))
+
 
 def accuracy(truth: GroundTruth, cloud: ArrayLike) -> Accuracy:
     """Precision, recall and F at 2 and 5 mm, distance statistics and chamfer of ``cloud`` (N, 3) against
@@ -106,9 +133,7 @@ def accuracy(truth: GroundTruth, cloud: ArrayLike) -> Accuracy:
         nan = float("nan")
         return Accuracy(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, nan, nan, nan, 0)
     to_surface = truth.distance(p)
-    # compact_nodes and balanced_tree off: with them, scipy's unbounded query from samples far from a partial cloud
-    # (the unseen side of an object, the second of two boxes) took 40 s for 10k samples on 100k points; 0.3 s off
-    to_cloud, _ = KDTree(p, compact_nodes=False, balanced_tree=False).query(truth.samples, k=1)
+    to_cloud = truth.samples_distance(p)
     scores: dict[str, float] = {}
     for tau_mm in TAUS_MM:
         tau = tau_mm / 1000.0
