@@ -72,7 +72,7 @@ def test_the_recall_query_in_spatial_order_gives_each_sample_its_own_distance(
     nearest = np.concatenate(
         [
             np.sqrt(((chunk[:, None, :] - cloud[None]) ** 2).sum(axis=2)).min(axis=1)
-            for chunk in truth.samples.reshape(10, -1, 3)
+            for chunk in np.array_split(truth.samples, 10)
         ]
     )  # (M,) brute force, in the samples' order
     got = truth.samples_distance(cloud)
