@@ -118,8 +118,8 @@ def spatial_order(points: NDArray[np.float64], cell: float = QUERY_CELL) -> NDAr
     """(N,) an order of ``points`` (N, 3) that visits them cell by cell of a ``cell``-metre grid (x, then y, then z).
 
     Nearest-neighbour queries asked in this order walk the same branches of the tree one after another: the
-    recall's KD-tree query of 20,000 samples against a 100,000-point surface takes about a third less time than
-    in the samples' own (random) order, with the same distances.
+    recall's KD-tree query of 20,000 samples against a 100,000-point surface takes a quarter to a third less time
+    than in the samples' own (random) order (13-20 % with the tree's build), with the same distances.
     """
     cells = np.floor(points / cell).astype(np.int64)
     return np.lexsort((cells[:, 2], cells[:, 1], cells[:, 0]))
