@@ -31,18 +31,29 @@ SMALL_CAMERA = CameraConfig(width=320, height=240, fx=305.0, fy=305.0, cx=159.5,
 count; the tests of the camera, the surface and the sensors run at the default's."""
 
 
-def with_small_camera(settings: Any) -> Any:
-    """``settings`` (an ``AppSettings`` or ``WorkbenchSettings``) with :data:`SMALL_CAMERA` as its simulated camera."""
-    return dataclasses.replace(settings, devices=dataclasses.replace(settings.devices, camera=SMALL_CAMERA))
+SMALL_SCORE_POINTS = 20_000
+"""The ``surface_score_points`` of the API and browser tests' servers: a fifth of the default's points on each
+view's surface when it is scored (0.03-0.05 s of CPU a view instead of 0.11-0.18, docs/method.md). Those tests
+check that the scores are there, in range and the same after a resume or a discard, not their value; the tests
+of the surface and its scoring (tests/workbench/test_surface*.py) run at the default."""
 
 
-def small_camera_toml() -> str:
-    """:data:`SMALL_CAMERA` as the ``[devices]`` table of an ``nbv serve --config`` file (a server process's): the
-    fields where it differs from the default camera."""
+def with_small_costs(settings: Any) -> Any:
+    """``settings`` (an ``AppSettings`` or ``WorkbenchSettings``) with :data:`SMALL_CAMERA` as its simulated camera
+    and :data:`SMALL_SCORE_POINTS` on each scored surface."""
+    camera = dataclasses.replace(settings.devices, camera=SMALL_CAMERA)
+    return dataclasses.replace(settings, devices=camera, surface_score_points=SMALL_SCORE_POINTS)
+
+
+def small_costs_toml() -> str:
+    """:func:`with_small_costs` as an ``nbv serve --config`` file (a server process's): :data:`SMALL_SCORE_POINTS`
+    in its ``[server]`` table, :data:`SMALL_CAMERA` in ``[devices]`` (the fields where it differs from the default
+    camera)."""
     default = CameraConfig()
     fields = [f.name for f in dataclasses.fields(CameraConfig)]
     changed = [f"{k} = {getattr(SMALL_CAMERA, k)!r}" for k in fields if getattr(SMALL_CAMERA, k) != getattr(default, k)]
-    return f"[devices]\ncamera = {{ {', '.join(changed)} }}\n"
+    server = f"[server]\nsurface_score_points = {SMALL_SCORE_POINTS}\n"
+    return f"{server}[devices]\ncamera = {{ {', '.join(changed)} }}\n"
 
 
 SMALL_FLAGS = ["--resolution", "0.02", "--candidates", "60", "--t-min", "2", "--t-max", "6"]

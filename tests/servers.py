@@ -18,7 +18,7 @@ import uvicorn
 
 from app.main import create_app
 from app.settings import AppSettings
-from tests.helpers import free_port, small_camera_toml
+from tests.helpers import free_port, small_costs_toml
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -59,12 +59,12 @@ def running_server(settings: AppSettings) -> Iterator[LiveServer]:
 def serve_process(
     data_dir: Path, models_dir: Path, log: Path, timeout: float = 60.0
 ) -> Iterator[tuple[subprocess.Popen, httpx.Client]]:
-    """An ``nbv serve`` process on a free port with the tests' small camera (a ``--config`` file beside
+    """An ``nbv serve`` process on a free port with the tests' small camera and scoring (a ``--config`` file beside
     ``data_dir``), its output appended to ``log``; yields it once ``/api/health`` answers, with a client of
     ``timeout`` seconds. Killed on exit if still running."""
     port = free_port()
-    config = data_dir.parent / "serve.toml"  # tests/helpers.py SMALL_CAMERA, as the in-process servers
-    config.write_text(small_camera_toml())
+    config = data_dir.parent / "serve.toml"  # tests/helpers.py with_small_costs, as the in-process servers
+    config.write_text(small_costs_toml())
     cmd = [sys.executable, "-m", "nbv.cli", "serve", "--port", str(port), "--viser-port", "0", "--config", str(config)]
     cmd += ["--data-dir", str(data_dir), "--models-dir", str(models_dir), "--log-level", "warning"]
     with open(log, "ab") as out:

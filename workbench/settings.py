@@ -16,12 +16,18 @@ from devices.faults import FaultConfig
 from planner.config import PlannerConfig
 from planner.validate import finite, integer
 from workbench.sources.limits import MeshLimits
+from workbench.surface.scoring import SURFACE_SAMPLES
 
 
 def default_models_dir() -> Path:
     """``../shared/models`` when it exists (the team's test meshes), else ``./models``."""
     shared = Path("../shared/models")
     return shared if shared.is_dir() else Path("models")
+
+
+MIN_SCORE_POINTS = 1_000
+MAX_SCORE_POINTS = 1_000_000
+"""The range of ``surface_score_points``: a million points is 24 MB and about 1.5 s of CPU a view."""
 
 
 @dataclass(frozen=True)
@@ -80,6 +86,11 @@ class WorkbenchSettings:
     devices: DeviceConfig = field(default_factory=DeviceConfig)
     """The simulated devices. ``devices.model`` is the default model (a built-in name or a file
     in models_dir), ``devices.size`` / ``devices.up`` apply to every model file."""
+    surface_score_points: int = SURFACE_SAMPLES
+    """Points sampled on a simulated session's reconstructed surface to score it against the ground truth at each
+    view (precision, recall, F, chamfer; workbench/surface/scoring.py). 100,000 puts them about 0.8 mm apart on
+    the bunny, well below the 2 mm of the finest score, and costs about 0.15 s of CPU a view; fewer cost less, and
+    on a large object spread the points so far apart that they score a good surface's recall at 2 mm low."""
     cell: str = ""
     """A cell file (docs/hardware.md): new sessions drive its camera, arm and turntable (source ``hardware``,
     workbench/sources/hardware.py). "" = simulated sessions. Read when a session is created or resumed."""
@@ -118,6 +129,11 @@ class WorkbenchSettings:
             value = getattr(self, name)
             if not integer(value) or value < 0:
                 raise ValueError(f"server.{name}: must be an integer >= 0, got {value!r}")
+        points = self.surface_score_points
+        if not integer(points) or not MIN_SCORE_POINTS <= points <= MAX_SCORE_POINTS:
+            raise ValueError(
+                f"server.surface_score_points: an integer in [{MIN_SCORE_POINTS}, {MAX_SCORE_POINTS}], got {points!r}"
+            )
         if isinstance(self.mesh_limits, dict):
             try:
                 object.__setattr__(self, "mesh_limits", MeshLimits(**self.mesh_limits))

@@ -13,7 +13,7 @@ from fastapi.testclient import TestClient
 
 from app.main import create_app
 from app.settings import AppSettings
-from tests.helpers import with_small_camera
+from tests.helpers import with_small_costs
 
 
 @pytest.fixture
@@ -28,7 +28,7 @@ def models_dir(tmp_path: Path) -> Path:
 @pytest.fixture
 def settings(tmp_path: Path, models_dir: Path) -> AppSettings:
     # fault_api: the tests inject faults through the API (a server refuses them without this test flag)
-    return with_small_camera(
+    return with_small_costs(
         AppSettings(viser_port=0, scene=False, models_dir=models_dir, data_dir=tmp_path / "data", fault_api=True)
     )
 

@@ -32,7 +32,7 @@ from hypothesis import HealthCheck, Phase, settings
 
 from app.main import create_app
 from app.settings import AppSettings
-from tests.helpers import with_small_camera
+from tests.helpers import with_small_costs
 
 pytestmark = pytest.mark.xdist_group("heavy")  # tests/conftest.py: not beside the load test
 MAX_EXAMPLES = 15
@@ -41,8 +41,8 @@ _CALLS = itertools.count()
 _ROOT = Path(tempfile.mkdtemp(prefix="nbv-schemathesis-"))
 (_ROOT / "models").mkdir()
 (_ROOT / "models" / "cube.obj").write_text(CUBE_OBJ)
-APP = create_app(  # the small camera of the other API tests (tests/helpers.py): what is checked here is the API
-    with_small_camera(
+APP = create_app(  # the small camera and scoring of the other API tests (tests/helpers.py): what is checked here is the API
+    with_small_costs(
         AppSettings(
             scene=False, models_dir=_ROOT / "models", data_dir=_ROOT / "data", capture_timeout=5.0, fault_api=True
         )

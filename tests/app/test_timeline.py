@@ -24,7 +24,7 @@ from app.main import create_app
 from app.scene.controller import png_bytes
 from app.settings import AppSettings
 from nbv.cli import main
-from tests.helpers import with_small_camera
+from tests.helpers import with_small_costs
 
 
 def decode_viser(data: bytes) -> tuple[float, list[tuple[float, dict[str, Any]]]]:
@@ -41,7 +41,7 @@ def scanned(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[TestClie
     """A 3-view session (an override at view 1, the planner's choice at view 2, a plan pending after view 3) and,
     per view, what the live session showed then: its status and its candidates."""
     tmp = tmp_path_factory.mktemp("timeline")
-    settings = with_small_camera(AppSettings(viser_port=0, scene=False, models_dir=tmp, data_dir=tmp / "data"))
+    settings = with_small_costs(AppSettings(viser_port=0, scene=False, models_dir=tmp, data_dir=tmp / "data"))
     with TestClient(create_app(settings), base_url=BASE_URL) as client:
         sid = client.post("/api/sessions", json={"model": "l-block", "config": SMALL}).json()["id"]
         assert client.post(f"/api/sessions/{sid}/capture").status_code == 200
@@ -146,9 +146,7 @@ def test_nbv_record_writes_the_recording_of_a_journal(scanned, tmp_path: Path, c
 
 
 def test_a_discard_rebuilds_the_timeline(tmp_path: Path) -> None:
-    settings = with_small_camera(
-        AppSettings(viser_port=0, scene=False, models_dir=tmp_path, data_dir=tmp_path / "data")
-    )
+    settings = with_small_costs(AppSettings(viser_port=0, scene=False, models_dir=tmp_path, data_dir=tmp_path / "data"))
     with TestClient(create_app(settings), base_url=BASE_URL) as client:
         sid = client.post("/api/sessions", json={"model": "two-boxes", "config": SMALL}).json()["id"]
         client.post(f"/api/sessions/{sid}/capture")

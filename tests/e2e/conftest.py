@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 
 from app.settings import AppSettings
-from tests.helpers import free_port, with_small_camera
+from tests.helpers import free_port, with_small_costs
 from tests.servers import LiveServer, running_server
 
 CHROMIUM_ARGS = [
@@ -140,7 +140,7 @@ def output_dir() -> Path:
 @pytest.fixture
 def live_server(tmp_path: Path) -> Iterator[LiveServer]:
     settings = AppSettings(port=free_port(), viser_port=0, data_dir=tmp_path / "data", models_dir=tmp_path)
-    with running_server(with_small_camera(settings)) as server:
+    with running_server(with_small_costs(settings)) as server:
         yield server
 
 

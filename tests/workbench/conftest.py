@@ -7,16 +7,17 @@ from pathlib import Path
 
 import pytest
 
-from tests.helpers import with_small_camera
+from tests.helpers import with_small_costs
 from workbench.registry.registry import SessionRegistry
 from workbench.settings import WorkbenchSettings
 
 
 @pytest.fixture
 def settings(tmp_path: Path) -> WorkbenchSettings:
-    """The API tests' small camera (tests/helpers.py ``SMALL_CAMERA``): these tests check the session's loop, not
-    the pixels (their three files: 20.8 -> 16.8 CPU-s); the surface and sensor tests build their own settings."""
-    return with_small_camera(WorkbenchSettings(models_dir=tmp_path / "models", data_dir=tmp_path / "data"))
+    """The API tests' small camera and surface scoring (tests/helpers.py ``with_small_costs``): these tests check
+    the session's loop, not the pixels (their three files: 20.8 -> 16.8 CPU-s) nor the scores' values; the surface
+    and sensor tests build their own settings."""
+    return with_small_costs(WorkbenchSettings(models_dir=tmp_path / "models", data_dir=tmp_path / "data"))
 
 
 @pytest.fixture

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from tests.helpers import SMALL, with_small_camera
+from tests.helpers import SMALL, with_small_costs
 from workbench.errors import Conflict, Invalid
 from workbench.journal.rebuild import REPLAY_STAGE
 from workbench.progress import CREATE_STAGES, Progress, Throttle, Tracker
@@ -49,7 +49,7 @@ def stage_names(seen: list[dict[str, Any]]) -> list[str]:
 
 @pytest.mark.parametrize("workers", [True, False])
 def test_a_plan_reports_its_stages_and_ends(tmp_path: Path, workers: bool) -> None:
-    registry = SessionRegistry(with_small_camera(WorkbenchSettings(data_dir=tmp_path / "data", workers=workers)))
+    registry = SessionRegistry(with_small_costs(WorkbenchSettings(data_dir=tmp_path / "data", workers=workers)))
     try:
         session = registry.create(model="l-block", config=SMALL)
         session.capture()
@@ -179,7 +179,7 @@ def test_the_tracker_sends_stage_changes_and_ends_but_throttles_items() -> None:
 
 
 def test_a_discard_and_a_resume_report_the_journal_they_replay(tmp_path: Path) -> None:
-    settings = with_small_camera(WorkbenchSettings(data_dir=tmp_path / "data", workers=False))
+    settings = with_small_costs(WorkbenchSettings(data_dir=tmp_path / "data", workers=False))
     registry = SessionRegistry(settings)
     try:
         session = registry.create(model="l-block", config=SMALL)
@@ -214,7 +214,7 @@ def test_a_discard_and_a_resume_report_the_journal_they_replay(tmp_path: Path) -
 def test_a_resume_replays_its_journal_in_the_worker(tmp_path: Path) -> None:
     """With workers (the server's default) the journal is replayed in the session's worker, bounded and killable
     like its plans: the rebuilt map and pending plan equal the live session's, with no mismatch."""
-    settings = with_small_camera(WorkbenchSettings(data_dir=tmp_path / "data"))
+    settings = with_small_costs(WorkbenchSettings(data_dir=tmp_path / "data"))
     registry = SessionRegistry(settings)
     try:
         session = registry.create(model="l-block", config=SMALL)

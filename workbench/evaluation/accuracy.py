@@ -67,9 +67,13 @@ class GroundTruth:
     """The true surface: a triangle mesh (table frame) and points sampled uniformly on it.
 
     vertices: (V, 3) float64. faces: (F, 3) int. samples: (M, 3) float64, M >= 1 (``devices.mesh.sample_surface``).
+    ``surface_points``: how many points a reconstructed surface scored against this truth is sampled with
+    (workbench/surface/scoring.py ``surface_accuracy``; None: its ``SURFACE_SAMPLES``).
     """
 
-    def __init__(self, vertices: ArrayLike, faces: ArrayLike, samples: ArrayLike) -> None:
+    def __init__(
+        self, vertices: ArrayLike, faces: ArrayLike, samples: ArrayLike, surface_points: int | None = None
+    ) -> None:
         import open3d as o3d
 
         self._vertices = np.ascontiguousarray(vertices, dtype=np.float32)
@@ -79,15 +83,20 @@ class GroundTruth:
         self.samples = as_points("samples", samples)
         if len(self.samples) == 0:
             raise ValueError("samples: need at least one sample")
+        if surface_points is not None and (
+            not isinstance(surface_points, int) or isinstance(surface_points, bool) or surface_points < 1
+        ):
+            raise ValueError(f"surface_points: a positive integer or None, got {surface_points!r}")
+        self.surface_points = surface_points
         self.query_order = spatial_order(self.samples)
         """(M,) the samples' order for nearest-neighbour queries (:func:`spatial_order`), computed once."""
         self._scene = o3d.t.geometry.RaycastingScene()
         self._scene.add_triangles(o3d.core.Tensor.from_numpy(self._vertices), o3d.core.Tensor.from_numpy(self._faces))
 
     @staticmethod
-    def of(mesh: Any, samples: ArrayLike) -> GroundTruth:
+    def of(mesh: Any, samples: ArrayLike, surface_points: int | None = None) -> GroundTruth:
         """From a trimesh mesh and its surface samples."""
-        return GroundTruth(np.asarray(mesh.vertices), np.asarray(mesh.faces), samples)
+        return GroundTruth(np.asarray(mesh.vertices), np.asarray(mesh.faces), samples, surface_points)
 
     def distance(self, points: ArrayLike) -> NDArray[np.float64]:
         """(N,) distance of each of ``points`` (N, 3) to the nearest point of the surface, metres."""

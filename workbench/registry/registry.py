@@ -233,7 +233,7 @@ class SessionRegistry:
         worker = None
         if self.engine is not None:
             worker = self.engine.worker(sid, render_spec(parts.cell, devices.cell))
-            worker.truth = truth_spec(parts.mesh, parts.surface_samples)
+            worker.truth = truth_spec(parts.mesh, parts.surface_samples, s.surface_score_points)
             worker.warm = (parts.cell.config, parts.cell.joint_positions(), parts.cell.angle, config)
             offload_rendering(parts.cell, worker, s.capture_budget)
             worker.start_soon()  # and warm its planning cell while the person looks at the page and captures
@@ -250,6 +250,7 @@ class SessionRegistry:
             worker=worker,
             plan_budget=s.plan_budget,
             capture_budget=s.capture_budget,
+            surface_points=s.surface_score_points,
         )
         if parts.surface_samples is not None and parts.model_kind != "replay":  # a ground truth in the sim cell
 

@@ -78,6 +78,7 @@ class SessionCore:
         worker: SessionWorker | None = None,
         plan_budget: float = 60.0,
         capture_budget: float = 30.0,
+        surface_points: int | None = None,
     ) -> None:
         self.id = session_id
         self.model = parts.model
@@ -98,7 +99,7 @@ class SessionCore:
         self.plan_budget = plan_budget
         truth = None
         if parts.surface_samples is not None and len(parts.mesh.faces) > 0:  # a ground truth: accuracy per view
-            truth = GroundTruth.of(parts.mesh, parts.surface_samples)
+            truth = GroundTruth.of(parts.mesh, parts.surface_samples, surface_points)
         self.step_runner = ViewStep(
             self.cell, journal, parts.surface_samples, capture_timeout, move_timeout, worker, capture_budget, truth
         )

@@ -62,8 +62,12 @@ def surface_accuracy(
     truth: Truth,
     ground_truth_samples: ArrayLike | None = None,
     *,
-    n_points: int = SURFACE_SAMPLES,
+    n_points: int | None = None,
     seed: int = 0,
 ) -> Accuracy:
-    """The shared :class:`Accuracy` of a reconstructed surface: of ``n_points`` sampled on it (seed ``seed``)."""
+    """The shared :class:`Accuracy` of a reconstructed surface: of ``n_points`` sampled on it (seed ``seed``);
+    None: the truth's ``surface_points`` when it is a :class:`GroundTruth` that has them, else :data:`SURFACE_SAMPLES`."""
+    if n_points is None:
+        given = truth.surface_points if isinstance(truth, GroundTruth) else None
+        n_points = SURFACE_SAMPLES if given is None else given
     return cloud_accuracy(surface_points(surface, n_points, seed), truth, ground_truth_samples, seed=seed)

@@ -80,12 +80,14 @@ class TruthSpec:
     """The ground truth a worker scores the session's surface against (simulated sessions).
 
     vertices: (V, 3) float64 and faces: (F, 3) int64 of the object in the table frame; samples: (M, 3) float64
-    points uniform on it (the session's ``surface_samples``).
+    points uniform on it (the session's ``surface_samples``); surface_points: how many points the surface is
+    sampled with to score it (the server's ``surface_score_points``; None: the scorer's default).
     """
 
     vertices: NDArray[np.float64]
     faces: NDArray[np.int64]
     samples: NDArray[np.float64]
+    surface_points: int | None = None
 
 
 class _ArmState:
@@ -259,7 +261,7 @@ class _Worker:
             return self.setup(payload)
         if kind == "truth":
             spec = cast(TruthSpec, payload)
-            self.truth = GroundTruth(spec.vertices, spec.faces, spec.samples)
+            self.truth = GroundTruth(spec.vertices, spec.faces, spec.samples, spec.surface_points)
             return None
         if kind == "render":
             return self.render(payload)

@@ -346,13 +346,15 @@ def render_spec(cell: Cell, cell_config: CellConfig) -> RenderSpec | None:
     )
 
 
-def truth_spec(mesh: Any, samples: NDArray[np.float64] | None) -> TruthSpec | None:
+def truth_spec(mesh: Any, samples: NDArray[np.float64] | None, surface_points: int | None = None) -> TruthSpec | None:
     """What a worker scores the surface against: the session's ground-truth ``mesh`` (a trimesh in the table
-    frame) and its ``samples`` (M, 3); None without a ground truth (``samples`` None or an empty mesh)."""
+    frame) and its ``samples`` (M, 3), the surface sampled with ``surface_points`` (None: the scorer's default);
+    None without a ground truth (``samples`` None or an empty mesh)."""
     if samples is None or len(mesh.faces) == 0:
         return None
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
-    return TruthSpec(vertices, np.asarray(mesh.faces, dtype=np.int64), np.asarray(samples, dtype=np.float64))
+    faces, samples = np.asarray(mesh.faces, dtype=np.int64), np.asarray(samples, dtype=np.float64)
+    return TruthSpec(vertices, faces, samples, surface_points)
 
 
 def offload_rendering(cell: Cell, worker: SessionWorker, budget: float) -> bool:
