@@ -32,13 +32,15 @@ def flat_fans(lines: int) -> bytes:
 
 
 class HealthProbe:
-    """Samples GET /api/health every 100 ms in a thread; ``worst`` is the slowest answer, seconds."""
+    """Samples GET /api/health every 100 ms in a thread; ``worst`` is the slowest answer, seconds. Entering returns
+    once the first answer came (a probe whose thread had not started yet saw nothing of a short window)."""
 
     def __init__(self, url: str) -> None:
         self.url = url
         self.samples: list[float] = []
         self.failures: list[str] = []
         self._stop = threading.Event()
+        self._probing = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
 
     def _run(self) -> None:
@@ -51,12 +53,14 @@ class HealthProbe:
                     ok = False
                     self.failures.append(repr(exc))
                 self.samples.append(time.monotonic() - t0)
+                self._probing.set()
                 if not ok:
                     self.failures.append("not 200")
                 self._stop.wait(0.1)
 
     def __enter__(self) -> HealthProbe:
         self._thread.start()
+        assert self._probing.wait(30), "the health probe got no answer within 30 s"
         return self
 
     def __exit__(self, *exc: object) -> None:
