@@ -73,7 +73,10 @@ class Rebuilt:
     """plan_id of a decision whose capture never happened (the step in flight at the crash)."""
     device_state: dict[str, Any] | None
     kept: int = 0
-    """Events of the journal replayed (all of them unless one was damaged)."""
+    """How many of the journal's events (``Journal.events``, discarded ones included) come before the first damaged
+    one: all of them unless one was damaged. A resume cuts the journal there; counting the replayed events instead
+    (a discarded capture is not replayed) cut a journal with a discard short: the discard, or the views after it,
+    came back or were lost at the next restart."""
     dropped: list[str] = field(default_factory=list)
     """What was lost: the damaged event or frame, and how many events after it (empty when nothing was)."""
     surface: SurfaceUpdate | None = None
@@ -129,7 +132,8 @@ def rebuild(
     dropped: list[str] = []
     if journal.damage is not None:
         dropped.append(f"{journal.damage}: {journal.dropped_lines} line(s) from there on")
-    kept = 0
+    kept = len(journal.events)
+    position = {id(ev): i for i, ev in enumerate(journal.events)}  # an event's place in the whole journal
     events = without_discarded(journal.events)
     heavy = sum(1 for ev in events if ev.get("kind") in HEAVY_KINDS)
     done = 0
@@ -155,10 +159,10 @@ def rebuild(
                 captures[-1].views = tuple(planner.views)
                 captures[-1].cloud = np.array(planner.cloud, dtype=np.float64, copy=True)
         except (ValueError, KeyError, TypeError) as exc:
-            rest = len(events) - kept - 1
+            kept = position[id(ev)]
+            rest = len(journal.events) - kept - 1
             dropped.insert(0, f"event {ev.get('seq')} ({ev.get('kind')}): {exc}; it and {rest} later event(s) dropped")
             break
-        kept += 1
     if progress is not None:
         progress(REPLAY_STAGE, done, heavy)
     interrupted = None
