@@ -26,6 +26,7 @@ from hypothesis.stateful import RuleBasedStateMachine, initialize, invariant, pr
 from devices.config import CameraConfig, DeviceConfig
 from planner import PlannerConfig
 from tests.full_disk import FullDisk
+from tests.helpers import SMALL_SCORE_POINTS
 from workbench.errors import WorkbenchError
 from workbench.journal.discard import without_discarded
 from workbench.journal.store import list_journals, read_journal, sessions_dir
@@ -60,6 +61,7 @@ class Durability(RuleBasedStateMachine):
             workers=False,
             planner=PlannerConfig().replace(**TINY),
             devices=DeviceConfig(camera=CAMERA),
+            surface_score_points=SMALL_SCORE_POINTS,  # what is checked is what survives, not the scores
         )
         self.storage = FullDisk()
         self._patch = self.storage.installed()

@@ -12,7 +12,7 @@ from typing import Any
 
 import pytest
 
-from tests.helpers import SMALL
+from tests.helpers import SMALL, with_small_costs
 from workbench.errors import AtCapacity
 from workbench.registry.registry import SessionRegistry
 from workbench.session.session import Session
@@ -23,7 +23,9 @@ from workbench.settings import WorkbenchSettings
 @pytest.fixture
 def registry(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[SessionRegistry]:
     options = getattr(request, "param", {})
-    settings = WorkbenchSettings(models_dir=tmp_path / "models", data_dir=tmp_path / "data", workers=False, **options)
+    settings = with_small_costs(
+        WorkbenchSettings(models_dir=tmp_path / "models", data_dir=tmp_path / "data", workers=False, **options)
+    )
     registry = SessionRegistry(settings)
     yield registry
     registry.close()
