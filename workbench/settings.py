@@ -27,7 +27,8 @@ def default_models_dir() -> Path:
 
 MIN_SCORE_POINTS = 1_000
 MAX_SCORE_POINTS = 1_000_000
-"""The range of ``surface_score_points``: a million points is 24 MB and about 1.5 s of CPU a view."""
+"""The range of ``surface_score_points``: a million points are 24 MB of coordinates and about ten times the
+default's CPU a view."""
 
 
 @dataclass(frozen=True)
