@@ -5,14 +5,17 @@ same either way (reachability is a pure function of the view and the object box)
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 
 import numpy as np
+import pytest
 
 from devices.builtins import resolve_model
 from devices.config import CameraConfig, CellConfig
 from devices.sim import make_sim_cell
 from tests.helpers import SMALL_CONFIG
 from workbench.workers.child import RenderSpec, _Worker
+from workbench.workers.spare import PAUSES, SpareCore
 
 
 def _worker() -> tuple[_Worker, object]:
@@ -27,6 +30,7 @@ def _worker() -> tuple[_Worker, object]:
         cell.config.plate_thickness,
     )
     worker.setup(spec)
+    worker.warm_share = 0.0  # never pauses: what is checked here is the cache and the hurry, whatever the load
     return worker, cell
 
 
@@ -59,3 +63,76 @@ def test_warm_fills_the_cache_unless_a_job_waits() -> None:
     late.hurry = after_ten
     late.warm(cell.config, cell.joint_positions(), cell.angle, SMALL_CONFIG)  # type: ignore[attr-defined]
     assert 10 <= _attempts(late, cell) < _attempts(idle, cell)
+
+
+class _Machine:
+    """A fake clock and thread CPU time: each step of work takes ``step`` s of wall time, ``share`` of it on CPU."""
+
+    def __init__(self) -> None:
+        self.wall = self.cpu = 0.0
+        self.share = 1.0
+        self.waits: list[float] = []
+
+    def work(self, seconds: float) -> None:
+        self.wall += seconds
+        self.cpu += seconds * self.share
+
+    def wait(self, seconds: float) -> bool:
+        self.waits.append(seconds)
+        self.wall += seconds
+        return False
+
+
+def _spare(machine: _Machine, hurry: Callable[[], bool] = lambda: False) -> SpareCore:
+    return SpareCore(hurry, machine.wait, clock=lambda: machine.wall, cpu=lambda: machine.cpu)
+
+
+def test_spare_core_goes_on_alone_and_pauses_then_gives_up_when_the_cores_are_busy() -> None:
+    machine = _Machine()
+    spare = _spare(machine)
+    for _ in range(100):  # alone on its core: 100 steps of 6 ms, never a pause
+        assert spare.go()
+        machine.work(0.006)
+    assert machine.waits == []
+    machine.share = 0.5  # another busy thread on its core
+    steps = 0
+    while spare.go():
+        machine.work(0.006)
+        steps += 1
+    assert machine.waits == list(PAUSES)  # every pause once, then it stops
+    assert spare.paused_seconds == pytest.approx(sum(PAUSES))
+    assert steps == 4 * (len(PAUSES) + 1)  # a window of work (4 steps of 6 ms) before each measurement
+
+
+def test_spare_core_starts_over_once_it_has_its_core_again() -> None:
+    machine = _Machine()
+    spare = _spare(machine)
+    machine.share = 0.3
+    for _ in range(8):  # two busy windows: two pauses
+        assert spare.go()
+        machine.work(0.006)
+    assert machine.waits == list(PAUSES[:1])
+    assert spare.go()
+    assert machine.waits == list(PAUSES[:2])
+    machine.share = 1.0
+    for _ in range(8):
+        assert spare.go()
+        machine.work(0.006)
+    assert spare.paused == 0 and machine.waits == list(PAUSES[:2])  # the next busy window pauses 50 ms again
+
+
+def test_spare_core_stops_when_a_job_waits_even_mid_pause() -> None:
+    machine = _Machine()
+    waiting = [False]
+    spare = _spare(machine, lambda: waiting[0])
+    assert spare.go()
+    waiting[0] = True
+    assert not spare.go()  # a job waits: no more steps
+
+    machine = _Machine()
+    machine.share = 0.2
+    arrived = SpareCore(lambda: False, lambda seconds: True, clock=lambda: machine.wall, cpu=lambda: machine.cpu)
+    for _ in range(4):
+        assert arrived.go()
+        machine.work(0.006)
+    assert not arrived.go()  # the pause ended because a job arrived: the warm-up ends too

@@ -35,6 +35,7 @@ target of its processes, and the forkserver preloads it so a new worker starts i
 from __future__ import annotations
 
 import contextlib
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
@@ -55,6 +56,7 @@ from workbench.journal.timeline import TimelineStep
 from workbench.planning import plan_in
 from workbench.progress import Throttle
 from workbench.surface.live import LiveSurface
+from workbench.workers.spare import SHARE, SpareCore
 
 WARM_BOX = ((-0.1, -0.1, 0.0), (0.1, 0.1, 0.2))
 """The nominal object box (table frame, m) whose hemisphere a new worker's IK is warmed on: an object of the default
@@ -136,6 +138,12 @@ class _Throttled:
             self.send(progress)
 
 
+def _sleep(seconds: float) -> bool:
+    """A pause with nobody to wake it (a worker outside a process, as in tests): False, no job arrived."""
+    time.sleep(seconds)
+    return False
+
+
 class _Worker:
     def __init__(self) -> None:
         self.camera: Any = None
@@ -146,6 +154,10 @@ class _Worker:
         """What the surface is scored against (the ``truth`` job, once per process), None: not scored."""
         self.hurry: Callable[[], bool] = lambda: False
         """True once a job waits for this process: the warm-up stops where it is (:meth:`warm`)."""
+        self.wait_for_job: Callable[[float], bool] = _sleep
+        """Sleep up to the seconds given; True when a job arrived meanwhile (the warm-up's pauses)."""
+        self.warm_share = SHARE
+        """The share of a core the warm-up must get to go on (:class:`SpareCore`; 0: always)."""
 
     def setup(self, spec: RenderSpec) -> None:
         import trimesh
@@ -189,7 +201,9 @@ class _Worker:
         nominal box (``WARM_BOX``). Reachability is a pure function of the view and the object box, so the plans
         are the same as without it; only the first one is faster. When :attr:`hurry` says a job waits (a capture
         right after the create), the reachability pass stops there: the plan asks the rest itself, and the job is
-        not kept waiting for views the plan may never ask about."""
+        not kept waiting for views the plan may never ask about. It is speculative, so it goes on only while it has
+        a core to itself (:class:`workbench.workers.spare.SpareCore`: it pauses, then gives up, while the machine's
+        other work wants the cores)."""
         import planner.baselines
         import planner.bic_search
         import planner.tour  # noqa: F401
@@ -202,7 +216,8 @@ class _Worker:
             return
         cfg = planner_config if isinstance(planner_config, PlannerConfig) else PlannerConfig()
         box = aim = BoundingBox(np.array(WARM_BOX[0]), np.array(WARM_BOX[1]))
-        if self.hurry():
+        spare = SpareCore(self.hurry, self.wait_for_job, self.warm_share)
+        if not spare.go():
             return
         if self.camera is not None:
             pose = cell.initial_pose()
@@ -215,7 +230,7 @@ class _Worker:
         cell.set_object_box(box)
         try:
             for c in candidates:
-                if self.hurry():
+                if not spare.go():
                     break
                 cell.is_reachable(c.T_world_camera)
         finally:
@@ -287,8 +302,6 @@ class _Worker:
 
             return fit_at_t(*payload)
         if kind == "sleep":  # tests: a job that holds the worker (like a plan that never ends)
-            import time
-
             time.sleep(float(payload))
             return None
         raise ValueError(f"worker: unknown job {kind!r}")
@@ -300,6 +313,7 @@ def serve(conn: Connection, hurry: Any = None) -> None:
     worker = _Worker()
     if hurry is not None:
         worker.hurry = hurry.is_set
+        worker.wait_for_job = hurry.wait
     while True:
         try:
             kind, payload = conn.recv()

@@ -173,15 +173,19 @@ class SessionWorker:
 
         return render
 
+    def _asking(self) -> None:
+        """A job is coming: a process still warming up (start_soon holds the job lock meanwhile) stops doing so."""
+        with self._proc_lock:
+            self._asked = True
+            if self._hurry is not None:
+                self._hurry.set()
+
     def call(
         self, kind: str, payload: Any, budget: float, what: str, on_progress: Callable[[Any], None] | None = None
     ) -> Any:
         """Run one job; its result, or the job's own exception, or JobKilled (budget, cancel, a dead worker).
         ``on_progress`` gets what the job reports on the way (``("progress", value)`` messages)."""
-        with self._proc_lock:  # a process still warming up (start_soon holds the job lock meanwhile) stops doing so
-            self._asked = True
-            if self._hurry is not None:
-                self._hurry.set()
+        self._asking()
         with self._job_lock:
             if self._closed:
                 raise JobKilled(f"{what}: the session is closed")
@@ -234,8 +238,11 @@ class SessionWorker:
         self._kill()
         raise JobKilled(f"{what}: {reason}")
 
-    def start(self) -> None:
-        """Start the process now if it is not running (and ship the render scene); JobKilled if it cannot start."""
+    def start(self, asked: bool = True) -> None:
+        """Start the process now if it is not running (and ship the render scene); JobKilled if it cannot start.
+        ``asked``: a job follows (a capture starts its session's worker first), so a warm-up in progress stops."""
+        if asked:
+            self._asking()
         with self._job_lock:
             if self._closed:
                 raise JobKilled("the session is closed")
@@ -247,7 +254,7 @@ class SessionWorker:
 
         def run() -> None:
             try:
-                self.start()
+                self.start(asked=False)
             except JobKilled as exc:  # the first job will try again and report it
                 if not self._closed:
                     log.warning("session %s: %s", self.name, exc)
