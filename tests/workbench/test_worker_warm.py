@@ -13,8 +13,10 @@ import pytest
 from devices.builtins import resolve_model
 from devices.config import CameraConfig, CellConfig
 from devices.sim import make_sim_cell
-from tests.helpers import SMALL_CONFIG
+from planner import PlannerConfig
+from tests.helpers import SMALL_CONFIG, wait_until
 from workbench.workers.child import RenderSpec, _Worker
+from workbench.workers.pool import Engine
 from workbench.workers.spare import PAUSES, SpareCore
 
 
@@ -136,3 +138,21 @@ def test_spare_core_stops_when_a_job_waits_even_mid_pause() -> None:
         assert arrived.go()
         machine.work(0.006)
     assert not arrived.go()  # the pause ended because a job arrived: the warm-up ends too
+
+
+def test_a_start_that_a_job_follows_asks_the_warm_up_to_stop() -> None:
+    """A capture starts its session's worker first (``SessionWorker.start()``): that says a job follows, so a
+    warm-up in progress stops at once; the create's own start (``start_soon``) lets it run."""
+    _, cell = _worker()
+    engine = Engine()
+    worker = engine.worker("warm-test")
+    worker.warm = (cell.config, cell.joint_positions(), cell.angle, PlannerConfig())  # type: ignore[attr-defined]
+    try:
+        worker.start_soon()  # the default config: 400 candidates to warm, about half a second when idle
+        wait_until(lambda: worker._hurry is not None, 60.0, "the worker process started")
+        assert not worker._hurry.is_set()  # warming up: nobody asked anything yet
+        worker.start()  # returns once the warm-up has stopped (the process was started already)
+        assert worker._hurry.is_set() and worker._asked
+    finally:
+        worker.close()
+        engine.close()
