@@ -24,7 +24,8 @@ and a fresh worker takes up the next job. Jobs:
 - ``("warm", (cell_config, q, angle, planner_config))`` once per process, right after it starts (while the person
   captures): the planning cell's arm model built, the planner's modules imported and the reachability of the
   first plan's candidates cached, so the session's first plan does not pay for them (:meth:`_Worker.warm`); cut
-  short when a job is already waiting for it (the server sets the process's ``hurry`` event);
+  short when a job is already waiting for it (the server sets the process's ``hurry`` event) or when the machine's
+  cores stay busy (workbench/workers/spare.py);
 - ``("fit", (points_world, cluster_config, resolution, kind, t))``: ``(ellipsoids, ClusterFit)`` of one voxel
   kind at exactly T components (``planner.ellipsoids.fit_at_t``: the Fit panel's "fit at another T").
 
