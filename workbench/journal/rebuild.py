@@ -133,7 +133,6 @@ def rebuild(
     if journal.damage is not None:
         dropped.append(f"{journal.damage}: {journal.dropped_lines} line(s) from there on")
     kept = len(journal.events)
-    position = {id(ev): i for i, ev in enumerate(journal.events)}  # an event's place in the whole journal
     events = without_discarded(journal.events)
     heavy = sum(1 for ev in events if ev.get("kind") in HEAVY_KINDS)
     done = 0
@@ -159,7 +158,7 @@ def rebuild(
                 captures[-1].views = tuple(planner.views)
                 captures[-1].cloud = np.array(planner.cloud, dtype=np.float64, copy=True)
         except (ValueError, KeyError, TypeError) as exc:
-            kept = position[id(ev)]
+            kept = next(i for i, e in enumerate(journal.events) if e is ev)  # its place in the whole journal
             rest = len(journal.events) - kept - 1
             dropped.insert(0, f"event {ev.get('seq')} ({ev.get('kind')}): {exc}; it and {rest} later event(s) dropped")
             break
