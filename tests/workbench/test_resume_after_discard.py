@@ -7,20 +7,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from devices.config import CameraConfig, DeviceConfig
+from test_durability_model import CAMERA, TINY
+
+from devices.config import DeviceConfig
 from planner.config import PlannerConfig
 from workbench.journal.discard import without_discarded
 from workbench.journal.store import read_journal, sessions_dir
 from workbench.registry.registry import SessionRegistry
 from workbench.session.session import Session
 from workbench.settings import WorkbenchSettings
-
-TINY = {
-    "voxel": {"resolution": 0.025},
-    "candidates": {"count": 24, "parallels": 3},
-    "cluster": {"t_min": 2, "t_max": 4},
-}
-CAMERA = CameraConfig(width=96, height=72, fx=92.0, fy=92.0, cx=48.0, cy=36.0)
 
 
 def _settings(tmp_path: Path) -> WorkbenchSettings:
