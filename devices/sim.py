@@ -316,18 +316,44 @@ def make_sim_cell(
         seed=int(pose_seed.generate_state(1)[0]),
     )
     cell.errors = errors
-    try:
-        motion = cell.plan_motion(cell.initial_pose())
-    except DeviceError:
+    initial = _initial_move(cell, cell_config)
+    if initial is None:
         return cell  # an unusual geometry: leave the arm where it is until the first move
-    turntable.rotate_to(motion.angle)
+    angle, q, T_base_camera = initial
+    turntable.rotate_to(angle)
     if isinstance(arm, SimulatedJointArm):
-        assert motion.q is not None
-        arm.reset(motion.q)
+        assert q is not None
+        arm.reset(q.copy())
     else:
-        arm.move_to(motion.T_base_camera)
+        arm.move_to(T_base_camera)
     arm.moves = turntable.rotations = 0
     return cell
+
+
+_InitialMove = tuple[float, NDArray[np.float64] | None, Pose]
+_INITIAL_MOVES: dict[CellConfig, _InitialMove | None] = {}
+"""The move to the first view of a new cell, per cell config (:func:`_initial_move`)."""
+INITIAL_MOVES_KEPT = 64
+"""Cell configs whose initial move is remembered (forgotten all at once when full)."""
+
+
+def _initial_move(cell: Cell, cell_config: CellConfig) -> _InitialMove | None:
+    """(plate angle, joints q (n,) or None for the reach sphere, T_base_camera) of the move to the initial view
+    of ``cell``, new and built from ``cell_config``; None when there is none. A pure function of the config (a new
+    cell's arm stands at home, its plate at 0, no object box yet), which every session's create asks again (IK of
+    every plate angle and branch: 20-50 ms with the UR5), so the answer is kept per config for the process."""
+    if cell_config in _INITIAL_MOVES:
+        return _INITIAL_MOVES[cell_config]
+    found: _InitialMove | None
+    try:
+        motion = cell.plan_motion(cell.initial_pose())
+        found = (motion.angle, None if motion.q is None else motion.q.copy(), motion.T_base_camera)
+    except DeviceError:
+        found = None
+    if len(_INITIAL_MOVES) >= INITIAL_MOVES_KEPT:
+        _INITIAL_MOVES.clear()
+    _INITIAL_MOVES[cell_config] = found
+    return found
 
 
 def sim_cell_from_config(config: DeviceConfig) -> tuple[str, trimesh.Trimesh, Cell]:

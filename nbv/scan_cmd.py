@@ -142,7 +142,7 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
     """The body of ``nbv scan`` / ``nbv profile``; returns the JSON written."""
     from devices.config import CameraConfig
     from devices.ply import write_ply
-    from workbench.surface import SurfaceIntegrator, ViewSurfaces, export_bytes, surface_block, surface_config_for
+    from workbench.surface import SurfaceIntegrator, ViewSurfaces, export_bytes, surface_config_for
 
     config = planner_config_from_args(args)
     camera = CameraConfig(depth_noise_std=args.depth_noise, sensor=args.sensor, calibration=args.calibration)
@@ -179,8 +179,8 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
     if scan.reachable_coverage is not None:
         console.print(f"reachable coverage {scan.reachable_coverage:.4f} ({scan.ceiling_seconds:.1f} s)")
     doc = metrics_json(scan, args.planner)
-    surface, doc["surface"] = surface_block(integrator, scan.mesh)
-    for row, fscore in zip(doc["iterations"], per_view.fscores(scan.mesh), strict=True):
+    surface, doc["surface"], fscores = per_view.scored(scan.mesh)
+    for row, fscore in zip(doc["iterations"], fscores, strict=True):
         row["surface_fscore_5mm"] = fscore
     (out / "metrics.json").write_text(json.dumps(doc, indent=2))
     write_ply(out / "cloud.ply", scan.planner.cloud)

@@ -88,19 +88,56 @@ def find_spheres(
     out: list[SphereFit | None] = []
     if len(p) == 0:
         return [None] * len(pred)
-    distances = np.linalg.norm(p[:, None, :] - pred[None, :, :], axis=2)  # (N, K)
+    reach = radius + window
+    # the points inside the box of some prediction's window: every other point is farther than ``reach`` from
+    # every prediction (in no cap), and a box test costs a fraction of the distances to every prediction
+    close = np.flatnonzero(_in_any_box(p, pred, reach))
+    distances = np.linalg.norm(p[close, None, :] - pred[None, :, :], axis=2)  # (M, K)
     nearest = distances.argmin(axis=1)
     for k in range(len(pred)):
-        mask = (nearest == k) & (distances[:, k] < radius + window)
+        mask = (nearest == k) & (distances[:, k] < reach)
         if int(mask.sum()) < MIN_POINTS:
             out.append(None)
             continue
         try:
-            fit = fit_sphere(p[mask], radius, start=pred[k])
-            near = np.linalg.norm(p - fit.centre, axis=1) < radius + TRIM
-            fit = fit_sphere(p[near], radius, start=fit.centre)
+            fit = fit_sphere(p[close[mask]], radius, start=pred[k])
+            fit = fit_sphere(p[_within(p, close, pred[k], reach, fit.centre, radius + TRIM)], radius, start=fit.centre)
         except ValueError:
             out.append(None)
             continue
         out.append(fit if float(np.linalg.norm(fit.centre - pred[k])) < window else None)
     return out
+
+
+def _in_any_box(p: NDArray[np.float64], centres: NDArray[np.float64], half: float) -> NDArray[np.bool_]:
+    """(N,) whether each point of ``p`` (N, 3) lies in the axis-aligned cube of half-side ``half`` about one of
+    ``centres`` (K, 3): the box of them all first, one coordinate at a time, then each cube among those in it."""
+    lo, hi = centres.min(axis=0) - half, centres.max(axis=0) + half
+    candidates = np.flatnonzero((p[:, 2] >= lo[2]) & (p[:, 2] <= hi[2]))
+    for axis in (0, 1):
+        column = p[candidates, axis]
+        candidates = candidates[(column >= lo[axis]) & (column <= hi[axis])]
+    near = p[candidates]
+    inside = np.zeros(len(candidates), dtype=bool)
+    for c in centres:
+        inside |= (np.abs(near - c) <= half).all(axis=1)
+    out = np.zeros(len(p), dtype=bool)
+    out[candidates[inside]] = True
+    return out
+
+
+def _within(
+    p: NDArray[np.float64],
+    close: NDArray[np.intp],
+    window_centre: NDArray[np.float64],
+    reach: float,
+    centre: NDArray[np.float64],
+    limit: float,
+) -> NDArray[np.intp]:
+    """Indices, ascending, of the points of ``p`` (N, 3) nearer than ``limit`` to ``centre``: searched among
+    ``close`` (the points in the cubes of half-side ``reach`` about the predictions) when the ball lies in the cube
+    about ``window_centre``, else among all."""
+    inside = float(np.abs(centre - window_centre).max()) + limit <= reach
+    pool = close if inside else np.arange(len(p))
+    pool = pool[(np.abs(p[pool] - centre) < limit).all(axis=1)]
+    return pool[np.linalg.norm(p[pool] - centre, axis=1) < limit]

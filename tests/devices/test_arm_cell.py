@@ -166,3 +166,24 @@ def test_device_state_brings_a_resumed_cell_to_the_same_joints(l_block) -> None:
     with pytest.raises(ValueError, match=r"^device state: cannot restore"):
         b.restore_device_state({"arm": {"q": [0.0, 1.0], "angle": 0.0}})
     np.testing.assert_array_equal(b.joint_positions(), a.joint_positions())  # nothing half-restored
+
+
+def test_a_new_cell_starts_where_its_own_config_says_and_the_kept_move_is_the_one_it_plans(l_block) -> None:
+    """make_sim_cell keeps the initial move per cell config (every session's create asks it): a cell built from
+    the kept answer stands where one planned afresh stands, and another initial view gets its own move."""
+    from devices import sim
+    from devices.config import CellConfig
+
+    other = CellConfig(initial_azimuth_deg=90.0, initial_elevation_deg=45.0)
+    kept = make_sim_cell(l_block), make_sim_cell(l_block, cell_config=other)  # the answers are kept by now
+    sim._INITIAL_MOVES.clear()
+    fresh = make_sim_cell(l_block), make_sim_cell(l_block, cell_config=other)  # planned again
+    assert len(sim._INITIAL_MOVES) == 2
+    for a, b in zip(kept, fresh, strict=True):
+        np.testing.assert_array_equal(a.joint_positions(), b.joint_positions())
+        assert a.angle == b.angle and a.arm.moves == 0 and a.turntable.rotations == 0
+        start = a.initial_pose()
+        assert np.linalg.norm(a.pose.translation - start.translation) < 1e-3
+    assert np.linalg.norm(kept[0].pose.translation - kept[1].pose.translation) > 0.1
+    kept[0].move_to(view(40, 100))  # a cell's own moves leave the kept answer alone
+    np.testing.assert_array_equal(make_sim_cell(l_block).joint_positions(), fresh[0].joint_positions())

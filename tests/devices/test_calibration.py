@@ -15,9 +15,11 @@ from devices.calibration import (
     CalibrationError,
     Capture,
     ErrorBudget,
+    SphereFit,
     axis_error,
     calibrated_cell_text,
     estimate,
+    find_spheres,
     fit_sphere,
     pose_error,
     write_calibration,
@@ -256,3 +258,63 @@ def test_a_bad_cell_file_is_refused_and_left_alone(tmp_path: Path) -> None:
     with pytest.raises(ValueError):
         write_calibration(path, _result())
     assert path.read_text() == bad and sorted(p.name for p in tmp_path.iterdir()) == ["cell.toml"]
+
+
+def _cap(centre: np.ndarray, radius: float, rng: np.random.Generator, n: int = 3000) -> np.ndarray:
+    """(~n, 3) noisy points of the cap of a sphere that a camera at the origin sees."""
+    d = rng.normal(size=(4 * n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d = d[d @ (-centre / np.linalg.norm(centre)) > 0.3][:n]
+    return centre + radius * d + rng.normal(0.0, 0.0004, (len(d), 3))
+
+
+def _find_spheres_over_every_point(
+    p: np.ndarray, pred: np.ndarray, radius: float, window: float = 0.03
+) -> list[SphereFit | None]:
+    """find_spheres as it was written first: the distances of every point to every prediction."""
+    from devices.calibration.spheres import MIN_POINTS, TRIM
+
+    distances = np.linalg.norm(p[:, None, :] - pred[None, :, :], axis=2)
+    nearest = distances.argmin(axis=1)
+    out: list[SphereFit | None] = []
+    for k in range(len(pred)):
+        mask = (nearest == k) & (distances[:, k] < radius + window)
+        if int(mask.sum()) < MIN_POINTS:
+            out.append(None)
+            continue
+        try:
+            fit = fit_sphere(p[mask], radius, start=pred[k])
+            fit = fit_sphere(p[np.linalg.norm(p - fit.centre, axis=1) < radius + TRIM], radius, start=fit.centre)
+        except ValueError:
+            out.append(None)
+            continue
+        out.append(fit if float(np.linalg.norm(fit.centre - pred[k])) < window else None)
+    return out
+
+
+def test_find_spheres_searches_near_the_predictions_and_finds_what_every_point_would() -> None:
+    """find_spheres looks only at the points in the boxes of the predictions' windows (and at every point when a
+    fit lands near a window's edge): the same fits, to the bit, as distances over every point of the frame."""
+    rng = np.random.default_rng(11)
+    radius = 0.02
+    truth = np.array([[0.05, 0.0, 0.5], [-0.06, 0.02, 0.52], [0.0, -0.07, 0.48], [0.12, 0.1, 0.6]])
+    shift = np.array([[0.002, -0.001, 0.001], [0.0, 0.0, 0.0], [0.0285, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    # sphere 3's prediction lies 2.85 cm from it along x: its fit lands near the window's edge, and the points of a
+    # post 2.25 cm from its centre on the far side (within the second fit's reach) lie outside the prediction's box
+    # (the search over all points); sphere 4 is not in the frame (None); a plate behind and a post below sphere 1
+    plate = np.column_stack([rng.uniform(-0.3, 0.3, 60000), rng.uniform(-0.2, 0.2, 60000), np.full(60000, 0.7)])
+    post = np.column_stack(
+        [rng.uniform(0.045, 0.055, 2000), rng.uniform(0.02, 0.2, 2000), rng.uniform(0.49, 0.5, 2000)]
+    )
+    far = truth[2] + np.column_stack([np.full(300, -0.0225), rng.uniform(-0.002, 0.002, (300, 2))])
+    p = np.vstack([plate, post, far, *(_cap(c, radius, rng) for c in truth[:3])])
+    p = p[rng.permutation(len(p))]
+    pred = truth + shift
+    got = find_spheres(p, pred, radius)
+    want = _find_spheres_over_every_point(p, pred, radius)
+    assert [g is None for g in got] == [w is None for w in want] == [False, False, False, True]
+    for g, w, c in zip(got[:3], want[:3], truth[:3], strict=True):
+        assert g is not None and w is not None
+        assert np.array_equal(g.centre, w.centre) and g.rms == w.rms and g.points == w.points
+        assert np.linalg.norm(g.centre - c) < 5e-4
+    assert find_spheres(np.zeros((0, 3)), pred, radius) == [None] * 4

@@ -1,5 +1,5 @@
 """The ``surface`` block of a scan's metrics.json: the final surface's accuracy, size and time; and the surface
-after each view (:class:`ViewSurfaces`), scored once the ground truth is known (:meth:`ViewSurfaces.fscores`)."""
+after each view (:class:`ViewSurfaces`), scored once the ground truth is known (:meth:`ViewSurfaces.scored`)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from numpy.typing import ArrayLike
 from planner import DepthFrame
 from workbench.surface.integrator import SurfaceIntegrator
 from workbench.surface.mesh import SurfaceError, SurfaceMesh
-from workbench.surface.scoring import ground_truth, surface_accuracy
+from workbench.surface.scoring import Truth, ground_truth, surface_accuracy
 
 SCORES = ("fscore_2mm", "fscore_5mm", "precision_5mm", "recall_5mm", "chamfer_mm")
 """The accuracy fields of the block (None without a ground truth)."""
@@ -20,7 +20,7 @@ SCORES = ("fscore_2mm", "fscore_5mm", "precision_5mm", "recall_5mm", "chamfer_mm
 
 def surface_block(
     integrator: SurfaceIntegrator,
-    ground_truth: trimesh.Trimesh | None,
+    ground_truth: Truth | None,
     ground_truth_samples: ArrayLike | None = None,
 ) -> tuple[SurfaceMesh | None, dict[str, Any]]:
     """(the final surface, its block) after a scan fed every frame to ``integrator``.
@@ -60,8 +60,11 @@ class ViewSurfaces:
         except SurfaceError:
             self.meshes.append(None)
 
-    def fscores(self, truth: trimesh.Trimesh, samples: ArrayLike | None = None) -> list[float | None]:
-        """F@5mm of each view's surface against ``truth`` (with its ``samples``, default those of
-        :func:`surface_block`: the last equals the block's ``fscore_5mm``), None for a view with no surface."""
-        reference = ground_truth(truth, samples)
-        return [None if m is None else surface_accuracy(m, reference).fscore_5mm for m in self.meshes]
+    def scored(self, truth: trimesh.Trimesh) -> tuple[SurfaceMesh | None, dict[str, Any], list[float | None]]:
+        """(the final surface, its :func:`surface_block` against ``truth``, F@5mm of each view's surface: None for a
+        view with no surface). The truth is sampled once, and the last view's surface, which is the final one, is
+        scored once: its F@5mm is the block's."""
+        reference = ground_truth(truth)
+        surface, block = surface_block(self.integrator, reference)
+        earlier = [None if m is None else surface_accuracy(m, reference).fscore_5mm for m in self.meshes[:-1]]
+        return surface, block, [*earlier, block["fscore_5mm"]] if self.meshes else []
