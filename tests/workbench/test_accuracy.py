@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from workbench.evaluation import GroundTruth, accuracy, fscore
+from workbench.evaluation import GroundTruth, accuracy, coverage, coverage_and_accuracy, fscore
 
 
 @pytest.fixture(scope="module")
@@ -81,3 +81,24 @@ def test_the_recall_query_in_spatial_order_gives_each_sample_its_own_distance(
     acc = accuracy(truth, cloud)
     assert acc.recall_5mm == float(np.mean(got <= 0.005))
     assert acc.chamfer_mm == pytest.approx((truth.distance(cloud).mean() + got.mean()) / 2 * 1000, rel=1e-12)
+
+
+def test_coverage_taken_from_the_recall_is_the_coverage_to_the_bit(cube: tuple[trimesh.Trimesh, GroundTruth]) -> None:
+    """A view asks coverage and accuracy of one cloud: with the truth's own samples the coverage is the recall at
+    5 mm, equal to what coverage() measures on its own, for partial, noisy and offset clouds; other samples are
+    measured by coverage(); each is None without its input."""
+    mesh, truth = cube
+    rng = np.random.default_rng(4)
+    for k in range(8):
+        cloud, _ = trimesh.sample.sample_surface_even(mesh, 30_000, seed=k)
+        cloud = np.asarray(cloud)[np.asarray(cloud)[:, k % 3] > rng.uniform(-0.05, 0.05)]  # a partial view
+        cloud = cloud + rng.normal(0.0, 0.001 * k, cloud.shape) + rng.uniform(-0.004, 0.004, 3)
+        cov, acc = coverage_and_accuracy(truth.samples.copy(), truth, cloud)
+        assert acc == accuracy(truth, cloud)
+        assert cov == coverage(truth.samples, cloud) == acc.recall_5mm
+        assert 0.0 < cov < 1.0
+    other = truth.samples[:5000] + 0.003  # not the truth's samples: measured on its own
+    cov, acc = coverage_and_accuracy(other, truth, cloud)
+    assert acc is not None and cov == coverage(other, cloud) and cov != acc.recall_5mm
+    assert coverage_and_accuracy(None, truth, cloud)[0] is None
+    assert coverage_and_accuracy(other, None, cloud) == (coverage(other, cloud), None)

@@ -1,6 +1,7 @@
 """How good a scan is, measured against a ground truth, and the headless scan the bench and ``nbv scan`` run.
 
-- accuracy.py: GroundTruth, Accuracy, accuracy: precision, recall and F at 2 and 5 mm, distances, chamfer;
+- accuracy.py: GroundTruth, Accuracy, accuracy: precision, recall and F at 2 and 5 mm, distances, chamfer; the
+  coverage taken from the recall when both are asked of one cloud (coverage_and_accuracy);
 - coverage.py: ground-truth coverage (the fraction of surface samples a cloud point is near);
 - curves.py: coverage against the ceiling per view, its area, views-to-X, robot time to X, means and paired
   comparisons;
@@ -14,7 +15,15 @@
 - executors.py: running many of them, in local processes (forkserver) or on a Dask cluster.
 """
 
-from workbench.evaluation.accuracy import ACCURACY_COLUMNS, TAUS_MM, Accuracy, GroundTruth, accuracy, fscore
+from workbench.evaluation.accuracy import (
+    ACCURACY_COLUMNS,
+    TAUS_MM,
+    Accuracy,
+    GroundTruth,
+    accuracy,
+    coverage_and_accuracy,
+    fscore,
+)
 from workbench.evaluation.ceiling import DEFAULT_CEILING, CeilingConfig
 from workbench.evaluation.coverage import coverage
 from workbench.evaluation.curves import (
@@ -71,6 +80,7 @@ __all__ = [
     "cached_ceiling",
     "ceiling_mask",
     "coverage",
+    "coverage_and_accuracy",
     "cumulative_seconds",
     "execute",
     "final_accuracy",

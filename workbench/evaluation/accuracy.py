@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import KDTree
 
-from workbench.evaluation.coverage import as_points
+from workbench.evaluation.coverage import as_points, coverage
 
 TAUS_MM = (2, 5)
 """The distances at which precision, recall and F are reported, millimetres."""
@@ -158,3 +158,24 @@ def accuracy(truth: GroundTruth, cloud: ArrayLike) -> Accuracy:
         chamfer_mm=float((to_surface.mean() + to_cloud.mean()) / 2 * 1000),
         points=len(p),
     )
+
+
+def coverage_and_accuracy(
+    surface_samples: ArrayLike | None, truth: GroundTruth | None, cloud: ArrayLike
+) -> tuple[float | None, Accuracy | None]:
+    """(:func:`workbench.evaluation.coverage` of ``cloud`` (N, 3) over ``surface_samples`` (M, 3), its
+    :func:`accuracy` against ``truth``), each None without its input. When the truth's samples are the coverage's,
+    the coverage is the accuracy's recall at 5 mm (the same nearest-neighbour distances, the same 5 mm): one
+    KD-tree query of the samples instead of two, the same value to the bit."""
+    scores = None if truth is None else accuracy(truth, cloud)
+    if surface_samples is None:
+        return None, scores
+    samples = np.asarray(surface_samples, dtype=np.float64)
+    if (
+        truth is not None
+        and scores is not None
+        and samples.shape == truth.samples.shape
+        and np.array_equal(samples, truth.samples)
+    ):
+        return scores.recall_5mm, scores
+    return float(coverage(samples, cloud)), scores

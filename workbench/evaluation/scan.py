@@ -16,8 +16,7 @@ from numpy.typing import NDArray
 
 from planner import DepthFrame, Planner, PlanResult, Pose
 from planner.planner import IntegrationReport
-from workbench.evaluation.accuracy import ACCURACY_COLUMNS, GroundTruth, accuracy
-from workbench.evaluation.coverage import coverage
+from workbench.evaluation.accuracy import ACCURACY_COLUMNS, GroundTruth, coverage_and_accuracy
 from workbench.planning import plan_in
 from workbench.session.summaries import voxel_counts
 
@@ -240,13 +239,13 @@ def run_scan(
         cpu0 = time.process_time()
         plan = plan_in(cell, planner)
         plan_cpu_seconds = time.process_time() - cpu0
-        cov = coverage(surface_samples, planner.cloud) if surface_samples is not None else None
+        cov, measured = coverage_and_accuracy(surface_samples, truth, planner.cloud)
         record = make_record(report, plan, voxel_counts(planner), cov)
         record.capture_seconds = capture_seconds
         record.plan_cpu_seconds = plan_cpu_seconds
         record.refused_moves = refused
-        if truth is not None:
-            record.accuracy = accuracy(truth, planner.cloud).to_json()
+        if measured is not None:
+            record.accuracy = measured.to_json()
         to_json = getattr(motion, "to_json", None)
         record.move = cast(dict[str, Any], to_json()) if callable(to_json) else None
         records.append(record)

@@ -25,8 +25,7 @@ from devices.timeout import DeviceTimeoutError, call_with_timeout
 from planner import DepthFrame, Planner, Pose, VoxelClass
 from planner.planner import IntegrationReport
 from workbench.errors import DeviceFault, Unreachable, WorkbenchError
-from workbench.evaluation.accuracy import GroundTruth, accuracy
-from workbench.evaluation.coverage import coverage
+from workbench.evaluation.accuracy import GroundTruth, coverage_and_accuracy
 from workbench.journal.store import JournalWriter
 from workbench.journal.surface import in_step
 from workbench.session.summaries import voxel_counts
@@ -132,8 +131,8 @@ class ViewStep:
             if stored is not None:
                 self.discard_frame(stored[0])
             raise
-        cov = None if self.surface_samples is None else float(coverage(self.surface_samples, after.cloud))
-        scores = None if self.truth is None else accuracy(self.truth, after.cloud).to_json()
+        cov, measured = coverage_and_accuracy(self.surface_samples, self.truth, after.cloud)
+        scores = None if measured is None else measured.to_json()
         occupied = after.voxel_map.centers(VoxelClass.OCCUPIED)
         return ViewOutcome(
             frame,
