@@ -210,6 +210,17 @@ class Durability(RuleBasedStateMachine):
         for sid in self.dormant_ids:
             self._resume(sid)
 
+    @precondition(lambda self: any(self.views[sid] for sid in self.live))
+    @rule(data=st.data(), abrupt=st.booleans())
+    def discard_then_restart_twice(self, data: st.DataObject, abrupt: bool) -> None:
+        """A discard, then two restarts each followed by a resume of every session: what a resume writes must keep
+        the discard (a resume once cut it off the journal, and the discarded view was back after the next restart)."""
+        sid = data.draw(st.sampled_from([sid for sid in self.live_ids if self.views[sid]]))
+        if self._try(self.registry.get(sid).discard_last_view) is not None:
+            self.views[sid].pop()
+        self.restart_and_resume_all(abrupt)
+        self.restart_and_resume_all(abrupt)
+
     @precondition(lambda self: set(self.views) - self.live)
     @rule(data=st.data())
     def resume(self, data: st.DataObject) -> None:
