@@ -269,6 +269,22 @@ def test_surface_block_of_a_scan(box: trimesh.Trimesh, box_frames, box_surface: 
     assert nothing is None and failed["triangles"] == 0 and "empty surface" in failed["error"]
 
 
+def test_each_views_surface_is_scored_and_the_last_is_the_blocks(box: trimesh.Trimesh, box_frames) -> None:
+    """nbv scan's per-view F@5mm (ViewSurfaces.scored): each view's surface against the truth sampled once; the
+    last view's surface is the final one, scored once: its F@5mm is the block's."""
+    from workbench.surface import ViewSurfaces
+
+    views = ViewSurfaces(SurfaceIntegrator())
+    for frame in box_frames[:3]:
+        views.add(frame)
+    surface, block, fscores = views.scored(box)
+    each = [surface_accuracy(m, box).fscore_5mm for m in views.meshes if m is not None]
+    assert len(fscores) == 3 and fscores == each and fscores[-1] == block["fscore_5mm"]
+    assert surface == views.meshes[-1] and block["frames"] == 3
+    assert 0.0 < fscores[0] < fscores[-1] <= 1.0  # the surface grows with the views
+    assert ViewSurfaces(SurfaceIntegrator()).scored(box)[2] == []
+
+
 def test_the_layer_fits_its_budget_fast_and_keeps_the_shape(box_surface: SurfaceMesh) -> None:
     from workbench.surface import layer_mesh
 
