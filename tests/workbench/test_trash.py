@@ -59,3 +59,26 @@ def test_delete_moves_the_frames_out_and_the_limit_removes_them(tmp_path: Path) 
         assert entry.session_id == session.id and (entry.path / JOURNAL_FILE).is_file()
     finally:
         registry.close()
+
+
+def test_each_entry_is_measured_once_and_forgotten_when_it_leaves(tmp_path: Path, monkeypatch) -> None:
+    """A delete prunes the trash: the sizes of what was there already are kept (a trash entry is not written
+    again), so the n-th delete walks one folder, not n; an entry that left is forgotten, and the totals are those
+    of a fresh walk."""
+    from workbench.journal import trash
+
+    walked: list[str] = []
+    size = trash._size
+    monkeypatch.setattr(trash, "_size", lambda path: walked.append(path.name[:8]) or size(path))
+    for i, sid in enumerate(["0000001a", "0000001b", "0000001c"]):
+        move_to_trash(fake_session(tmp_path, sid, 1000 * (i + 1)))
+        prune(tmp_path, max_bytes=10**9, max_age=3600)
+        time.sleep(0.002)
+    assert walked == ["0000001a", "0000001b", "0000001c"]
+    assert [e.size for e in entries(tmp_path)] == [size(e.path) for e in entries(tmp_path)]
+    assert [e.size - 1000 * (i + 1) for i, e in enumerate(entries(tmp_path))] == [3] * 3  # the frame + "{}\n"
+    removed = prune(tmp_path, max_bytes=6000, max_age=3600)  # 6,009 bytes: the oldest goes
+    assert [e.session_id for e in removed] == ["0000001a"]
+    assert {p.name[:8] for p in trash._SIZES if p.parent == trash_dir(tmp_path)} == {"0000001b", "0000001c"}
+    move_to_trash(fake_session(tmp_path, "0000001a", 10))  # the same session id again: a new entry, walked
+    assert [e.size for e in entries(tmp_path)] == [2003, 3003, 13] and walked[-1] == "0000001a"

@@ -14,6 +14,7 @@ import logging
 import os
 import re
 import shutil
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -59,6 +60,13 @@ def _size(path: Path) -> int:
     return total
 
 
+_SIZES: dict[Path, int] = {}
+"""The size of each trash entry measured so far: a session's folder is not written again once it is in the trash,
+so each entry is walked once, not at every delete (a server that deleted n sessions walked n folders at the
+n-th: 1.3 s of CPU over the 174 deletes of the API's config fuzz test)."""
+_SIZES_LOCK = threading.Lock()
+
+
 def entries(data_dir: Path) -> list[TrashEntry]:
     """What is in the trash, oldest deletion first (names that are not ``<id>-<ns>`` folders are ignored)."""
     root = trash_dir(data_dir)
@@ -68,8 +76,22 @@ def entries(data_dir: Path) -> list[TrashEntry]:
     for path in root.iterdir():
         match = _ENTRY.match(path.name)
         if match and path.is_dir() and not path.is_symlink():
-            found.append(TrashEntry(path, match.group(1), int(match.group(2)) / 1e9, _size(path)))
+            found.append(TrashEntry(path, match.group(1), int(match.group(2)) / 1e9, _entry_size(path)))
+    with _SIZES_LOCK:  # forget the entries of this trash that are gone
+        listed = {e.path for e in found}
+        for path in [p for p in _SIZES if p.parent == root and p not in listed]:
+            del _SIZES[path]
     return sorted(found, key=lambda e: e.deleted)
+
+
+def _entry_size(path: Path) -> int:
+    with _SIZES_LOCK:
+        size = _SIZES.get(path)
+    if size is None:
+        size = _size(path)
+        with _SIZES_LOCK:
+            _SIZES[path] = size
+    return size
 
 
 def prune(data_dir: Path, max_bytes: int, max_age: float, now: float | None = None) -> list[TrashEntry]:
@@ -86,5 +108,7 @@ def prune(data_dir: Path, max_bytes: int, max_age: float, now: float | None = No
         removed.append(oldest)
     for entry in removed:
         shutil.rmtree(entry.path, ignore_errors=True)
+        with _SIZES_LOCK:
+            _SIZES.pop(entry.path, None)
         log.info("trash: removed session %s (%d bytes)", entry.session_id, entry.size)
     return removed
