@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import trimesh
@@ -333,6 +333,7 @@ def make_sim_cell(
 _InitialMove = tuple[float, NDArray[np.float64] | None, Pose]
 _INITIAL_MOVES: dict[CellConfig, _InitialMove | None] = {}
 """The move to the first view of a new cell, per cell config (:func:`_initial_move`)."""
+_UNKNOWN = object()
 INITIAL_MOVES_KEPT = 64
 """Cell configs whose initial move is remembered (forgotten all at once when full)."""
 
@@ -342,8 +343,9 @@ def _initial_move(cell: Cell, cell_config: CellConfig) -> _InitialMove | None:
     of ``cell``, new and built from ``cell_config``; None when there is none. A pure function of the config (a new
     cell's arm stands at home, its plate at 0, no object box yet), which every session's create asks again (IK of
     every plate angle and branch: 20-50 ms with the UR5), so the answer is kept per config for the process."""
-    if cell_config in _INITIAL_MOVES:
-        return _INITIAL_MOVES[cell_config]
+    kept = _INITIAL_MOVES.get(cell_config, _UNKNOWN)  # one lookup: another thread may clear the dict meanwhile
+    if kept is not _UNKNOWN:
+        return cast("_InitialMove | None", kept)
     found: _InitialMove | None
     try:
         motion = cell.plan_motion(cell.initial_pose())
