@@ -211,11 +211,11 @@ class RobotScene:
         self._thread = None
 
     def remove(self) -> None:
-        """Remove every node of the arm from the scene."""
+        """Remove every node of the arm from the scene: the two top frames, and with them (viser removes a node's
+        descendants) the URDF's links and meshes drawn under them. ``ViserUrdf.remove`` would remove each joint
+        frame and then each mesh, which the frames had taken along already: a warning per mesh."""
         self.stop()
         self.show_path(None)
-        self._arm.remove()
-        self._ghost.remove()
         for frame in self._frames.values():
             frame.remove()
 

@@ -200,3 +200,28 @@ def test_a_custom_pose_gets_the_ghost_or_its_reason(scene_client: TestClient, pl
         assert not {"/robot/ghost", "/robot/path"} & set(nodes(scene_client, vid))
     finally:
         raw.ws.close()
+
+
+def test_deleting_the_session_takes_the_whole_arm_out_of_its_tabs_without_warnings(
+    scene_client: TestClient, planned_session
+) -> None:
+    """A deleted session's tabs lose every /robot node (the arm, the ghost, their links and meshes) with one removal
+    per top frame: viser removes a node's descendants, so removing each URDF mesh after its frame warned once per
+    mesh (62 warnings in a suite run)."""
+    import warnings
+
+    sid, _ = planned_session(scene_client)
+    vid, raw = connect(scene_client, sid)
+    try:
+        viewer = scene_client.app.state.scene.viewer(vid)  # type: ignore[attr-defined]
+        scene = viewer.client.scene
+        drawn = [name for name in scene._handle_from_node_name if name.startswith("/robot/")]
+        assert len(drawn) > 20 and any(name.startswith("/robot/ghost/") for name in drawn)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            assert scene_client.delete(f"/api/sessions/{sid}").status_code == 204
+        assert [str(w.message) for w in caught if "removed node" in str(w.message)] == []
+        assert [name for name in scene._handle_from_node_name if name.startswith("/robot/")] == []
+        assert not any(n.startswith("/robot/") for n in nodes(scene_client, vid))
+    finally:
+        raw.close()
