@@ -156,3 +156,48 @@ def test_a_start_that_a_job_follows_asks_the_warm_up_to_stop() -> None:
     finally:
         worker.close()
         engine.close()
+
+
+class _ClosesOnPickling:
+    """A setup spec whose pickling closes its worker first: a session deleted (on another thread) while its new
+    worker's start sends the setup jobs, made deterministic."""
+
+    def __init__(self, worker: object) -> None:
+        self.worker = worker
+
+    def __reduce__(self) -> tuple[type, tuple[None]]:
+        self.worker.close()  # type: ignore[attr-defined]
+        return (_ClosesOnPickling, (None,))
+
+
+def test_a_session_deleted_while_its_worker_starts_ends_the_start_quietly(caplog: pytest.LogCaptureFixture) -> None:
+    """The create's background start (start_soon) sends the setup jobs while a delete closes the worker: the pipe
+    is closed under the send (multiprocessing writes to a handle that is None: TypeError). The start ends with
+    JobKilled("the session is closed"), no process is left, and the background thread raises nothing."""
+    from workbench.workers.client import JobKilled
+
+    engine = Engine()
+    try:
+        worker = engine.worker("closing")
+        worker.render_spec = _ClosesOnPickling(worker)  # type: ignore[assignment]
+        with pytest.raises(JobKilled, match="the session is closed"):
+            worker.start(asked=False)
+        assert worker._proc is None and worker._conn is None
+        other = engine.worker("closing-soon")
+        other.render_spec = _ClosesOnPickling(other)  # type: ignore[assignment]
+        errors: list[BaseException] = []
+        previous = threading.excepthook
+        threading.excepthook = lambda args: errors.append(args.exc_value)  # type: ignore[assignment]
+        try:
+            other.start_soon()
+            wait_until(lambda: other._closed and other._proc is None, 60.0, "the start ended")
+            wait_until(
+                lambda: not any(t.name == "nbv-start-closing-soon" for t in threading.enumerate()),
+                30.0,
+                "the start thread ended",
+            )
+        finally:
+            threading.excepthook = previous
+        assert errors == []
+    finally:
+        engine.close()

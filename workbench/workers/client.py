@@ -288,8 +288,12 @@ class SessionWorker:
                 if not parent.poll(SETUP_TIMEOUT):
                     raise OSError(f"no answer within {SETUP_TIMEOUT:g} s")
                 status, result = parent.recv()
-            except (EOFError, OSError) as exc:
+            except (EOFError, OSError, TypeError, ValueError) as exc:
+                # TypeError / ValueError: the pipe was closed under the send (the session deleted meanwhile, from
+                # another thread: multiprocessing then writes to a handle that is None), or a spec that does not pickle
                 self._kill()
+                if self._closed:
+                    raise JobKilled("the session is closed") from None
                 raise JobKilled(f"the worker process did not start ({exc or proc.exitcode})") from None
             if status == "error":
                 self._kill()
