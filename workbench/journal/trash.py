@@ -61,9 +61,10 @@ def _size(path: Path) -> int:
 
 
 _SIZES: dict[Path, int] = {}
-"""The size of each trash entry measured so far: a session's folder is not written again once it is in the trash,
-so each entry is walked once, not at every delete (a server that deleted n sessions walked n folders at the
-n-th: 1.3 s of CPU over the 174 deletes of the API's config fuzz test)."""
+"""The size of each trash entry measured so far: a session's folder is not written again once it is in the trash
+(a frame already being written at the delete may still land: the size is then short by it until the server
+restarts), so each entry is walked once, not at every delete (a server that deleted n sessions walked n folders
+at the n-th: 1.3 s of CPU over the 174 deletes of the API's config fuzz test)."""
 _SIZES_LOCK = threading.Lock()
 
 
