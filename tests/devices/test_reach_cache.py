@@ -32,6 +32,7 @@ def pair() -> tuple[ArmKinematics, ArmKinematics]:
     reference = ArmKinematics(ArmConfig(), plate_radius=0.2, plate_thickness=0.02)
     reference.reach.use_attempt_cache = False
     reference.use_sweep_test = False
+    reference.reach._anchors = {}  # its own IK anchors too, solved afresh (the cells of one arm share theirs)
     return cached, reference
 
 
@@ -94,3 +95,35 @@ def test_seconds_between_is_move_estimate_for_every_pair(pair) -> None:
         for j in range(5):
             assert m[i, j] == pytest.approx(reach.move_estimate(q[i], q[j], angles[i], angles[j]), rel=1e-12)
     assert np.all(np.diag(m) == 0) and np.all(m[~np.eye(5, dtype=bool)] > 0)
+
+
+def test_the_cells_of_one_arm_share_their_ik_anchors_and_find_the_same_targets() -> None:
+    """A new cell of an arm finds the IK anchors the earlier cells of that arm solved (one dict per arm, plate and
+    home in the process) and reaches the same verdicts and targets (reachability and the move's best target) as a
+    cell that solves every anchor itself; another plate has anchors of its own."""
+    first = ArmKinematics(ArmConfig(), plate_radius=0.2, plate_thickness=0.02)
+    poses = hemisphere(BOX, step=7)
+    first.set_object_box(BOX.lower, BOX.upper)
+    q0 = first.home
+    want = [first.reachability(T, q0, 0.0) for T in poses]
+    solved = len(first.reach._anchors)  # with the anchors of the cells built before in this process
+    second = ArmKinematics(ArmConfig(), plate_radius=0.2, plate_thickness=0.02)
+    alone = ArmKinematics(ArmConfig(), plate_radius=0.2, plate_thickness=0.02)
+    alone.reach._anchors = {}
+    assert second.reach._anchors is first.reach._anchors
+    for kin in (second, alone):
+        kin.set_object_box(BOX.lower, BOX.upper)
+        assert [kin.reachability(T, q0, 0.0) for T in poses] == want
+    assert len(first.reach._anchors) == solved  # the second cell had nothing new to solve
+    shared = first.reach._anchors
+    assert alone.reach._anchors.keys() <= shared.keys() and len(alone.reach._anchors) > 10
+    for key, anchor in alone.reach._anchors.items():  # and what the lone cell solved is what is shared
+        assert (anchor is None and shared[key] is None) or np.array_equal(anchor, shared[key])
+    for T in poses[::3]:
+        a, _ = second.reach.best_target(T, q0 + 0.2, 0.3)
+        b, _ = alone.reach.best_target(T, q0 + 0.2, 0.3)
+        assert (a is None) == (b is None)
+        if a is not None and b is not None:
+            assert a.angle == b.angle and np.array_equal(a.q, b.q) and a.move_estimate == b.move_estimate
+    other_plate = ArmKinematics(ArmConfig(), plate_radius=0.2, plate_thickness=0.03)
+    assert other_plate.reach._anchors is not first.reach._anchors
