@@ -164,9 +164,11 @@ class ArmReach:
     def _shared_anchors(self) -> _Anchors:
         """The IK anchors (:meth:`_anchor`) of every cell of this (arm, plate, home) in the process, shared as the
         seed library is: each anchor is a pure function of its grid cell, the arm model, the library and home, so a
-        new session's cell finds the anchors earlier sessions solved (a first plan's CPU about halves: 0.13 ->
-        0.07 s, mug, the tests' small config; the same plans). A world that already holds an object box has a
-        library of its own, and anchors of its own."""
+        cell that plans views an earlier cell of the process planned (a bench's runs of one model and placement, a
+        server's sessions of one object, their moves) finds their anchors: such a plan's CPU about halves (0.13 ->
+        0.07 s, mug, the tests' small config; the same plans). A session's worker process starts with none (anchors
+        of a nominal hemisphere solved in the forkserver were tried: no plan used one). A world that already holds
+        an object box has a library of its own, and anchors of its own."""
         if self.world.box is not None:
             return {}
         key = (id(self.arm), self.world.plate, self.home.tobytes())
