@@ -57,9 +57,18 @@ def test_devices_check_prints_one_ok_line_per_device(cell, capsys):
     assert ("stopScript",) in controller.calls  # each device was closed after its check
 
 
+def silent_turntable(path: Path, grbl: FakeGrbl) -> None:
+    """Make the cell's GRBL silent, and the cell file wait 0.5 s for its banner instead of the default 3 s: no
+    banner ever comes, so the wait is all the check spends on it (3 s each time, the machine otherwise idle)."""
+    grbl.silent = True
+    text = path.read_text()
+    assert "[devices.turntable]\n" in text
+    path.write_text(text.replace("[devices.turntable]\n", "[devices.turntable]\nstartup_s = 0.5\n"))
+
+
 def test_devices_check_reports_each_failure_and_exits_1(cell, capsys):
     path, _, grbl, controller = cell
-    grbl.silent = True
+    silent_turntable(path, grbl)
     controller.safety_mode = 3  # connecting works; the arm's state is readable even in a protective stop
     assert main(["devices", "check", "--config", str(path)]) == 1
     lines = capsys.readouterr().out.strip().splitlines()
@@ -122,7 +131,7 @@ def test_open_rig_drives_the_cell_and_stop_halts_arm_and_turntable(cell):
 
 def test_open_rig_closes_what_it_opened_when_a_device_fails(cell):
     path, _, grbl, controller = cell
-    grbl.silent = True
+    silent_turntable(path, grbl)
     with pytest.raises(DeviceError, match="no Grbl banner"):
         open_rig(load_cell_file(path))
     assert ("stopScript",) in controller.calls and ("receive.disconnect",) in controller.calls
