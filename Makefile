@@ -9,7 +9,9 @@ HOST    ?= 127.0.0.1
 PORT    ?= 8000
 PYTEST_ARGS ?=
 # three processes on the 2-core machine (the tests wait on browsers, servers and workers: 2 left a third of
-# the CPU idle, 4 oversubscribe it; measured 336 s, 378-455 s, 378 s); tests/conftest.py: a file shares a worker
+# the CPU idle, 4 oversubscribe it; measured 336 s, 378-455 s, 378 s); tests/conftest.py: a file shares a worker,
+# and the groups with a slow or browser test go first (--no-loadscope-reorder keeps that order, where xdist would
+# hand out the groups with the most tests first and end the run on a long single-test file)
 PYTEST_WORKERS ?= 3
 # Plugins by name, not every installed one: pytest rewrites the asserts of every module of a package that has
 # a plugin entry point (dash, 673 files, imported by open3d), on each run when bytecode is not written.
@@ -57,7 +59,7 @@ test: system-deps $(TSTAMP)
 	$(BIN)/ruff check planner devices workbench app nbv tests
 	@mkdir -p test-output
 	@# the log's summary is printed again last: native libraries print at exit after pytest's own summary
-	set -o pipefail; $(TEST_THREADS) PYTEST_DISABLE_PLUGIN_AUTOLOAD=1 $(BIN)/python -m pytest -q -rfE -n $(PYTEST_WORKERS) --dist loadgroup $(PYTEST_ARGS) 2>&1 \
+	set -o pipefail; $(TEST_THREADS) PYTEST_DISABLE_PLUGIN_AUTOLOAD=1 $(BIN)/python -m pytest -q -rfE -n $(PYTEST_WORKERS) --dist loadgroup --no-loadscope-reorder $(PYTEST_ARGS) 2>&1 \
 	  | tee test-output/pytest.log; status=$$?; \
 	  echo "== make test: summary (test-output/pytest.log) =="; \
 	  grep -aE '^(FAILED|ERROR) |[0-9]+ (passed|failed|errors?)\b.* in [0-9.]+s' test-output/pytest.log | tail -n 60; \

@@ -139,6 +139,7 @@ def test_configs_beyond_the_limits_are_refused_at_create(client: TestClient, con
 FUZZ = [-1e308, 1e308, -1, 0, 1e-300, 10**30, -(10**30), 0.5, 3, "1", True, None, [], float("nan"), float("inf")]
 
 
+@pytest.mark.slow
 def test_numeric_fuzz_of_every_config_field_is_2xx_or_4xx_json(client: TestClient) -> None:
     """Every field of BOUNDS with FUZZ values and its own two ends: never a 5xx; accepted values plan safely."""
     seen: dict[int, int] = {}

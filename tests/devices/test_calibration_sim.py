@@ -36,6 +36,7 @@ def test_poses_are_listed_before_anything_moves(routine: Calibration) -> None:
     assert np.allclose(motion.T_base_camera.matrix, routine.poses[0].T_base_camera.matrix, atol=1e-6)
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_poor_calibration_seed_0_is_recovered_within_the_bounds(routine: Calibration) -> None:
     result = routine.run()

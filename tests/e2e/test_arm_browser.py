@@ -7,11 +7,14 @@ from __future__ import annotations
 
 import httpx
 import numpy as np
+import pytest
 from playwright.sync_api import BrowserContext, expect
 
 from tests.e2e.test_workbench_browser import Tab, _state
 from tests.helpers import SMALL
 from tests.servers import LiveServer
+
+pytestmark = pytest.mark.e2e  # tests/conftest.py: the long groups are handed out first
 
 REASONS = ("no_ik", "joint_limit", "collision:", "no_path")
 

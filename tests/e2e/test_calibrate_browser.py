@@ -6,10 +6,13 @@ uncertainty and its error against the simulated truth."""
 from __future__ import annotations
 
 import httpx
+import pytest
 from playwright.sync_api import BrowserContext, expect
 
 from tests.e2e.test_workbench_browser import Tab
 from tests.servers import LiveServer
+
+pytestmark = pytest.mark.e2e  # tests/conftest.py: the long groups are handed out first
 
 
 def test_calibrate_mode_previews_approves_and_shows_residuals_and_the_estimate(

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import httpx
 import numpy as np
+import pytest
 from playwright.sync_api import BrowserContext, expect
 
 from tests.e2e.conftest import draw_viewer
@@ -14,6 +15,8 @@ from tests.e2e.test_workbench_browser import Tab, _state
 from tests.helpers import SMALL
 from tests.servers import LiveServer
 from tests.viewer_buffers import decode_frame_arrays
+
+pytestmark = pytest.mark.e2e  # tests/conftest.py: the long groups are handed out first
 
 
 class _Decoded:

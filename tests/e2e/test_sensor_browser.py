@@ -6,11 +6,14 @@ from __future__ import annotations
 import re
 
 import httpx
+import pytest
 from playwright.sync_api import BrowserContext, expect
 
 from devices.sensors.presets import SENSORS
 from tests.e2e.forms import fill_small_form
 from tests.servers import LiveServer
+
+pytestmark = pytest.mark.e2e  # tests/conftest.py: the long groups are handed out first
 
 
 def test_a_d435_session_from_the_form_charts_precision(

@@ -4,11 +4,14 @@ session's simplified surface to this tab's viewer as the ``/surface`` mesh; the 
 from __future__ import annotations
 
 import httpx
+import pytest
 from playwright.sync_api import BrowserContext, expect
 
 from tests.e2e.test_workbench_browser import Tab, _state
 from tests.helpers import SMALL
 from tests.servers import LiveServer
+
+pytestmark = pytest.mark.e2e  # tests/conftest.py: the long groups are handed out first
 
 
 def test_the_surface_layer_after_two_views(live_server: LiveServer, browser_context: BrowserContext) -> None:

@@ -14,6 +14,7 @@ from typing import Any
 
 import httpx
 import numpy as np
+import pytest
 from PIL import Image
 from playwright.sync_api import BrowserContext, expect
 
@@ -23,6 +24,8 @@ from tests.e2e.test_workbench_browser import Tab, _state
 from tests.helpers import SMALL
 from tests.servers import LiveServer
 from tests.viewer_buffers import decode_frame_arrays
+
+pytestmark = pytest.mark.e2e  # tests/conftest.py: the long groups are handed out first
 
 
 def _scan(api: httpx.Client, views: int) -> tuple[str, dict[int, dict[str, Any]]]:

@@ -7,12 +7,15 @@ from __future__ import annotations
 import itertools
 
 import httpx
+import pytest
 from playwright.sync_api import BrowserContext, expect
 
 from tests.e2e.test_workbench_browser import Tab
 from tests.helpers import SMALL
 from tests.servers import LiveServer
 from tests.viewer_wire import session_nodes
+
+pytestmark = pytest.mark.e2e  # tests/conftest.py: the long groups are handed out first
 
 CONFIG = {**SMALL, "voxel": {"resolution": 0.01}, "tour": {"min_gain": 0.0, "horizon": 4, "lazy_reach": False}}
 """Few candidates (fast), a map fine enough for several views to add frontier, a tour of all of them (up to 4);

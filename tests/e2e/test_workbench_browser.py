@@ -16,12 +16,15 @@ import threading
 from typing import Any
 
 import httpx
+import pytest
 from playwright.sync_api import BrowserContext, Page, expect
 
 from tests.e2e.forms import fill_small_form
 from tests.helpers import SMALL
 from tests.servers import LiveServer
 from tests.viewer_wire import decode_frame, session_labels, session_nodes
+
+pytestmark = pytest.mark.e2e  # tests/conftest.py: the long groups are handed out first
 
 LONG = {**SMALL, "termination": {"max_views": 30, "stop_without_frontier": False}}
 AUTO_STEPS = 6

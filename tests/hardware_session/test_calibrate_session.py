@@ -22,6 +22,7 @@ E = Pose(Rotation.from_rotvec([0.006, -0.009, 0.004]).as_matrix(), np.array([0.0
 """The cell file's hand-eye error: the true camera is at ``T_flange_camera_file @ E``."""
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(400)
 def test_calibrate_on_the_fake_rig_moves_through_the_approved_poses_and_writes_the_cell_file(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]

@@ -26,6 +26,7 @@ E = Pose(Rotation.from_rotvec([-0.007, 0.005, 0.006]).as_matrix(), np.array([-0.
 """The cell file's hand-eye error: the true camera is at ``T_flange_camera_file @ E``."""
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_calibrate_mode_on_the_fake_rig_approves_each_pose_and_writes_the_cell_file(tmp_path: Path) -> None:
     with calibration_rig(tmp_path, E) as (fake, poses):

@@ -119,6 +119,7 @@ def dry_run_scan(tmp: Path, rig: Any) -> tuple[list[Any], list[Pose], float]:
     return frames, poses, float(status["coverage"])
 
 
+@pytest.mark.slow
 def test_supervised_scan_on_hardware_drivers(tmp_path: Path, rig: Any) -> None:
     frames, dry_poses, dry_coverage = dry_run_scan(tmp_path, rig)
     assert len(frames) == VIEWS + 1 and dry_coverage > 0.2

@@ -22,6 +22,7 @@ translation = [-0.85, 0.0, 0.0]
 """
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_sim_json_is_one_object_with_the_errors(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["calibrate", "--sim", "--calibration", "poor", "--seed", "1", "--json"]) == 0

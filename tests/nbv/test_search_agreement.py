@@ -8,9 +8,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 import trimesh
 
 ROOT = Path(__file__).resolve().parents[2]
+pytestmark = pytest.mark.slow  # five Python processes: tests/conftest.py hands the long groups out first
+
 SMALL = "--resolution 0.02 --candidates 60 --t-min 2 --t-max 4"
 
 

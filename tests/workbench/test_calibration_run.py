@@ -35,6 +35,7 @@ def poor(tmp_path_factory: pytest.TempPathFactory) -> Iterator[CalibrationRun]:
     book.close_all()
 
 
+@pytest.mark.slow
 def test_the_workbench_path_recovers_the_poor_calibration_within_the_issue_bounds(poor: CalibrationRun) -> None:
     status = poor.status()
     assert status["counts"]["pending"] == 0 and status["counts"]["captured"] >= 30
@@ -50,6 +51,7 @@ def test_the_workbench_path_recovers_the_poor_calibration_within_the_issue_bound
     assert 0 < estimate["hand_eye_std_mm"] < 2.0 and 0 < estimate["axis_std_deg"] < 0.2
 
 
+@pytest.mark.slow
 def test_a_captured_pose_is_not_taken_twice_and_an_unknown_one_is_not_found(poor: CalibrationRun) -> None:
     before = poor.status()
     with pytest.raises(Conflict, match="captured already"):
