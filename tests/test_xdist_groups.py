@@ -39,7 +39,8 @@ def test_a_file_shares_a_worker_a_group_shares_one_and_long_groups_go_first(tmp_
     (tmp_path / "test_heavy1.py").write_text(module(3, 'pytest.mark.xdist_group("heavy")'))
     (tmp_path / "test_heavy2.py").write_text(module(3, 'pytest.mark.xdist_group("heavy")'))
     (tmp_path / "test_z_long.py").write_text(module(1, "pytest.mark.slow"))  # last by name and by count
-    env = {**os.environ, "PYTEST_DISABLE_PLUGIN_AUTOLOAD": "1", "PYTEST_PLUGINS": "xdist.plugin"}
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PYTEST_XDIST_")}  # not this run's worker
+    env.update(PYTEST_DISABLE_PLUGIN_AUTOLOAD="1", PYTEST_PLUGINS="xdist.plugin")
     args = ["-n", "3", "--dist", "loadgroup", "--no-loadscope-reorder", "-q", "-p", "no:cacheprovider"]
     proc = subprocess.run(
         [sys.executable, "-m", "pytest", *args], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120
