@@ -2,7 +2,8 @@
 --no-loadscope-reorder``): the tests of a file run in one worker process, so a module's fixtures (a served app, a
 bench run) are built once; a file marked ``xdist_group("name")`` shares its worker with the other files of that
 group (the long, CPU-heavy ones, which must not starve each other's budgets). Every test gets its own node id
-(xdist runs one test per id). The groups with a long test (``LONG_MARKS``) are handed out first.
+(xdist runs one test per id). The groups with a long test (``LONG_MARKS``) are handed out first, and the
+controller writes the test modules' assert-rewritten bytecode while its workers start (:func:`rewrite_ahead`).
 
 xdist's loadgroup tells its scheduler a test's group by appending ``@group`` to the node id in the worker; since
 pytest 9.2 builds node ids from structured parts, the string xdist writes is ignored and every test was scheduled
@@ -12,7 +13,11 @@ module fixtures, and the "heavy" group's two files ran side by side. The trylast
 
 from __future__ import annotations
 
+import fnmatch
 import gc
+import sys
+import threading
+from pathlib import Path
 
 import pytest
 
@@ -77,3 +82,41 @@ def pytest_collection_finish(session: pytest.Session) -> None:
     each."""
     gc.collect()
     gc.freeze()
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """In the xdist controller (which collects nothing): :func:`rewrite_ahead` in a thread while the workers start."""
+    if getattr(config.option, "numprocesses", None) and not hasattr(config, "workerinput"):
+        threading.Thread(target=rewrite_ahead, args=(config,), name="rewrite-ahead", daemon=True).start()
+
+
+def rewrite_ahead(config: pytest.Config, root: Path = Path(__file__).parent) -> None:
+    """Write pytest's assert-rewritten bytecode of every test module and conftest under ``root`` that has none, in
+    the order the workers collect them, with pytest's own functions (``_pytest.assertion.rewrite``). On a fresh
+    clone the three workers otherwise each rewrite all of them at once (4-5 s of CPU a worker); a worker that gets
+    there first just rewrites the module itself, as before. Skipped where bytecode is not written or pytest's
+    functions are not there."""
+    try:
+        from _pytest.assertion import rewrite
+    except ImportError:
+        return
+    needed = ("assertstate_key", "get_cache_dir", "PYC_TAIL", "_read_pyc", "_rewrite_test", "_write_pyc")
+    if sys.dont_write_bytecode or not all(hasattr(rewrite, name) for name in needed):
+        return
+    state = config.stash.get(rewrite.assertstate_key, None)
+    if state is None:  # --assert=plain
+        return
+    patterns = ["conftest.py", *config.getini("python_files")]
+    for source in sorted(root.rglob("*.py")):
+        if "__pycache__" in source.parts or not any(fnmatch.fnmatch(source.name, p) for p in patterns):
+            continue
+        cache = rewrite.get_cache_dir(source)
+        pyc = cache / (source.name[:-3] + rewrite.PYC_TAIL)
+        try:
+            if rewrite._read_pyc(source, pyc, state.trace) is not None:
+                continue
+            cache.mkdir(exist_ok=True)
+            source_hash, code = rewrite._rewrite_test(source, config)
+            rewrite._write_pyc(state, code, source_hash, pyc)
+        except (OSError, SyntaxError):  # the worker that imports the module reports it
+            continue

@@ -1,6 +1,7 @@
-"""tests/conftest.py's rule for parallel runs, checked on a small suite run the way ``make test`` runs ours: the tests of
-a file share one xdist worker, the files of one ``xdist_group`` share one, and a group with a long test is handed out
-first. (pytest 9.2 silently broke xdist's own grouping: pytest-xdist issue 1386.)"""
+"""tests/conftest.py's rules for parallel runs. On a small suite run the way ``make test`` runs ours: the tests of a
+file share one xdist worker, the files of one ``xdist_group`` share one, and a group with a long test is handed out
+first (pytest 9.2 silently broke xdist's own grouping: pytest-xdist issue 1386). And the controller writes the
+test modules' assert-rewritten bytecode ahead of the workers."""
 
 from __future__ import annotations
 
@@ -8,6 +9,10 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
+
+from tests.conftest import rewrite_ahead
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -56,3 +61,26 @@ def test_a_file_shares_a_worker_a_group_shares_one_and_long_groups_go_first(tmp_
     assert len(set().union(*workers_of.values())) == 3  # the groups are still spread over the workers
     (long_worker,) = workers_of["test_z_long"]
     assert next(test for worker, test in ran if worker == long_worker) == "test_z_long.0"
+
+
+def test_the_controller_writes_the_rewritten_bytecode_pytest_then_loads(
+    tmp_path: Path, pytestconfig: pytest.Config, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(sys, "dont_write_bytecode", False)  # as in make test
+    (tmp_path / "test_sample.py").write_text("def test_it():\n    left = [1, 2]\n    assert left == [1, 3]\n")
+    (tmp_path / "helper.py").write_text("X = 1\n")  # not a test module: pytest does not rewrite it
+    rewrite_ahead(pytestconfig, tmp_path)
+    cached = sorted(p.name for p in (tmp_path / "__pycache__").iterdir())
+    assert len(cached) == 1 and cached[0].startswith("test_sample.") and "-pytest-" in cached[0]
+    from _pytest.assertion.rewrite import _read_pyc
+
+    code = _read_pyc(tmp_path / "test_sample.py", tmp_path / "__pycache__" / cached[0])
+    assert code is not None
+    namespace: dict[str, object] = {}
+    exec(code, namespace)
+    with pytest.raises(AssertionError) as failed:
+        namespace["test_it"]()  # type: ignore[operator]
+    assert "[1, 2] == [1, 3]" in str(failed.value)  # pytest's explanation: the rewritten assert, not a bare one
+    before = (tmp_path / "__pycache__" / cached[0]).stat().st_mtime_ns
+    rewrite_ahead(pytestconfig, tmp_path)  # up to date: left alone
+    assert (tmp_path / "__pycache__" / cached[0]).stat().st_mtime_ns == before
