@@ -1,16 +1,16 @@
 """How far below `projection`'s robot motion a planner that *knew the object* could get (issue 25's bound).
 
-For each mesh and placement: `projection`'s scan in the UR5 cell (ideal sensor, 10 views), its moves to 95 % of
-the ceiling; then an oracle that knows the true mesh: every candidate view about the object's *true* box rendered
-and preprocessed like the planner (the samples each covers within 5 mm, as the scan's coverage counts them), every
+For each mesh and placement: `projection`'s scan in the UR5 cell (``--sensor``, 10 views), its moves to 95 % of the
+ceiling; then an oracle that knows the true mesh: every candidate view about the object's *true* box rendered and
+preprocessed like the planner (the samples each covers within 5 mm, as the scan's coverage counts them), every
 view's free arm targets at every plate angle (the reachability cache), and a beam search over sequences of views
 from the scan's first view that minimises the predicted seconds of moves (plate turn, then the slowest joint's
-trapezoid, `ArmReach.seconds_between`) to 95 % of the ceiling. The oracle's best sequence is then *executed* in a
-fresh simulated cell (real moves, planned by the cell; real captures, integrated by the planner; with
-``--sensor`` / ``--calibration`` that sensor and calibration error; the oracle then knows the view masks as that
-sensor renders them, with another noise draw, and no calibration error), so its
-moves to 95 % are measured as the scans' are; after its sequence the scan goes on with `projection`'s plans to 10
-views (the AUC over views is that of these 10).
+trapezoid, `ArmReach.seconds_between`; ``--overhead`` seconds more per view) to 95 % of the ceiling. The oracle's
+best sequence is then *executed* in a fresh simulated cell (real moves, planned by the cell; real captures,
+integrated by the planner; with ``--sensor`` / ``--calibration`` that sensor and calibration error; the oracle then
+knows the view masks as that sensor renders them, with another noise draw, and no calibration error), so its moves
+to 95 % are measured as the scans' are; after its sequence the scan goes on with `projection`'s plans to 10 views
+(the AUC over views is that of these 10).
 
     .venv/bin/python benchmarks/bench_tour_oracle.py ../shared/models/bunny.obj --yaws 0,90 --overhead 0.3
 
@@ -43,10 +43,14 @@ the executed scan, which goes on with `projection`'s plans, may still get to 95 
 
 @dataclass
 class Oracle:
+    """The quickest sequence a search found."""
+
     views: list[int]
     """Candidate indices in order (after the first view)."""
     predicted_seconds: float
+    """Its moves' estimated seconds plus the per-view overhead."""
     predicted_coverage: float
+    """Samples covered in the masks after it (the first view's included)."""
 
 
 def _masks(
