@@ -40,6 +40,9 @@ MARGIN = 0.01
 no sequence of at most ``--max-views`` views gets there it aims at 95 %, then a point lower at a time (down to 80 %):
 the executed scan, which goes on with `projection`'s plans, may still get to 95 %, else it pays the penalty."""
 
+POPCOUNT = np.array([bin(i).count("1") for i in range(256)], dtype=np.int32)
+"""Set bits of every byte (numpy >= 1.26 has no ``bitwise_count``)."""
+
 
 @dataclass
 class Oracle:
@@ -92,7 +95,7 @@ def beam_search(
     start_times (T,) from the state after the first view. States ranked by time + samples missing / rate.
     """
     packed = np.packbits(masks, axis=1)
-    lut = np.array([bin(i).count("1") for i in range(256)], dtype=np.int32)
+    lut = POPCOUNT
     states: list[tuple[float, NDArray[np.uint8], int, list[int]]] = [(0.0, np.packbits(covered0), -1, [])]
     best: Oracle | None = None
     for _ in range(max_views):
@@ -150,7 +153,15 @@ def run_one(model: Path, yaw: float, args: argparse.Namespace, rates: list[float
     from planner import Planner, PlannerConfig
     from planner.candidates import propose_candidates
     from planner.types import BoundingBox
-    from workbench.evaluation import coverage, run_scan, simulate
+    from workbench.evaluation import (
+        area_under_curve,
+        coverage,
+        ratio_curve,
+        run_scan,
+        simulate,
+        time_to_reach,
+        views_to_reach,
+    )
 
     name, mesh = resolve_model(str(model), up="y", size=0.2)
     if yaw % 360:
@@ -161,19 +172,11 @@ def run_one(model: Path, yaw: float, args: argparse.Namespace, rates: list[float
     ref = simulate(name, PlannerConfig(), mesh=mesh, planner_name="projection", seed=0, **sensor)
     ceiling = float(ref.reachable_coverage or 1.0)
     samples = ref.surface_samples
-    goal_cov = TARGET * ceiling
-
-    def moves_to(coverages: list[float], moves: list[float]) -> tuple[float, int]:
-        total = 0.0
-        for k, (c, m) in enumerate(zip(coverages, moves, strict=True)):
-            total += m
-            if c >= goal_cov:
-                return total, k + 1
-        return total + total / max(1, len(moves)), len(moves) + 1
 
     ref_cov = [float(r.coverage or 0.0) for r in ref.result.records]
     ref_moves = [r.move_seconds for r in ref.result.records]
-    ref_t, ref_views = moves_to(ref_cov, ref_moves)
+    ref_ratios = [c / ceiling for c in ref_cov]
+    ref_t, ref_views = time_to_reach(ref_ratios, ref_moves, TARGET), views_to_reach(ref_ratios, TARGET)
 
     # the oracle's world: candidates about the true box, masks, arm targets
     t0 = time.perf_counter()
@@ -258,9 +261,10 @@ def run_one(model: Path, yaw: float, args: argparse.Namespace, rates: list[float
         rest = run_scan(planner, run_cell, samples, first_pose=poses[best.views[-1]])
         exec_cov += [float(r.coverage or 0.0) for r in rest.records[1:]]
         exec_moves += [r.move_seconds for r in rest.records[1:]]
-    ex_t, ex_views = moves_to(exec_cov, exec_moves)
-    ref_auc = statistics.fmean(c / ceiling for c in (ref_cov + [ref_cov[-1]] * 10)[:10])
-    ex_auc = statistics.fmean(c / ceiling for c in (exec_cov + [exec_cov[-1]] * 10)[:10])
+    ex_ratios = [c / ceiling for c in exec_cov]
+    ex_t, ex_views = time_to_reach(ex_ratios, exec_moves, TARGET), views_to_reach(ex_ratios, TARGET)
+    ref_auc = area_under_curve(ratio_curve(ref_cov, ceiling, 10))
+    ex_auc = area_under_curve(ratio_curve(exec_cov, ceiling, 10))
     return {
         "model": name,
         "yaw": yaw,
@@ -296,6 +300,8 @@ def main() -> None:
     parser.add_argument("--verbose", action="store_true", help="each sequence and its moves")
     parser.add_argument("--rates", default="0.02,0.05,0.1", help="coverage per second assumed for what is missing")
     args = parser.parse_args()
+    from workbench.evaluation import paired_comparison
+
     rates = [float(r) for r in args.rates.split(",")]
     rows = []
     for model in args.models:
@@ -314,19 +320,21 @@ def main() -> None:
             )
     if args.json is not None:
         args.json.write_text(json.dumps(rows, indent=1))
-    ok = [r for r in rows if "error" not in r]
-    if len(ok) >= 2:
-        p = [r["projection_moves"] for r in ok]
-        o = [r["oracle_moves"] for r in ok]
-        d = [b - a for a, b in zip(p, o, strict=True)]
-        sd = statistics.stdev(d)
-        half = 1.96 * sd / math.sqrt(len(d))
-        mp, mo = statistics.mean(p), statistics.mean(o)
+    ok = {(r["model"], r["yaw"]): r for r in rows if "error" not in r}
+    paired = paired_comparison(
+        {k: r["oracle_moves"] for k, r in ok.items()},
+        {k: r["projection_moves"] for k, r in ok.items()},
+        higher_is_better=False,
+    )
+    if paired is not None and paired.low is not None and paired.high is not None:
+        mp = statistics.fmean(r["projection_moves"] for r in ok.values())
+        mo = statistics.fmean(r["oracle_moves"] for r in ok.values())
         print(
-            f"\n{len(ok)} pairs: projection {mp:.2f} s, oracle executed {mo:.2f} s ({100 * (mo / mp - 1):+.1f} %), "
-            f"paired {statistics.mean(d):+.2f} [{statistics.mean(d) - half:+.2f}, {statistics.mean(d) + half:+.2f}]; "
-            f"AUC {100 * statistics.fmean(r['projection_auc'] for r in ok):.2f} / "
-            f"{100 * statistics.fmean(r['oracle_auc'] for r in ok):.2f}"
+            f"\n{paired.n} pairs: projection {mp:.2f} s, oracle executed {mo:.2f} s ({100 * (mo / mp - 1):+.1f} %), "
+            f"paired {paired.mean:+.2f} [{paired.low:+.2f}, {paired.high:+.2f}] (95 % t-interval), wins "
+            f"{paired.wins} / ties {paired.ties} / losses {paired.losses}; AUC "
+            f"{100 * statistics.fmean(r['projection_auc'] for r in ok.values()):.2f} / "
+            f"{100 * statistics.fmean(r['oracle_auc'] for r in ok.values()):.2f}"
         )
 
 
