@@ -15,11 +15,13 @@ Read top-down against the paper:
 - ``partitions``                                       §III-F global longitude partitions
 - ``evaluators``, ``planner``                          Algorithm 1
 - ``progress``                                         where a running plan is (stage k of n), for a caller
+- ``deferred_imports``                                 open3d's plotly drawing (dash) imported on use
 """
 
 from typing import TYPE_CHECKING, Any
 
 from planner.config import PlannerConfig
+from planner.deferred_imports import defer
 from planner.types import (
     BoundingBox,
     Candidate,
@@ -34,6 +36,8 @@ from planner.types import (
     VoxelClass,
     VoxelSnapshot,
 )
+
+defer()  # before any module of ours imports open3d (neither module above does)
 
 if TYPE_CHECKING:
     from planner.planner import IntegrationReport, Planner
