@@ -32,7 +32,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import KDTree
 
 TARGET = 0.95
 MARGIN = 0.01
@@ -64,17 +63,13 @@ def _masks(
     bbox: Any,
     preprocess_config: Any,
 ) -> NDArray[np.bool_]:
-    """(V, M) bool: the samples each view covers (its depth rendered, preprocessed like the planner, 5 mm)."""
-    from planner import DepthFrame
-    from planner.preprocess import preprocess
+    """(V, M) bool: the samples each view covers (``workbench.evaluation.view_coverage`` of its rendered depth)."""
+    from workbench.evaluation import view_coverage
 
-    out = np.zeros((len(poses), len(samples)), dtype=bool)
-    for k, pose in enumerate(poses):
-        points = preprocess(DepthFrame(render(pose), pose, intrinsics).points_world, bbox, preprocess_config)
-        if len(points):
-            dist, _ = KDTree(points).query(samples, k=1, distance_upper_bound=0.005)
-            out[k] = np.isfinite(dist)
-    return out
+    return np.array(
+        [view_coverage(render(pose), pose, intrinsics, samples, bbox, preprocess_config) for pose in poses],
+        dtype=bool,
+    ).reshape(len(poses), len(samples))
 
 
 def beam_search(

@@ -14,9 +14,16 @@ from devices.config import CameraConfig, CellConfig
 from devices.mesh import turned_about_plate_axis
 from devices.sim import make_sim_cell
 from planner.config import PlannerConfig
-from planner.types import Pose
+from planner.types import BoundingBox, Pose
 from tests.helpers import SMALL_CAMERA  # the reference renders four times faster, the footprint still ~2 mm
-from workbench.evaluation.ceiling import CeilingConfig, OcclusionScene, samples_with_normals, seen_by_any, spread_order
+from workbench.evaluation.ceiling import (
+    CeilingConfig,
+    OcclusionScene,
+    samples_with_normals,
+    seen_by_any,
+    spread_order,
+    view_coverage,
+)
 from workbench.evaluation.object_ceiling import cached_ceiling, ceiling_key, ceiling_mask, reference_mask
 
 FEW_VIEWS = PlannerConfig().replace(candidates={"count": 30, "parallels": 4})
@@ -62,6 +69,26 @@ def test_one_view_sees_the_near_face_and_not_the_far_one() -> None:
     assert not seen[near & ~above].any() and (near & ~above).any()
     assert not seen[far].any()
     assert not seen[top].any()
+
+
+def test_one_rendered_view_covers_the_near_face_and_nothing_from_a_view_away() -> None:
+    _, mesh = resolve_model("box")  # 0.2 x 0.14 x 0.1, centred on the plate axis
+    cell = make_sim_cell(mesh, SMALL_CAMERA, CellConfig(kinematics="reach_sphere"))
+    points, normals = samples_with_normals(mesh, 4000, 0)
+    box = BoundingBox(np.array([-0.15, -0.15, 0.0]), np.array([0.15, 0.15, 0.15]))
+    clean = PlannerConfig().preprocess
+    view = Pose.look_at(np.array([0.5, 0.0, 0.25]), np.array([0.0, 0.0, 0.05]))  # from +x, above
+    covered = view_coverage(cell.camera.render(view), view, cell.camera.intrinsics, points, box, clean)
+    near = (normals[:, 0] > 0.9) & (points[:, 2] > 0.01)  # the +x face, above the plate's clearance
+    far = (normals[:, 0] < -0.9) & (points[:, 2] < 0.09)  # the -x face, off its top edge (within 5 mm of the top)
+    assert covered.shape == (4000,) and near.sum() > 100 and far.sum() > 100
+    assert covered[near].mean() > 0.95 and not covered[far].any()
+    picked = np.flatnonzero(near | far)[::3]  # a subset keeps its order
+    depth = cell.camera.render(view)
+    assert (view_coverage(depth, view, cell.camera.intrinsics, points[picked], box, clean) == covered[picked]).all()
+    away = Pose.look_at(np.array([0.5, 0.0, 0.25]), np.array([1.5, 0.0, 0.25]))  # the camera's back to the box
+    empty = view_coverage(cell.camera.render(away), away, cell.camera.intrinsics, points, box, clean)
+    assert empty.shape == (4000,) and not empty.any()
 
 
 def test_no_reachable_view_gives_zero() -> None:

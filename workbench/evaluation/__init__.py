@@ -6,7 +6,7 @@
 - curves.py: coverage against the ceiling per view, its area, views-to-X, robot time to X, means and paired
   comparisons;
 - ceiling.py: the reachable-coverage ceiling by visibility (one occlusion ray per sample and view) and by
-  rendering (the reference);
+  rendering (the reference; the samples one rendered view covers: ``view_coverage``);
 - object_ceiling.py: the ceiling of one (mesh, placement, cell), keyed and cached on disk;
 - ceiling_service.py: a session's ceiling computed in a worker process, one at a time;
 - scan.py: Algorithm 1 headless (``run_scan``), with metrics per iteration;
@@ -24,7 +24,7 @@ from workbench.evaluation.accuracy import (
     coverage_and_accuracy,
     fscore,
 )
-from workbench.evaluation.ceiling import DEFAULT_CEILING, CeilingConfig
+from workbench.evaluation.ceiling import DEFAULT_CEILING, CeilingConfig, view_coverage
 from workbench.evaluation.coverage import coverage
 from workbench.evaluation.curves import (
     THRESHOLDS,
@@ -99,5 +99,6 @@ __all__ = [
     "run_scan",
     "simulate",
     "time_to_reach",
+    "view_coverage",
     "views_to_reach",
 ]

@@ -45,8 +45,8 @@ from scipy.spatial import KDTree
 
 from devices.config import CameraConfig
 from planner.candidates import propose_candidates
-from planner.config import PlannerConfig
-from planner.types import BoundingBox, DepthFrame, Pose
+from planner.config import PlannerConfig, PreprocessConfig
+from planner.types import BoundingBox, DepthFrame, Intrinsics, Pose
 from planner.validate import finite, integer, require
 
 
@@ -292,6 +292,28 @@ def spread_order(n: int) -> list[int]:
     return [(k * step) % n for k in range(n)]
 
 
+def view_coverage(
+    depth: NDArray[np.float32],
+    pose: Pose,
+    intrinsics: Intrinsics,
+    samples_world: NDArray[np.float64],
+    bbox: BoundingBox,
+    preprocess_config: PreprocessConfig,
+    coverage_radius: float = 0.005,
+) -> NDArray[np.bool_]:
+    """(M,) bool: the samples one rendered view covers: its depth (H, W) at ``pose`` (``T_world_camera``)
+    preprocessed like the planner's frames (cropped to ``bbox``, plate removed, down-sampled, ``preprocess_config``'s
+    filters), a sample covered within ``coverage_radius`` (m) of the cloud. samples_world: (M, 3) float64."""
+    from planner.preprocess import preprocess
+
+    samples = np.asarray(samples_world, dtype=np.float64)
+    points = preprocess(DepthFrame(depth, pose, intrinsics).points_world, bbox, preprocess_config)
+    if len(points) == 0 or len(samples) == 0:
+        return np.zeros(len(samples), dtype=bool)
+    dist, _ = KDTree(points).query(samples, k=1, distance_upper_bound=coverage_radius)
+    return np.isfinite(dist)
+
+
 def render_ceiling(
     camera: object,
     samples_world: NDArray[np.float64],
@@ -302,10 +324,9 @@ def render_ceiling(
 ) -> NDArray[np.bool_]:
     """(M,) bool: the reference: render every view, preprocess its cloud like the planner (cropped to
     ``bbox``, plate removed, down-sampled; no outlier removal), and count samples within
-    ``coverage_radius`` of the union. camera: a simulated camera (``render(T_world_camera)`` gives
-    noise-free depth, ``intrinsics``). samples_world: (M, 3) float64."""
-    from planner.preprocess import preprocess
-
+    ``coverage_radius`` of the union (:func:`view_coverage` of each view, on the samples not covered yet). camera:
+    a simulated camera (``render(T_world_camera)`` gives noise-free depth, ``intrinsics``). samples_world: (M, 3)
+    float64."""
     samples = np.asarray(samples_world, dtype=np.float64)
     clean = replace(config.preprocess, outlier_min_neighbors=0)
     covered = np.zeros(len(samples), dtype=bool)
@@ -314,10 +335,6 @@ def render_ceiling(
         if len(todo) == 0:
             break
         depth = camera.render(pose)  # type: ignore[attr-defined]
-        frame = DepthFrame(depth, pose, camera.intrinsics)  # type: ignore[attr-defined]
-        points = preprocess(frame.points_world, bbox, clean)
-        if len(points) == 0:
-            continue
-        dist, _ = KDTree(points).query(samples[todo], k=1, distance_upper_bound=coverage_radius)
-        covered[todo[np.isfinite(dist)]] = True
+        seen = view_coverage(depth, pose, camera.intrinsics, samples[todo], bbox, clean, coverage_radius)  # type: ignore[attr-defined]
+        covered[todo[seen]] = True
     return covered
