@@ -5,11 +5,16 @@ exhaustive configuration. One scan per model is a poor measure of that: the gree
 planner is chaotic, and any change to the ellipsoids (even between two equally good
 mixtures) sends it down another path that ends up to 1.5 points higher or lower.
 So every model is scanned in several placements (turned about the turntable axis by
-``--yaws`` degrees, ``nbv scan --yaw``) with each search, and the table compares the
+``--yaws`` degrees, as ``nbv scan --yaw``) with each search, and the table compares the
 mean final coverage per model, as well as the placement at yaw 0 on its own.
 
     python benchmarks/search_agreement.py [--models ../shared/models] [--out out/agreement]
-        [--yaws 0,60,120,180,240,300] [--views 10] [--jobs 2] [--extra "..."]
+        [--yaws 0,60,120,180,240,300] [--views 10] [--jobs 2] [--config planner.toml]
+
+The scans are the library's bench runs (``workbench.evaluation.run_local``: the UR5 cell, ideal
+sensor, no reachable-coverage ceiling, as ``nbv scan --no-reachable``), forked from one
+preloaded process; each run's record (``RunOutcome.to_json`` and its planner config) is written
+to ``OUT/<model>/yaw<deg>/<search>/run.json``.
 
 The exhaustive runs are slow (5 to 10 s per view on a 2-core machine): the default
 grid of 4 models x 6 placements x 2 searches took 16 minutes with 2 jobs.
@@ -19,29 +24,16 @@ from __future__ import annotations
 
 import argparse
 import json
-import shlex
 import statistics
-import subprocess
-import sys
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+
+from planner.config import PlannerConfig
+from workbench.evaluation import RunOutcome, RunTask, run_local
 
 MODELS = ("bunny.obj", "armadillo.obj", "dragon.ply", "buddha.obj")
 SEARCHES = ("fast", "exhaustive")
 LIMIT = 0.01
 """Largest allowed |fast - exhaustive| in final coverage (1 point)."""
-
-
-def run_one(model: Path, yaw: float, search: str, out: Path, args: argparse.Namespace) -> float:
-    """Final coverage of one ``nbv scan``; its metrics.json stays in ``out``."""
-    cmd = [
-        sys.executable, "-m", "nbv.cli", "scan", "--model", str(model), "--views", str(args.views),
-        "--yaw", str(yaw), "--search", search, "--no-reachable", "--out", str(out), *shlex.split(args.extra),
-    ]  # fmt: skip
-    proc = subprocess.run(cmd, capture_output=True, text=True)
-    if proc.returncode != 0:
-        raise SystemExit(f"{model.name} yaw {yaw:g} {search}: nbv scan failed\n{proc.stderr}")
-    return float(json.loads((out / "metrics.json").read_text())["final_coverage"])
 
 
 def main() -> int:
@@ -51,7 +43,7 @@ def main() -> int:
     p.add_argument("--yaws", default="0,60,120,180,240,300", help="placements, degrees, comma-separated")
     p.add_argument("--views", type=int, default=10)
     p.add_argument("--jobs", type=int, default=2)
-    p.add_argument("--extra", default="", help="more nbv scan flags, quoted")
+    p.add_argument("--config", type=Path, default=None, help="the planner config the scans start from (TOML)")
     p.add_argument("--only", default="", help="comma-separated model files")
     args = p.parse_args()
     yaws = [float(y) for y in args.yaws.split(",")]
@@ -59,18 +51,37 @@ def main() -> int:
     for name in names:
         if not (args.models / name).exists():
             raise SystemExit(f"missing model {args.models / name}")
-    grid = [(name, yaw, search) for name in names for yaw in yaws for search in SEARCHES]
+    base = PlannerConfig.from_toml(args.config) if args.config else PlannerConfig()
+    tasks = {
+        (name, yaw, search): RunTask(
+            str(args.models / name),
+            f"{name}|{search}",  # the label keys a run: a model's two searches are two labels
+            "projection",
+            0,
+            base.replace(termination={"max_views": args.views}, cluster={"search": search}),
+            yaw_deg=yaw,
+            threads=1 if args.jobs > 1 else None,
+        )
+        for name in names
+        for yaw in yaws
+        for search in SEARCHES
+    }
+    coverage: dict[tuple[str, float, str], float] = {}
 
-    def task(key: tuple[str, float, str]) -> float:
-        name, yaw, search = key
-        out = args.out / Path(name).stem / f"yaw{yaw:g}" / search
-        cov = run_one(args.models / name, yaw, search, out, args)
-        print(f"  {name:<14} yaw {yaw:>5g}  {search:<10} {cov:.4f}", flush=True)
-        return cov
+    def done(outcome: RunOutcome) -> None:
+        name, search = outcome.label.split("|")
+        if outcome.error is not None or not outcome.rows:
+            raise SystemExit(f"{name} yaw {outcome.yaw:g} {search}: the scan failed: {outcome.error}")
+        key = (name, outcome.yaw, search)
+        record = {**outcome.to_json(), "config": tasks[key].config.to_dict()}
+        out = args.out / Path(name).stem / f"yaw{outcome.yaw:g}" / search
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "run.json").write_text(json.dumps(record, indent=2))
+        coverage[key] = float(record["final_coverage"])
+        print(f"  {name:<14} yaw {outcome.yaw:>5g}  {search:<10} {coverage[key]:.4f}", flush=True)
 
-    print(f"{len(grid)} scans, {args.jobs} at a time ...", flush=True)
-    with ThreadPoolExecutor(max(1, args.jobs)) as pool:
-        coverage = dict(zip(grid, pool.map(task, grid), strict=True))
+    print(f"{len(tasks)} scans, {args.jobs} at a time ...", flush=True)
+    run_local(list(tasks.values()), max(1, args.jobs), done)
 
     print()
     first = f"yaw {yaws[0]:g} diff"
