@@ -13,8 +13,8 @@ mean final coverage per model, as well as the placement at yaw 0 on its own.
 
 The scans are the library's bench runs (``workbench.evaluation.run_local``: the UR5 cell, ideal
 sensor, no reachable-coverage ceiling, as ``nbv scan --no-reachable``), forked from one
-preloaded process; each run's record (``RunOutcome.to_json`` and its planner config) is written
-to ``OUT/<model>/yaw<deg>/<search>/run.json``.
+preloaded process; each run's record (``RunOutcome.to_json`` with the model, the search and the
+planner config) is written to ``OUT/<model>/yaw<deg>/<search>/run.json``.
 
 The exhaustive runs are slow (5 to 10 s per view on a 2-core machine): the default
 grid of 4 models x 6 placements x 2 searches took 16 minutes with 2 jobs.
@@ -73,7 +73,7 @@ def main() -> int:
         if outcome.error is not None or not outcome.rows:
             raise SystemExit(f"{name} yaw {outcome.yaw:g} {search}: the scan failed: {outcome.error}")
         key = (name, outcome.yaw, search)
-        record = {**outcome.to_json(), "config": tasks[key].config.to_dict()}
+        record = {**outcome.to_json(), "model": name, "search": search, "config": tasks[key].config.to_dict()}
         out = args.out / Path(name).stem / f"yaw{outcome.yaw:g}" / search
         out.mkdir(parents=True, exist_ok=True)
         (out / "run.json").write_text(json.dumps(record, indent=2))

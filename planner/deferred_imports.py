@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import importlib
 import sys
+import threading
 import types
 from collections.abc import Callable
 from typing import Any
@@ -28,6 +29,8 @@ PLOTLY = "open3d.visualization.draw_plotly"
 """open3d's drawing module that imports dash."""
 PLOTLY_NAMES = ("get_plotly_fig", "draw_plotly", "draw_plotly_server")
 """What ``open3d.visualization`` imports from it."""
+_LOADING = threading.Lock()
+"""One thread replaces the stand-in; another that asks meanwhile gets the real module."""
 
 
 class DeferredPlotly(types.ModuleType):
@@ -45,16 +48,17 @@ def load_plotly() -> types.ModuleType:
     """The real ``open3d.visualization.draw_plotly``, imported now (dash with it) in place of the stand-in; its
     functions put back in ``open3d.visualization`` (importing a submodule sets the parent's attribute of its name
     to the module, where open3d has the function ``draw_plotly``)."""
-    current = sys.modules.get(PLOTLY)
-    if current is not None and not isinstance(current, DeferredPlotly):
-        return current
-    sys.modules.pop(PLOTLY, None)
-    real = importlib.import_module(PLOTLY)
-    visualization = sys.modules.get("open3d.visualization")
-    if visualization is not None:
-        for name in PLOTLY_NAMES:
-            setattr(visualization, name, getattr(real, name))
-    return real
+    with _LOADING:
+        current = sys.modules.get(PLOTLY)
+        if current is not None and not isinstance(current, DeferredPlotly):
+            return current
+        sys.modules.pop(PLOTLY, None)
+        real = importlib.import_module(PLOTLY)
+        visualization = sys.modules.get("open3d.visualization")
+        if visualization is not None:
+            for name in PLOTLY_NAMES:
+                setattr(visualization, name, getattr(real, name))
+        return real
 
 
 def _deferred(name: str) -> Callable[..., Any]:

@@ -41,6 +41,7 @@ def test_agreement_table_matches_the_scans_it_ran(tmp_path: Path) -> None:
         assert summary[search] == finals
         assert all(0.05 < c <= 1.0 for c in finals)
         assert [run["yaw"] for run in runs] == [0.0, 90.0] and all(run["views"] == 2 for run in runs)
+        assert all(run["model"] == "bunny.obj" and run["search"] == search for run in runs)
         for run in runs:  # the scan ran with this search and the config file's settings
             assert run["config"]["cluster"]["search"] == search and run["config"]["cluster"]["t_max"] == 4
             assert run["config"]["voxel"]["resolution"] == 0.02 and run["config"]["candidates"]["count"] == 60
