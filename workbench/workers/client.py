@@ -329,7 +329,9 @@ class SessionWorker:
     def _kill(self) -> None:
         with self._proc_lock:
             proc, conn = self._proc, self._conn
-            self._proc = self._conn = None
+            # the process's event too: its last reference, so its five semaphores are unlinked now (a server that
+            # uvicorn ends by re-raising SIGTERM runs no exit handlers, and the resource tracker then warned of them)
+            self._proc = self._conn = self._hurry = None
         if proc is not None:
             if proc.is_alive():
                 proc.kill()
