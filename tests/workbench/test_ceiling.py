@@ -78,13 +78,13 @@ def test_one_rendered_view_covers_the_near_face_and_nothing_from_a_view_away() -
     box = BoundingBox(np.array([-0.15, -0.15, 0.0]), np.array([0.15, 0.15, 0.15]))
     clean = PlannerConfig().preprocess
     view = Pose.look_at(np.array([0.5, 0.0, 0.25]), np.array([0.0, 0.0, 0.05]))  # from +x, above
-    covered = view_coverage(cell.camera.render(view), view, cell.camera.intrinsics, points, box, clean)
+    depth = cell.camera.render(view)
+    covered = view_coverage(depth, view, cell.camera.intrinsics, points, box, clean)
     near = (normals[:, 0] > 0.9) & (points[:, 2] > 0.01)  # the +x face, above the plate's clearance
     far = (normals[:, 0] < -0.9) & (points[:, 2] < 0.09)  # the -x face, off its top edge (within 5 mm of the top)
     assert covered.shape == (4000,) and near.sum() > 100 and far.sum() > 100
     assert covered[near].mean() > 0.95 and not covered[far].any()
     picked = np.flatnonzero(near | far)[::3]  # a subset keeps its order
-    depth = cell.camera.render(view)
     assert (view_coverage(depth, view, cell.camera.intrinsics, points[picked], box, clean) == covered[picked]).all()
     away = Pose.look_at(np.array([0.5, 0.0, 0.25]), np.array([1.5, 0.0, 0.25]))  # the camera's back to the box
     empty = view_coverage(cell.camera.render(away), away, cell.camera.intrinsics, points, box, clean)
