@@ -256,6 +256,11 @@ class CandidateOut(BaseModel):
     tour_seconds: float | None = Field(
         None, description="predicted move seconds from now until the tour reaches this view (None off the tour)"
     )
+    tour_method: str | None = Field(
+        None,
+        description='how the tour was made: "ring" (a view of the ring opening, tour.opening), "exact" or "lkh" (the '
+        'cover\'s order), "near" (tour.score = "projection"); None off the tour',
+    )
 
 
 class EllipsoidTerm(BaseModel):

@@ -23,7 +23,9 @@ def candidate_json(plan: PlanResult, i: int) -> dict[str, Any]:
     """``{"index", "pose", "score", "eligible", "frontier", "occupied", ...}`` of candidate ``i``; ``move_seconds``
     the estimated move from the current state (None when the plan has no move times or the move is unknown),
     ``tour_order`` its place (1-based) in the ``tour`` planner's predicted tour and ``tour_seconds`` the predicted
-    move seconds from now until it is reached (both None off the tour)."""
+    move seconds from now until it is reached, ``tour_method`` how the tour was made ("ring": a view of the ring
+    opening, ``tour.opening``; "exact" or "lkh": the cover's order; "near": ``tour.score = "projection"``) (all three
+    None off the tour)."""
     c, s = plan.candidates[i], plan.scores[i]
     move = None if plan.move_costs is None else float(plan.move_costs[i])
     order = plan.tour.views.index(i) if plan.tour is not None and i in plan.tour.views else None
@@ -42,6 +44,7 @@ def candidate_json(plan: PlanResult, i: int) -> dict[str, Any]:
         "move_seconds": move if move is not None and math.isfinite(move) else None,
         "tour_order": None if order is None else order + 1,
         "tour_seconds": None if order is None or plan.tour is None else plan.tour.seconds[order],
+        "tour_method": None if order is None or plan.tour is None else plan.tour.method,
     }
 
 

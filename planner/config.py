@@ -316,7 +316,23 @@ class TourConfig:
     chosen for a shorter move."""
     near_views: int = 8
     """With ``score = "projection"``: how many reachable views (best F first) have their moves timed (about 20 ms
-    of IK each)."""
+    of IK each); with ``opening = "ring"``: how many of the ring's views (most frontier first) are timed."""
+    opening: Literal["none", "ring"] = "ring"
+    """The scan's first plans: "ring" (default) a turntable scanner's ring first (``planner.tour.ring_view``): the
+    plans after the first and second views each take a low view near one of the two azimuths ``ring_spread_deg``
+    either side of the scan's first view (about the object) that no view taken since is near, the shortest move
+    (timed as the cell would make it) among those that see the most frontier; then the tour. "none": the tour from
+    the first plan on (before issue 25's sixth round; docs/method.md measures both)."""
+    ring_spread_deg: float = 120.0
+    """With ``opening = "ring"``: the ring's two azimuths, degrees either side of the first view's."""
+    ring_max_elevation_deg: float = 30.0
+    """With ``opening = "ring"``: the highest elevation (degrees, about the object's box centre) of a ring view."""
+    ring_tolerance_deg: float = 30.0
+    """With ``opening = "ring"``: how far in azimuth (degrees) a view may be from a ring azimuth and still be its view
+    (a view taken that near closes it)."""
+    ring_share: float = 0.5
+    """With ``opening = "ring"``: a ring view must see at least this fraction of the frontier voxels the best ring
+    view sees; of those, the ``near_views`` that see the most are timed and the shortest move wins."""
 
     def __post_init__(self) -> None:
         require(
@@ -344,6 +360,23 @@ class TourConfig:
         require(
             finite(self.overhead_seconds) and self.overhead_seconds >= 0,
             f"tour.overhead_seconds: must be >= 0, got {self.overhead_seconds!r}",
+        )
+        require(self.opening in ("none", "ring"), f"tour.opening: 'none' or 'ring', got {self.opening!r}")
+        require(
+            finite(self.ring_spread_deg) and 0 < self.ring_spread_deg <= 180,
+            f"tour.ring_spread_deg: must be in (0, 180], got {self.ring_spread_deg!r}",
+        )
+        require(
+            finite(self.ring_max_elevation_deg) and -90 <= self.ring_max_elevation_deg <= 90,
+            f"tour.ring_max_elevation_deg: must be in [-90, 90], got {self.ring_max_elevation_deg!r}",
+        )
+        require(
+            finite(self.ring_tolerance_deg) and 0 < self.ring_tolerance_deg <= 90,
+            f"tour.ring_tolerance_deg: must be in (0, 90], got {self.ring_tolerance_deg!r}",
+        )
+        require(
+            finite(self.ring_share) and 0 <= self.ring_share <= 1,
+            f"tour.ring_share: must be in [0, 1], got {self.ring_share!r}",
         )
 
 

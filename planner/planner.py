@@ -44,8 +44,8 @@ from planner.types import BoundingBox, Candidate, DepthFrame, Intrinsics, PlanRe
 from planner.voxel_map import VoxelMap
 
 ChooseFn = Callable[..., tuple[int | None, TourPlan | None]]
-"""An evaluator's own choice (``planner.tour.TourEvaluator.choose``): (scores, candidates, the last view, move_times)
--> (the next view, the predicted tour)."""
+"""An evaluator's own choice (``planner.tour.TourEvaluator.choose``): (scores, candidates, the last view, move_times,
+taken=the views taken, center=the candidates' centre) -> (the next view, the predicted tour)."""
 
 
 @dataclass(frozen=True)
@@ -301,7 +301,9 @@ class Planner:
         choose = getattr(self.evaluator, "choose", None)
         if callable(choose):
             stages("tour", 0, 1)
-            best, tour = cast(ChooseFn, choose)(evaluation.scores, candidates, self.views[-1], move_times)
+            best, tour = cast(ChooseFn, choose)(
+                evaluation.scores, candidates, self.views[-1], move_times, taken=self.views, center=center
+            )
             if lazy:  # only the views it timed have a move (and a reachability answer: inf = unreachable)
                 timed: dict[int, float] = getattr(self.evaluator, "last_move_seconds", {})
                 move_costs = np.full(len(candidates), math.inf)
@@ -309,6 +311,8 @@ class Planner:
                 evaluation, reasons = _unreachable_marked(evaluation, reasons, timed)
             elif move_times is not None:  # each eligible candidate's move from here, for the table
                 move_costs = moves_from_here(move_times, candidates, [s.eligible for s in evaluation.scores])
+                timed = getattr(self.evaluator, "last_move_seconds", {})  # the evaluator's own (exact) times win
+                move_costs[list(timed)] = list(timed.values())
             stages("select", 0, 1)
         elif weight > 0 and (move_times is not None or move_cost is not None):
             eligible_now = np.array([s.eligible for s in evaluation.scores], dtype=bool)

@@ -19,6 +19,11 @@ costs; in the simulated UR5 cell the robot's moves are about 97 % of a scan's ti
 4. The first view of the order is the next view; the rest is the predicted tour (``PlanResult.tour``), re-planned
    after every capture.
 
+With ``tour.opening = "ring"`` the scan's first plans come before the tour (:func:`ring_view`): a turntable
+scanner's ring of low views about ``tour.ring_spread_deg`` either side of the scan's first view, which the oracle's
+sequences share across objects (docs/method.md, issue 25's fifth round); each plan takes the shortest move among the
+ring views that see the most frontier, until both sides of the ring hold a view.
+
 With ``tour.lazy_reach`` (the default) the plan skips its reachability pass over every candidate
 (:attr:`TourEvaluator.lazy_reach`): the cover's views are the only ones the cell is asked about, through their move
 times (inf: unreachable; the view is left out and the cover made again). With ``tour.score = "projection"`` the
@@ -38,6 +43,7 @@ from numpy.typing import NDArray
 
 from planner.config import PlannerConfig, TourConfig
 from planner.evaluators import EVALUATORS, Evaluation, EvaluationContext, ProjectionEvaluator
+from planner.partitions import azimuth_of
 from planner.types import Candidate, Intrinsics, Pose, TourPlan, ViewScore, VoxelClass
 
 MoveTimes = Callable[..., NDArray[np.float64]]
@@ -218,6 +224,50 @@ def near_best(
     return min(order, key=lambda i: timed[i]), timed  # min keeps the first (better F) on a tie
 
 
+def azimuth_gap(a: float | NDArray[np.float64], b: float) -> NDArray[np.float64]:
+    """The angle (rad, in [0, pi]) between azimuths ``a`` (any shape) and ``b``, the short way round."""
+    d = np.mod(np.asarray(a, dtype=np.float64) - b, 2.0 * math.pi)
+    return np.minimum(d, 2.0 * math.pi - d)
+
+
+def ring_directions(first: float, spread: float, taken: Sequence[float], tolerance: float) -> list[float]:
+    """The ring's azimuths (rad) still open: ``first`` + ``spread`` and ``first`` - ``spread`` (the scan's first
+    view's azimuth about the object, either side), each unless a view taken since (``taken``: their azimuths) lies
+    within ``tolerance`` of it. One azimuth when ``spread`` is pi (both sides meet behind the object)."""
+    sides = [first + spread] if math.isclose(spread, math.pi) else [first + spread, first - spread]
+    return [float(d % (2.0 * math.pi)) for d in sides if not any(float(azimuth_gap(a, d)) <= tolerance for a in taken)]
+
+
+def ring_view(
+    counts: NDArray[np.float64],
+    eligible: NDArray[np.bool_],
+    azimuths: NDArray[np.float64],
+    elevations: NDArray[np.float64],
+    directions: Sequence[float],
+    max_elevation: float,
+    tolerance: float,
+    share: float,
+    seconds: Callable[[list[int]], NDArray[np.float64]],
+    near_views: int,
+) -> tuple[int | None, dict[int, float]]:
+    """(the ring's next view, {view: move seconds} of every view timed) (:func:`near_best` over the ring's views).
+
+    counts: (C,) frontier voxels each candidate sees; eligible: (C,) bool; azimuths, elevations: (C,) rad about the
+    object's box centre. A ring view is eligible, sees some frontier, lies at most ``max_elevation`` high and within
+    ``tolerance`` (rad) in azimuth of one of ``directions`` (:func:`ring_directions`). Of the ring views that see at
+    least ``share`` x the most any of them sees, the ``near_views`` reachable ones that see the most are timed by
+    ``seconds`` (K indices -> (K,) seconds of each move from the current state, inf: unreachable) and the shortest
+    move wins. (None, {}) when no view is a ring view, (None, timed) when none timed is reachable.
+    """
+    counts = np.asarray(counts, dtype=np.float64)
+    near_ring = np.zeros(len(counts), dtype=bool)
+    for d in directions:
+        near_ring |= azimuth_gap(azimuths, d) <= tolerance
+    ring = np.asarray(eligible, dtype=bool) & near_ring & (np.asarray(elevations) <= max_elevation) & (counts > 0)
+    ranked = sorted(((int(i), float(counts[i])) for i in np.flatnonzero(ring)), key=lambda t: (-t[1], t[0]))
+    return near_best(ranked, seconds, 1.0 - share, near_views)
+
+
 def straight_move_times(start: Pose, poses: Sequence[Pose]) -> NDArray[np.float64]:
     """(K + 1, K + 1) seconds between ``start`` and every two of ``poses`` at :data:`FALLBACK_SPEED` along straight
     lines: the move times of a cell that gives none."""
@@ -278,11 +328,16 @@ class TourEvaluator:
         candidates: Sequence[Candidate],
         start: Pose,
         move_times: MoveTimes | None,
+        *,
+        taken: Sequence[Pose] = (),
+        center: NDArray[np.float64] | None = None,
     ) -> tuple[int | None, TourPlan | None]:
         """(the next view, the tour) from the last :meth:`evaluate`: the cover of its frontier, ordered by move
         time from the current state (``start``: the last view, for the straight-line fallback without
         ``move_times``). (None, None) when no view is eligible; without any frontier to cover, the eligible view
-        with the largest score and no tour."""
+        with the largest score and no tour. With ``tour.opening = "ring"``, in the scan's first plans, the ring's
+        next view first (:meth:`_choose_ring`; ``taken``: the views taken so far, ``T_world_camera``, the scan's
+        first one first; ``center`` (3,): the object's box centre the candidates are about)."""
         cfg: TourConfig = self.config.tour
         eligible = np.array([s.eligible for s in scores], dtype=bool)
         if not np.any(eligible):
@@ -290,6 +345,10 @@ class TourEvaluator:
         if cfg.score == "projection":
             return self._choose_near_best(scores, candidates, move_times)
         self.last_move_seconds = {}
+        if cfg.opening == "ring" and center is not None and 1 <= len(taken) <= 2:
+            best, plan = self._choose_ring(eligible, candidates, start, move_times, taken, center)
+            if best is not None:
+                return best, plan
         allowed = eligible.copy()
         while True:  # with lazy_reach: a view of the cover the cell cannot reach is left out and the cover made again
             views, gains = greedy_cover(self.last_seen, allowed, cfg.horizon, cfg.min_gain)
@@ -330,6 +389,52 @@ class TourEvaluator:
             method=method,
         )
         return plan.views[0], plan
+
+    def _choose_ring(
+        self,
+        eligible: NDArray[np.bool_],
+        candidates: Sequence[Candidate],
+        start: Pose,
+        move_times: MoveTimes | None,
+        taken: Sequence[Pose],
+        center: NDArray[np.float64],
+    ) -> tuple[int | None, TourPlan | None]:
+        """The ring's next view (:func:`ring_view`) and a one-view tour (method "ring"); (None, None) when the ring
+        is closed or none of its views is eligible and reachable (the tour then plans as without an opening)."""
+        cfg: TourConfig = self.config.tour
+        tolerance = math.radians(cfg.ring_tolerance_deg)
+        first = azimuth_of(taken[0].translation, center)
+        directions = ring_directions(
+            first,
+            math.radians(cfg.ring_spread_deg),
+            [azimuth_of(p.translation, center) for p in taken[1:]],
+            tolerance,
+        )
+        if not directions or not candidates:
+            return None, None
+
+        def seconds(views: list[int]) -> NDArray[np.float64]:
+            if move_times is not None:  # as the cell would make each move from here (every plate angle and branch)
+                return np.asarray(move_times(candidates, views, exact=True), dtype=np.float64)[0, 1:]
+            return straight_move_times(start, [candidates[i].T_world_camera for i in views])[0, 1:]
+
+        counts = self.last_seen.sum(axis=1).astype(np.float64)
+        best, timed = ring_view(
+            counts,
+            eligible,
+            np.array([c.azimuth for c in candidates]),
+            np.array([c.elevation for c in candidates]),
+            directions,
+            math.radians(cfg.ring_max_elevation_deg),
+            tolerance,
+            cfg.ring_share,
+            seconds,
+            cfg.near_views,
+        )
+        self.last_move_seconds.update(timed)
+        if best is None:
+            return None, None
+        return best, TourPlan(views=(best,), gains=(int(counts[best]),), seconds=(timed[best],), method="ring")
 
     def _choose_near_best(
         self, scores: Sequence[ViewScore], candidates: Sequence[Candidate], move_times: MoveTimes | None

@@ -70,12 +70,17 @@ function pageOf(index) {
   if (at >= 0) Table.page = Math.floor(at / PAGE_SIZE);
 }
 
-// "tour: 4 views, predicted robot time to done 9.8 s (moves)" from the table's rows ("" without a tour).
+// "tour: 4 views, predicted robot time to done 9.8 s (moves)" from the table's rows ("" without a tour); a view of
+// the ring opening (tour.opening = "ring"): "ring opening: a low view round from the first, then the tour; move 3.1 s".
 function tourSummary(items) {
   const tour = items.filter((c) => c.tour_order != null);
   if (!tour.length) return "";
   const total = Math.max(...tour.map((c) => c.tour_seconds || 0));
-  return `tour: ${tour.length} views, predicted robot time to done ${total.toFixed(1)} s (moves)`;
+  if (tour[0].tour_method === "ring") {
+    return `ring opening: a low view round from the first, then the tour; move ${total.toFixed(1)} s`;
+  }
+  const views = tour.length === 1 ? "1 view" : `${tour.length} views`;
+  return `tour: ${views}, predicted robot time to done ${total.toFixed(1)} s (moves)`;
 }
 
 function candidateOf(index) {

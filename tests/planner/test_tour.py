@@ -119,7 +119,7 @@ def test_a_tour_plan_in_the_simulated_cell_orders_its_cover_by_move_time() -> No
     from devices.sim import make_sim_cell
 
     cell = make_sim_cell(make_builtin("l-block"), cell_config=CellConfig(kinematics="reach_sphere"))
-    planner = Planner(PlannerConfig(), evaluator="tour")
+    planner = Planner(PlannerConfig().replace(tour={"opening": "none"}), evaluator="tour")  # the cover at once
     planner.integrate(cell.capture())
     plan = planner.plan(reachable=cell.is_reachable, move_times=cell.move_times)
     tour = plan.tour
