@@ -350,6 +350,8 @@ class TourEvaluator:
             if best is not None:
                 return best, plan
         allowed = eligible.copy()
+        if self.lazy_reach:  # a ring view the cell cannot reach from here is no view for the cover either
+            allowed[[v for v, t in self.last_move_seconds.items() if not math.isfinite(t)]] = False
         while True:  # with lazy_reach: a view of the cover the cell cannot reach is left out and the cover made again
             views, gains = greedy_cover(self.last_seen, allowed, cfg.horizon, cfg.min_gain)
             if not views:  # nothing gains: the best score among the views not known to be unreachable

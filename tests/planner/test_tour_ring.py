@@ -163,3 +163,33 @@ def test_the_ring_is_chosen_by_exact_moves_in_the_first_two_plans_only() -> None
     _, plan = without.choose(scores, candidates, first, move_times, taken=[first], center=np.zeros(3))
     assert plan is not None and plan.method != "ring"
     assert PlannerConfig().tour.opening == "ring"  # the default since issue 25's sixth round
+
+
+def test_a_ring_view_the_cell_cannot_reach_is_left_out_of_the_cover_too() -> None:
+    """The ring's view that sees most is unreachable from here as the cell would move (its exact time is inf) but
+    not by the cached estimate the cover orders by: with lazy reachability the cover leaves it out."""
+    from planner.baselines.evaluators import gain_scores
+    from planner.tour import TourEvaluator
+    from planner.types import Pose
+
+    candidates = ring_candidates([(120, 10), (180, 10)])  # 0: the ring's only view, unreachable; 1: off the ring
+    seen = np.zeros((2, 40), dtype=bool)
+    seen[0, :40] = seen[1, :20] = True
+
+    def move_times(cands: object, views: list[int], exact: bool = False) -> np.ndarray:
+        t = np.ones((len(views) + 1, len(views) + 1))
+        np.fill_diagonal(t, 0.0)
+        if exact and 0 in views:
+            k = views.index(0) + 1
+            t[k, :] = t[:, k] = math.inf
+            t[k, k] = 0.0
+        return t
+
+    scores = gain_scores(seen.sum(axis=1).astype(np.float64), np.ones(2, dtype=bool))
+    first = Pose.look_at(np.array([0.5, 0.0, 0.2]), np.zeros(3))
+    for lazy, expected in ((True, 1), (False, 0)):
+        evaluator = TourEvaluator(PlannerConfig().replace(tour={"lazy_reach": lazy}))
+        evaluator.last_seen = seen
+        best, plan = evaluator.choose(scores, candidates, first, move_times, taken=[first], center=np.zeros(3))
+        assert best == expected and plan is not None and plan.method != "ring"
+    assert evaluator.last_move_seconds[0] == 1.0  # without lazy reachability the cover's cached time stands
