@@ -193,3 +193,22 @@ def test_a_ring_view_the_cell_cannot_reach_is_left_out_of_the_cover_too() -> Non
         best, plan = evaluator.choose(scores, candidates, first, move_times, taken=[first], center=np.zeros(3))
         assert best == expected and plan is not None and plan.method != "ring"
     assert evaluator.last_move_seconds[0] == 1.0  # without lazy reachability the cover's cached time stands
+
+
+def test_the_projection_score_keeps_its_own_choice_from_the_first_plan() -> None:
+    from planner.baselines.evaluators import gain_scores
+    from planner.tour import TourEvaluator
+    from planner.types import Pose
+
+    candidates = ring_candidates([(120, 10), (180, 10)])  # 0 a ring view, 1 off the ring with the best score
+    scores = gain_scores(np.array([5.0, 9.0]), np.ones(2, dtype=bool))
+
+    def move_times(cands: object, views: list[int], exact: bool = False) -> np.ndarray:
+        t = np.ones((len(views) + 1, len(views) + 1))
+        np.fill_diagonal(t, 0.0)
+        return t
+
+    evaluator = TourEvaluator(PlannerConfig().replace(tour={"score": "projection", "slack": 0.1}))
+    first = Pose.look_at(np.array([0.5, 0.0, 0.2]), np.zeros(3))
+    best, plan = evaluator.choose(scores, candidates, first, move_times, taken=[first], center=np.zeros(3))
+    assert best == 1 and plan is not None and plan.method == "near"
