@@ -304,15 +304,14 @@ class Planner:
             best, tour = cast(ChooseFn, choose)(
                 evaluation.scores, candidates, self.views[-1], move_times, taken=self.views, center=center
             )
+            timed: dict[int, float] = getattr(self.evaluator, "last_move_seconds", {})  # the views it timed itself
             if lazy:  # only the views it timed have a move (and a reachability answer: inf = unreachable)
-                timed: dict[int, float] = getattr(self.evaluator, "last_move_seconds", {})
                 move_costs = np.full(len(candidates), math.inf)
                 move_costs[list(timed)] = list(timed.values())
                 evaluation, reasons = _unreachable_marked(evaluation, reasons, timed)
             elif move_times is not None:  # each eligible candidate's move from here, for the table
                 move_costs = moves_from_here(move_times, candidates, [s.eligible for s in evaluation.scores])
-                timed = getattr(self.evaluator, "last_move_seconds", {})  # the evaluator's own (exact) times win
-                move_costs[list(timed)] = list(timed.values())
+                move_costs[list(timed)] = list(timed.values())  # the evaluator's own (exact) times win
             stages("select", 0, 1)
         elif weight > 0 and (move_times is not None or move_cost is not None):
             eligible_now = np.array([s.eligible for s in evaluation.scores], dtype=bool)

@@ -43,7 +43,7 @@ from numpy.typing import NDArray
 
 from planner.config import PlannerConfig, TourConfig
 from planner.evaluators import EVALUATORS, Evaluation, EvaluationContext, ProjectionEvaluator
-from planner.partitions import azimuth_of
+from planner.partitions import TWO_PI, azimuth_of
 from planner.types import Candidate, Intrinsics, Pose, TourPlan, ViewScore, VoxelClass
 
 MoveTimes = Callable[..., NDArray[np.float64]]
@@ -226,8 +226,8 @@ def near_best(
 
 def azimuth_gap(a: float | NDArray[np.float64], b: float) -> NDArray[np.float64]:
     """The angle (rad, in [0, pi]) between azimuths ``a`` (any shape) and ``b``, the short way round."""
-    d = np.mod(np.asarray(a, dtype=np.float64) - b, 2.0 * math.pi)
-    return np.minimum(d, 2.0 * math.pi - d)
+    d = np.mod(np.asarray(a, dtype=np.float64) - b, TWO_PI)
+    return np.minimum(d, TWO_PI - d)
 
 
 def ring_directions(first: float, spread: float, taken: Sequence[float], tolerance: float) -> list[float]:
@@ -235,7 +235,7 @@ def ring_directions(first: float, spread: float, taken: Sequence[float], toleran
     view's azimuth about the object, either side), each unless a view taken since (``taken``: their azimuths) lies
     within ``tolerance`` of it. One azimuth when ``spread`` is pi (both sides meet behind the object)."""
     sides = [first + spread] if math.isclose(spread, math.pi) else [first + spread, first - spread]
-    return [float(d % (2.0 * math.pi)) for d in sides if not any(float(azimuth_gap(a, d)) <= tolerance for a in taken)]
+    return [float(d % TWO_PI) for d in sides if not any(float(azimuth_gap(a, d)) <= tolerance for a in taken)]
 
 
 def ring_view(
@@ -266,6 +266,22 @@ def ring_view(
     ring = np.asarray(eligible, dtype=bool) & near_ring & (np.asarray(elevations) <= max_elevation) & (counts > 0)
     ranked = sorted(((int(i), float(counts[i])) for i in np.flatnonzero(ring)), key=lambda t: (-t[1], t[0]))
     return near_best(ranked, seconds, 1.0 - share, near_views)
+
+
+def seconds_from_here(
+    move_times: MoveTimes | None, candidates: Sequence[Candidate], start: Pose
+) -> Callable[[list[int]], NDArray[np.float64]]:
+    """K indices -> (K,) seconds of the move from the current state to each of those ``candidates``, as the cell would
+    make it (``move_times(..., exact=True)``: every plate angle and IK branch; inf: unreachable); without
+    ``move_times``, straight lines from ``start`` (:func:`straight_move_times`). What :func:`near_best` and
+    :func:`ring_view` time their views by."""
+
+    def seconds(views: list[int]) -> NDArray[np.float64]:
+        if move_times is not None:
+            return np.asarray(move_times(candidates, views, exact=True), dtype=np.float64)[0, 1:]
+        return straight_move_times(start, [candidates[i].T_world_camera for i in views])[0, 1:]
+
+    return seconds
 
 
 def straight_move_times(start: Pose, poses: Sequence[Pose]) -> NDArray[np.float64]:
@@ -343,7 +359,7 @@ class TourEvaluator:
         if not np.any(eligible):
             return None, None
         if cfg.score == "projection":
-            return self._choose_near_best(scores, candidates, move_times)
+            return self._choose_near_best(scores, candidates, start, move_times)
         self.last_move_seconds = {}
         if cfg.opening == "ring" and center is not None and 1 <= len(taken) <= 2:
             best, plan = self._choose_ring(eligible, candidates, start, move_times, taken, center)
@@ -414,12 +430,6 @@ class TourEvaluator:
         )
         if not directions or not candidates:
             return None, None
-
-        def seconds(views: list[int]) -> NDArray[np.float64]:
-            if move_times is not None:  # as the cell would make each move from here (every plate angle and branch)
-                return np.asarray(move_times(candidates, views, exact=True), dtype=np.float64)[0, 1:]
-            return straight_move_times(start, [candidates[i].T_world_camera for i in views])[0, 1:]
-
         counts = self.last_seen.sum(axis=1).astype(np.float64)
         best, timed = ring_view(
             counts,
@@ -430,7 +440,7 @@ class TourEvaluator:
             math.radians(cfg.ring_max_elevation_deg),
             tolerance,
             cfg.ring_share,
-            seconds,
+            seconds_from_here(move_times, candidates, start),
             cfg.near_views,
         )
         self.last_move_seconds.update(timed)
@@ -439,7 +449,7 @@ class TourEvaluator:
         return best, TourPlan(views=(best,), gains=(int(counts[best]),), seconds=(timed[best],), method="ring")
 
     def _choose_near_best(
-        self, scores: Sequence[ViewScore], candidates: Sequence[Candidate], move_times: MoveTimes | None
+        self, scores: Sequence[ViewScore], candidates: Sequence[Candidate], start: Pose, move_times: MoveTimes | None
     ) -> tuple[int | None, TourPlan | None]:
         """:meth:`choose` with ``tour.score = "projection"``: :func:`near_best` under the cell's exact moves from
         the current state (without ``move_times``: the best F, as ``projection``)."""
@@ -450,11 +460,7 @@ class TourEvaluator:
         self.last_move_seconds = {}
         if move_times is None:
             return ranked[0][0], None
-        mt = move_times
-
-        def seconds(views: list[int]) -> NDArray[np.float64]:
-            return np.asarray(mt(candidates, views, exact=True), dtype=np.float64)[0, 1:]
-
+        seconds = seconds_from_here(move_times, candidates, start)
         best, self.last_move_seconds = near_best(ranked, seconds, cfg.slack, cfg.near_views)
         if best is None:
             return None, None
