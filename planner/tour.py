@@ -84,6 +84,8 @@ def visible_frontier(
         return seen
     k = intrinsics
     sx, sy = width / k.width, height / k.height
+    row = width + 2  # the raster with a border of one pixel at inf, so a 3 x 3 block never leaves it
+    block = np.array([dy * row + dx for dy in (-1, 0, 1) for dx in (-1, 0, 1)], dtype=np.int64)  # (9,)
     for start in range(0, len(poses), CAMERAS_PER_BATCH):
         batch = poses[start : start + CAMERAS_PER_BATCH]
         R = np.stack([p.rotation for p in batch])  # (B, 3, 3) camera axes in the world
@@ -95,16 +97,13 @@ def visible_frontier(
             v = (k.fy * X[..., 1] / z + k.cy + 0.5) * sy
         ok = (z > 1e-6) & (u >= 0) & (u < width) & (v >= 0) & (v < height)
         cam = np.broadcast_to(np.arange(len(batch))[:, None], z.shape)
-        pixel = cam * (width * height) + np.floor(v).astype(np.int64).clip(0, height - 1) * width
-        pixel += np.floor(u).astype(np.int64).clip(0, width - 1)
-        zbuf = np.full(len(batch) * width * height, np.inf)
+        pixel = cam * (row * (height + 2)) + (np.floor(v).astype(np.int64).clip(0, height - 1) + 1) * row
+        pixel += np.floor(u).astype(np.int64).clip(0, width - 1) + 1
+        zbuf = np.full(len(batch) * row * (height + 2), np.inf)
         np.minimum.at(zbuf, pixel[ok], z[ok])
-        img = zbuf.reshape(len(batch), height, width)
-        padded = np.pad(img, ((0, 0), (1, 1), (1, 1)), constant_values=np.inf)
-        rows = np.minimum(np.minimum(padded[:, :, :-2], padded[:, :, 1:-1]), padded[:, :, 2:])  # 3 x 3 min, separably
-        near = np.minimum(np.minimum(rows[:, :-2], rows[:, 1:-1]), rows[:, 2:]).reshape(-1)
         front = pixel[:, :n_f]
-        seen[start : start + len(batch)] = ok[:, :n_f] & (z[:, :n_f] <= near[front] + tolerance)
+        near = zbuf[front[..., None] + block].min(axis=-1)  # (B, F): the 3 x 3 minimum at each frontier pixel only
+        seen[start : start + len(batch)] = ok[:, :n_f] & (z[:, :n_f] <= near + tolerance)
     return seen
 
 

@@ -105,6 +105,53 @@ def test_visibility_hides_frontier_behind_occupied_voxels() -> None:
     assert visible_frontier(np.zeros((0, 3)), wall, [camera], K, 32, 24, 0.01).shape == (1, 0)
 
 
+def dense_visible_frontier(
+    frontier: np.ndarray, occluders: np.ndarray, poses: list[Pose], width: int, height: int, tolerance: float
+) -> np.ndarray:
+    """The reference of ``visible_frontier``: per camera a whole z-buffer image and its 3 x 3 minimum, pixel by pixel."""
+    points = np.concatenate([frontier, occluders])
+    seen = np.zeros((len(poses), len(frontier)), dtype=bool)
+    for c, pose in enumerate(poses):
+        X = (points - pose.translation) @ pose.rotation
+        image = np.full((height, width), np.inf)
+        pixels = []
+        for x, y, z in X:
+            if z <= 1e-6:
+                pixels.append(None)
+                continue
+            u = (K.fx * x / z + K.cx + 0.5) * width / K.width
+            v = (K.fy * y / z + K.cy + 0.5) * height / K.height
+            if not (0 <= u < width and 0 <= v < height):
+                pixels.append(None)
+                continue
+            r, q = math.floor(v), math.floor(u)
+            image[r, q] = min(image[r, q], z)
+            pixels.append((r, q, z))
+        for f in range(len(frontier)):
+            if pixels[f] is None:
+                continue
+            r, q, z = pixels[f]
+            near = image[max(r - 1, 0) : r + 2, max(q - 1, 0) : q + 2].min()
+            seen[c, f] = z <= near + tolerance
+    return seen
+
+
+def test_visibility_matches_a_whole_image_z_buffer_at_the_raster_edges_and_across_batches() -> None:
+    # the 3 x 3 minimum is taken at each frontier voxel's pixel only; the reference takes it over the whole image
+    rng = np.random.default_rng(7)
+    frontier = rng.uniform(-0.15, 0.15, (120, 3))
+    occluders = rng.uniform(-0.15, 0.15, (300, 3))
+    poses = []
+    for k in range(60):  # more than one batch of cameras (CAMERAS_PER_BATCH = 48)
+        azimuth, elevation = 2 * math.pi * k / 60, 0.2 + 0.8 * (k % 5) / 5
+        eye = 0.35 * np.array([math.cos(azimuth) * math.cos(elevation), math.sin(azimuth) * math.cos(elevation), 0])
+        eye[2] = 0.35 * math.sin(elevation)
+        poses.append(Pose.look_at(eye, np.zeros(3)))  # close enough that the cloud fills the image to its edges
+    seen = visible_frontier(frontier, occluders, poses, K, 32, 24, tolerance=0.01)
+    assert np.array_equal(seen, dense_visible_frontier(frontier, occluders, poses, 32, 24, 0.01))
+    assert 0 < seen.sum() < seen.size  # some hidden, some seen
+
+
 def test_the_tour_planner_is_registered_and_validates_its_settings() -> None:
     assert "tour" in evaluator_names()
     with pytest.raises(ValueError, match=r"^tour\.horizon:"):
