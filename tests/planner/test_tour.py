@@ -142,7 +142,7 @@ def test_visibility_matches_a_whole_image_z_buffer_at_the_raster_edges_and_acros
     frontier = rng.uniform(-0.15, 0.15, (120, 3))
     occluders = rng.uniform(-0.15, 0.15, (300, 3))
     poses = []
-    for k in range(60):  # more than one batch of cameras (CAMERAS_PER_BATCH = 48)
+    for k in range(60):  # more than one batch of cameras (CAMERAS_PER_BATCH = 16), the last one short
         azimuth, elevation = 2 * math.pi * k / 60, 0.2 + 0.8 * (k % 5) / 5
         eye = 0.35 * np.array([math.cos(azimuth) * math.cos(elevation), math.sin(azimuth) * math.cos(elevation), 0])
         eye[2] = 0.35 * math.sin(elevation)
