@@ -112,15 +112,15 @@ def dense_visible_frontier(
     points = np.concatenate([frontier, occluders])
     seen = np.zeros((len(poses), len(frontier)), dtype=bool)
     for c, pose in enumerate(poses):
-        X = (points - pose.translation) @ pose.rotation
+        X = points @ pose.rotation - pose.translation @ pose.rotation  # the camera frame, as visible_frontier does
         image = np.full((height, width), np.inf)
         pixels = []
         for x, y, z in X:
             if z <= 1e-6:
                 pixels.append(None)
                 continue
-            u = (K.fx * x / z + K.cx + 0.5) * width / K.width
-            v = (K.fy * y / z + K.cy + 0.5) * height / K.height
+            u = (K.fx * x / z + K.cx + 0.5) * (width / K.width)
+            v = (K.fy * y / z + K.cy + 0.5) * (height / K.height)
             if not (0 <= u < width and 0 <= v < height):
                 pixels.append(None)
                 continue
