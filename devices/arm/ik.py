@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from devices.arm.closed_form import ClosedFormIK
 from devices.arm.model import ArmModel
 from planner.types import Pose
 
@@ -118,6 +119,27 @@ def solve_ik(
             break
     if not solutions:
         return [], "joint_limit" if converged else "no_ik"
+    solutions.sort(key=lambda s: float(np.linalg.norm(s - reference)))
+    return solutions, None
+
+
+def every_branch(
+    arm: ArmModel, solver: ClosedFormIK, T_base_camera: Pose, reference: NDArray[np.float64]
+) -> tuple[list[NDArray[np.float64]], str | None]:
+    """:func:`solve_ik` with ``first=False`` in closed form (a UR-type arm, :mod:`devices.arm.closed_form`): every
+    branch of the pose, each turned by whole turns to the limits nearest ``reference``, distinct, sorted by joint
+    distance from it; the reason when none (``no_ik`` out of reach, ``joint_limit`` every branch outside)."""
+    found = solver.solve(T_base_camera, reference)
+    if not found:
+        return [], "no_ik"
+    solutions: list[NDArray[np.float64]] = []
+    for q in found:
+        fitted = fit_limits(q, reference, arm.lower, arm.upper)
+        if fitted is None or any(np.max(np.abs(fitted - s)) < 1e-3 for s in solutions):
+            continue
+        solutions.append(fitted)
+    if not solutions:
+        return [], "joint_limit"
     solutions.sort(key=lambda s: float(np.linalg.norm(s - reference)))
     return solutions, None
 

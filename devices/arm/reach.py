@@ -31,8 +31,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import KDTree
 
+from devices.arm.closed_form import closed_form
 from devices.arm.collision import CollisionWorld
-from devices.arm.ik import fixed_seeds, solve_ik
+from devices.arm.ik import every_branch, fixed_seeds, solve_ik
 from devices.arm.model import ArmModel
 from planner.types import Pose
 
@@ -125,6 +126,8 @@ class ArmReach:
         self._library, self._library_tree, self._wrist_in_camera, self._root, self.reach = self._seed_library()
         self._cache: dict[tuple[object, ...], tuple[list[NDArray[np.float64]], str | None]] = {}
         self._anchors = self._shared_anchors()
+        self._closed_form = closed_form(arm)
+        """Every IK branch of a move in closed form (a UR-type arm), else None: damped least squares from seeds."""
         self._attempts: dict[tuple[bytes, bytes, float, bytes], tuple[NDArray[np.float64], Pose] | str] = {}
         self._last_offset = 0
         self._velocity: list[float] = arm.velocity.tolist()
@@ -296,6 +299,12 @@ class ArmReach:
         hit = self._cache.get(key)
         if hit is not None:
             return hit
+        if not first and self._closed_form is not None:
+            result = every_branch(self.arm, self._closed_form, T_base_camera, reference)
+            if len(self._cache) >= CACHE_SIZE:
+                self._cache.clear()
+            self._cache[key] = result
+            return result
 
         def seeds() -> Iterator[NDArray[np.float64]]:  # lazily: the library is searched only if needed
             if not first:
@@ -469,6 +478,8 @@ class ArmReach:
                 return self.world.collision(q, angle) is None
 
             solutions, _ = solve_ik(self.arm, T_base_camera, seeds, self.home, self._data, first=True, accept=free)
+        if not first:  # the shortest free branch: check collisions nearest move first, stop at the first free one
+            return self._nearest_free(solutions, angle, q_current, angle_current)
         for q in solutions:
             hit = self.world.collision(q, angle)
             if hit is not None:
@@ -480,3 +491,19 @@ class ArmReach:
             if first:
                 break
         return (best, None) if best is not None else (None, collision)
+
+    def _nearest_free(
+        self, solutions: list[NDArray[np.float64]], angle: float, q_current: NDArray[np.float64], angle_current: float
+    ) -> tuple[ArmTarget | None, str | None]:
+        """Of a move's IK branches (non-empty, sorted by joint distance), the free one with the shortest move estimate
+        (the earlier of equals), or the first one's collision when none is free: what checking every branch gives,
+        with the collision checks (about 40 us each) stopped at the first free branch in the order of the move."""
+        estimates = [self.move_estimate(q_current, q, angle_current, angle) for q in solutions]
+        hits: dict[int, str] = {}
+        for i in sorted(range(len(solutions)), key=lambda i: (estimates[i], i)):
+            hit = self.world.collision(solutions[i], angle)
+            if hit is None:
+                q = solutions[i]
+                return ArmTarget(angle, q, self.arm.camera_pose(q, self._data), estimates[i]), None
+            hits[i] = hit
+        return None, hits[min(hits)]
