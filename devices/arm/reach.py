@@ -17,6 +17,11 @@ verdict does not depend on the order). The whole attempt at one plate angle (IK,
 cached per (view, plate angle, padded object box): a pure function of the three, so a plan whose candidates and
 box are those of an earlier plan (the box changes a few times per scan; the candidates only with it) answers
 from the cache, with the same targets as without it (``tests/devices/test_reach_cache.py``).
+
+A *move* (:meth:`ArmReach.best_target`) wants every IK branch at every plate angle, the shortest free one: for a
+UR-type arm (the UR5) they come in closed form (:mod:`devices.arm.closed_form`, all eight, exact), checked for
+collisions nearest move first; for any other arm, from damped least squares seeded by the current joints, the
+anchor and the library (the branches those seeds reach). Reachability keeps its seeded IK either way.
 """
 
 from __future__ import annotations
