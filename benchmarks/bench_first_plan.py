@@ -9,7 +9,10 @@ its IK on a nominal hemisphere (``workbench/workers/child.py``, the ``warm`` job
     .venv/bin/python benchmarks/bench_first_plan.py [--model bunny.obj] [--think 3] [--runs 3]
         [--sensor realsense-d435 --calibration typical]
 
-Run it from another checkout (``PYTHONPATH=/path/to/checkout``) to measure that code the same way.
+To measure another checkout's code the same way, run it from that checkout's directory (``cd /path/to/checkout;
+PYTHONPATH=. /path/to/.venv/bin/python benchmarks/bench_first_plan.py``): the workers come from a forkserver, and on
+Python 3.11 a forkserver puts its working directory first on ``sys.path`` (it ignores the parent's path), so a
+PYTHONPATH alone would measure the code of the directory it was started from.
 """
 
 from __future__ import annotations
