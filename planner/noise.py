@@ -37,25 +37,34 @@ averages the depth noise: a D435 at 0.55 m tilts a 5 mm baseline's normal by abo
 
 def vertical_cosines(frame: DepthFrame, stencil: int = NORMAL_STENCIL_PX) -> NDArray[np.float64]:
     """(N,) per point of ``frame.points_world``: |cos| of the angle between the surface normal there and the world
-    vertical, the normal from the cross product of the world points ``stencil`` pixels to either side along the row
-    and the column (0 where one of the four has no return: an edge, a hole)."""
+    vertical, the normal from the cross product of the differences of the points ``stencil`` pixels to either side
+    along the row and the column (0 where one of the four has no return: an edge, a hole). The cross product is taken
+    in the camera frame and only its vertical component rotated to the world (a rotation keeps cross products): the
+    same values to 1e-13 as rotating the whole image first, about 2x faster (13 against 29 ms a 640 x 480 frame; the
+    D435 model makes two calls a frame)."""
     d = frame.depth
     h, w = d.shape
-    cam = np.zeros((h, w, 3))
-    cam[d > 0] = frame.points_camera  # the frame's own back-projection (cached), in the mask's row-major order
-    world = cam @ frame.T_world_camera.rotation.T  # (H, W, 3) directions: the translation cancels in differences
+    valid = d > 0
     s = int(stencil)
+    if h <= 2 * s or w <= 2 * s:
+        return np.zeros(int(np.count_nonzero(valid)))
+    p = frame.points_camera
+    cx, cy, cz = (np.zeros((h, w)) for _ in range(3))
+    cx[valid], cy[valid], cz[valid] = p[:, 0], p[:, 1], p[:, 2]
+    row, col = (slice(s, -s), slice(2 * s, None)), (slice(s, -s), slice(None, -2 * s))
+    down, up = (slice(2 * s, None), slice(s, -s)), (slice(None, -2 * s), slice(s, -s))
+    ux, uy, uz = cx[row] - cx[col], cy[row] - cy[col], cz[row] - cz[col]
+    vx, vy, vz = cx[down] - cx[up], cy[down] - cy[up], cz[down] - cz[up]
+    nx = uy * vz - uz * vy  # the normal in the camera frame: the rotation to the world keeps cross products
+    ny = uz * vx - ux * vz
+    nz = ux * vy - uy * vx
+    r = frame.T_world_camera.rotation[2]  # the world's vertical component of a camera-frame vector
+    vertical = r[0] * nx + r[1] * ny + r[2] * nz
+    norm = np.sqrt(nx * nx + ny * ny + nz * nz)
+    ok = valid[row] & valid[col] & valid[down] & valid[up] & (norm > 0)
     out = np.zeros((h, w))
-    if h > 2 * s and w > 2 * s:
-        du = world[s:-s, 2 * s :] - world[s:-s, : -2 * s]
-        dv = world[2 * s :, s:-s] - world[: -2 * s, s:-s]
-        n = np.cross(du, dv)
-        norm = np.linalg.norm(n, axis=-1)
-        ok = ((d[s:-s, 2 * s :] > 0) & (d[s:-s, : -2 * s] > 0) & (d[2 * s :, s:-s] > 0) & (d[: -2 * s, s:-s] > 0)) & (
-            norm > 0
-        )
-        out[s:-s, s:-s] = np.where(ok, np.abs(n[..., 2]) / np.where(norm > 0, norm, 1.0), 0.0)
-    return out[d > 0]
+    out[s:-s, s:-s] = np.where(ok, np.abs(vertical) / np.where(norm > 0, norm, 1.0), 0.0)
+    return out[valid]
 
 
 def fit_plate(
