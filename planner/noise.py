@@ -35,36 +35,52 @@ NORMAL_STENCIL_PX = 3
 averages the depth noise: a D435 at 0.55 m tilts a 5 mm baseline's normal by about 10 degrees)."""
 
 
-def vertical_cosines(frame: DepthFrame, stencil: int = NORMAL_STENCIL_PX) -> NDArray[np.float64]:
+def vertical_cosines(
+    frame: DepthFrame, stencil: int = NORMAL_STENCIL_PX, at: NDArray[np.intp] | None = None
+) -> NDArray[np.float64]:
     """(N,) per point of ``frame.points_world``: |cos| of the angle between the surface normal there and the world
     vertical, the normal from the cross product of the differences of the points ``stencil`` pixels to either side
-    along the row and the column (0 where one of the four has no return: an edge, a hole). The cross product is taken
-    in the camera frame and only its vertical component rotated to the world (a rotation keeps cross products): the
-    same values to 1e-13 as rotating the whole image first, about 2x faster (13 against 29 ms a 640 x 480 frame; the
-    D435 model makes two calls a frame)."""
+    along the row and the column (0 where one of the four has no return or lies off the image: an edge, a hole).
+    at (K,): only those points (indices into ``frame.points_world``), (K,) values, the same as the whole frame's.
+
+    The four neighbours of each point are gathered through an image of point indices, and the cross product is
+    taken in the camera frame with only its vertical component rotated to the world (a rotation keeps cross
+    products): the same values to 1e-13 as rotating the whole image first and crossing every pixel's tangents, at
+    a fraction of the cost (the plate fit asks only the points near the plate; the D435 model asks twice a frame)."""
     d = frame.depth
     h, w = d.shape
     valid = d > 0
+    rows, cols = np.nonzero(valid)  # the order of frame.points_world
+    idx = np.arange(len(rows)) if at is None else np.asarray(at, dtype=np.intp)
+    r, c = rows[idx], cols[idx]
     s = int(stencil)
-    if h <= 2 * s or w <= 2 * s:
-        return np.zeros(int(np.count_nonzero(valid)))
+    index = np.full((h + 2 * s, w + 2 * s), -1, dtype=np.int64)  # -1: no return, or off the image
+    index[s : s + h, s : s + w][valid] = np.arange(len(rows))
+    right, left = index[r + s, c + 2 * s], index[r + s, c]
+    below, above = index[r + 2 * s, c + s], index[r, c + s]
+    ok = (right >= 0) & (left >= 0) & (below >= 0) & (above >= 0)
+    out = np.zeros(len(idx))
+    if not np.any(ok):
+        return out
     p = frame.points_camera
-    cx, cy, cz = (np.zeros((h, w)) for _ in range(3))
-    cx[valid], cy[valid], cz[valid] = p[:, 0], p[:, 1], p[:, 2]
-    row, col = (slice(s, -s), slice(2 * s, None)), (slice(s, -s), slice(None, -2 * s))
-    down, up = (slice(2 * s, None), slice(s, -s)), (slice(None, -2 * s), slice(s, -s))
-    ux, uy, uz = cx[row] - cx[col], cy[row] - cy[col], cz[row] - cz[col]
-    vx, vy, vz = cx[down] - cx[up], cy[down] - cy[up], cz[down] - cz[up]
-    nx = uy * vz - uz * vy  # the normal in the camera frame: the rotation to the world keeps cross products
+    du = p[right[ok]] - p[left[ok]]
+    dv = p[below[ok]] - p[above[ok]]
+    ux, uy, uz = du[:, 0], du[:, 1], du[:, 2]
+    vx, vy, vz = dv[:, 0], dv[:, 1], dv[:, 2]
+    nx = uy * vz - uz * vy
     ny = uz * vx - ux * vz
     nz = ux * vy - uy * vx
-    r = frame.T_world_camera.rotation[2]  # the world's vertical component of a camera-frame vector
-    vertical = r[0] * nx + r[1] * ny + r[2] * nz
+    up = frame.T_world_camera.rotation[2]  # the world's vertical component of a camera-frame vector
+    vertical = up[0] * nx + up[1] * ny + up[2] * nz
     norm = np.sqrt(nx * nx + ny * ny + nz * nz)
-    ok = valid[row] & valid[col] & valid[down] & valid[up] & (norm > 0)
-    out = np.zeros((h, w))
-    out[s:-s, s:-s] = np.where(ok, np.abs(vertical) / np.where(norm > 0, norm, 1.0), 0.0)
-    return out[valid]
+    out[ok] = np.where(norm > 0, np.abs(vertical) / np.where(norm > 0, norm, 1.0), 0.0)
+    return out
+
+
+def plate_window(points_world: NDArray[np.float64], window: float, workspace_radius: float) -> NDArray[np.bool_]:
+    """(N,) the points :func:`fit_plate` fits to: within ``window`` of z = 0 and ``workspace_radius`` of the axis."""
+    p = points_world
+    return (np.abs(p[:, 2]) <= window) & (p[:, 0] ** 2 + p[:, 1] ** 2 <= workspace_radius**2)
 
 
 def fit_plate(
@@ -87,7 +103,7 @@ def fit_plate(
     top, beyond a sensor's grazing limit, is left with too few). (0, 0, 0) when there are too few points or the
     plane is implausible."""
     p = points_world
-    near = (np.abs(p[:, 2]) <= window) & (p[:, 0] ** 2 + p[:, 1] ** 2 <= workspace_radius**2)
+    near = plate_window(p, window, workspace_radius)
     if candidates is not None:
         near &= candidates
     q = p[near]
@@ -129,8 +145,11 @@ def plate_heights(frame: DepthFrame, preprocess: PreprocessConfig, noise: NoiseC
     if not noise.fit_plate:
         return band
     horizontal = None
-    if noise.plate_fit_max_tilt_deg < 90:
-        horizontal = vertical_cosines(frame) >= math.cos(math.radians(noise.plate_fit_max_tilt_deg))
+    if noise.plate_fit_max_tilt_deg < 90:  # asked only where the fit looks: the points in its window
+        near = plate_window(points, noise.plate_fit_window, preprocess.workspace_radius)
+        horizontal = np.zeros(len(points), dtype=bool)
+        at = np.flatnonzero(near)
+        horizontal[at] = vertical_cosines(frame, at=at) >= math.cos(math.radians(noise.plate_fit_max_tilt_deg))
     a, b, c = fit_plate(points, noise.plate_fit_window, preprocess.workspace_radius, horizontal)
     return band + a * points[:, 0] + b * points[:, 1] + c
 

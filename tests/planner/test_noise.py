@@ -191,6 +191,10 @@ def test_vertical_cosines_equal_the_normals_of_the_world_points_with_holes_and_a
     got = vertical_cosines(frame, s)
     np.testing.assert_allclose(got, expected[depth > 0], atol=1e-12)
     assert np.count_nonzero(got) > 200 and np.ptp(got[got > 0]) > 0.5  # real spread, not all zero or all one
+    at = np.flatnonzero(rng.random(len(got)) < 0.3)  # some points only, the border's among them
+    rows, cols = np.nonzero(depth > 0)
+    assert np.any((rows[at] < s) | (cols[at] >= K.width - s))
+    np.testing.assert_array_equal(vertical_cosines(frame, s, at=at), got[at])
 
 
 def test_a_low_view_without_the_plate_top_fits_no_plane() -> None:
