@@ -36,7 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import KDTree
 
-from devices.arm.closed_form import closed_form
+from devices.arm.closed_form import closed_form, wrap
 from devices.arm.collision import CollisionWorld
 from devices.arm.ik import every_branch, fixed_seeds, solve_ik
 from devices.arm.model import ArmModel
@@ -68,12 +68,6 @@ ATTEMPT_CACHE_SIZE = 50_000
 def rz_matrix(theta: float) -> NDArray[np.float64]:
     c, s = math.cos(theta), math.sin(theta)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def wrap(angle: float) -> float:
-    """``angle`` wrapped to (-pi, pi]."""
-    a = math.remainder(angle, 2 * math.pi)
-    return math.pi if a == -math.pi else a
 
 
 def turn_matrix(angles: NDArray[np.float64], angles_to: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
@@ -306,10 +300,18 @@ class ArmReach:
             return hit
         if not first and self._closed_form is not None:
             result = every_branch(self.arm, self._closed_form, T_base_camera, reference)
-            if len(self._cache) >= CACHE_SIZE:
-                self._cache.clear()
-            self._cache[key] = result
-            return result
+        else:
+            result = self._seeded_ik(T_base_camera, reference, first=first)
+        if len(self._cache) >= CACHE_SIZE:
+            self._cache.clear()
+        self._cache[key] = result
+        return result
+
+    def _seeded_ik(
+        self, T_base_camera: Pose, reference: NDArray[np.float64], *, first: bool
+    ) -> tuple[list[NDArray[np.float64]], str | None]:
+        """:meth:`_ik` by damped least squares from seeds: the current configuration (a move), the pose's anchor,
+        then the library."""
 
         def seeds() -> Iterator[NDArray[np.float64]]:  # lazily: the library is searched only if needed
             if not first:
@@ -322,11 +324,7 @@ class ArmReach:
                 k = 1  # the cell's centre is out of reach: one more try (a cell on the workspace's edge), not all
             yield from self._library_seeds(T_base_camera, k)
 
-        result = solve_ik(self.arm, T_base_camera, seeds(), self.home if first else reference, self._data, first=first)
-        if len(self._cache) >= CACHE_SIZE:
-            self._cache.clear()
-        self._cache[key] = result
-        return result
+        return solve_ik(self.arm, T_base_camera, seeds(), self.home if first else reference, self._data, first=first)
 
     def _library_seeds(self, T_base_camera: Pose, k: int) -> list[NDArray[np.float64]]:
         _, idx = self._library_tree.query(self._feature(T_base_camera), k=min(k, len(self._library)))
@@ -473,9 +471,10 @@ class ArmReach:
         solutions, reason = self._ik(T_base_camera, q_current, first=first)
         if not solutions:
             return None, reason
-        best: ArmTarget | None = None
-        collision: str | None = None
-        if first and (collision := self.world.collision(solutions[0], angle)) is not None:
+        if not first:  # a move: the shortest free branch, collisions checked nearest move first
+            return self._nearest_free(solutions, angle, q_current, angle_current)
+        collision = self.world.collision(solutions[0], angle)
+        if collision is not None:
             # another branch may be free: the library's seeds, keeping only a free solution (state-independent)
             seeds = self._library_seeds(T_base_camera, self.arm.config.ik_seeds)
 
@@ -483,19 +482,14 @@ class ArmReach:
                 return self.world.collision(q, angle) is None
 
             solutions, _ = solve_ik(self.arm, T_base_camera, seeds, self.home, self._data, first=True, accept=free)
-        if not first:  # the shortest free branch: check collisions nearest move first, stop at the first free one
-            return self._nearest_free(solutions, angle, q_current, angle_current)
-        for q in solutions:
+        for q in solutions:  # reachability: the first free solution
             hit = self.world.collision(q, angle)
             if hit is not None:
                 collision = collision or hit
                 continue
             estimate = self.move_estimate(q_current, q, angle_current, angle)
-            if best is None or estimate < best.move_estimate:
-                best = ArmTarget(angle, q, self.arm.camera_pose(q, self._data), estimate)
-            if first:
-                break
-        return (best, None) if best is not None else (None, collision)
+            return ArmTarget(angle, q, self.arm.camera_pose(q, self._data), estimate), None
+        return None, collision
 
     def _nearest_free(
         self, solutions: list[NDArray[np.float64]], angle: float, q_current: NDArray[np.float64], angle_current: float
