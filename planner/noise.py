@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.config import NoiseConfig, PreprocessConfig, RegistrationConfig
-from planner.types import DepthFrame
+from planner.types import DepthFrame, Pose
 
 
 def depth_std(depth: NDArray[np.floating], noise: NoiseConfig) -> NDArray[np.float64]:
@@ -127,14 +127,43 @@ def fit_plate(
     return np.asarray(coef, dtype=np.float64)
 
 
-def plate_heights(frame: DepthFrame, preprocess: PreprocessConfig, noise: NoiseConfig) -> NDArray[np.float64]:
+def plate_plane(frame: DepthFrame, preprocess: PreprocessConfig, noise: NoiseConfig) -> NDArray[np.float64]:
+    """(3,) (a, b, c) of the plate's surface ``z = a x + b y + c`` in ``frame``: the frame's fitted plane with
+    ``noise.fit_plate`` (:func:`fit_plate`; with ``noise.plate_fit_max_tilt_deg`` < 90 only points whose surface
+    normal, :func:`vertical_cosines`, is within that angle of the vertical), else z = 0 (zeros)."""
+    if noise.exact or not noise.fit_plate:
+        return np.zeros(3)
+    points = frame.points_world
+    horizontal = None
+    if noise.plate_fit_max_tilt_deg < 90:  # asked only where the fit looks: the points in its window
+        near = plate_window(points, noise.plate_fit_window, preprocess.workspace_radius)
+        horizontal = np.zeros(len(points), dtype=bool)
+        at = np.flatnonzero(near)
+        horizontal[at] = vertical_cosines(frame, at=at) >= math.cos(math.radians(noise.plate_fit_max_tilt_deg))
+    return fit_plate(points, noise.plate_fit_window, preprocess.workspace_radius, horizontal)
+
+
+def plane_moved(plane: NDArray[np.float64], T_new_old: Pose) -> NDArray[np.float64]:
+    """(3,) the plane ``z = a x + b y + c`` (``plane`` (3,), in frame "old") in frame "new" (``x_new = T_new_old
+    x_old``): a registration's correction moves the frame's points, and the plate fitted to them with them."""
+    a, b, c = (float(v) for v in plane)
+    normal = T_new_old.rotation @ np.array([-a, -b, 1.0])
+    offset = c + float(normal @ T_new_old.translation)
+    return np.array([-normal[0] / normal[2], -normal[1] / normal[2], offset / normal[2]])
+
+
+def plate_heights(
+    frame: DepthFrame,
+    preprocess: PreprocessConfig,
+    noise: NoiseConfig,
+    plane: NDArray[np.float64] | None = None,
+) -> NDArray[np.float64]:
     """(N,) per point of ``frame.points_world``: below this height above z = 0 a point is plate.
 
-    The plate's surface (z = 0, or the frame's fitted plane with ``noise.fit_plate``) plus
-    ``max(plate_clearance, plate_sigmas * sigma_z)``, where sigma_z is the depth std at the point's depth times
-    the vertical component of its ray (a ray along the vertical moves the point up and down by its whole error,
-    a grazing one hardly at all). With ``noise.plate_fit_max_tilt_deg`` < 90 only points whose surface normal
-    (:func:`vertical_cosines`) is within that angle of the vertical are fitted."""
+    The plate's surface (``plane``, (3,) as :func:`plate_plane` gives it; None: :func:`plate_plane` of this frame)
+    plus ``max(plate_clearance, plate_sigmas * sigma_z)``, where sigma_z is the depth std at the point's depth
+    times the vertical component of its ray (a ray along the vertical moves the point up and down by its whole
+    error, a grazing one hardly at all)."""
     n = int(np.count_nonzero(frame.valid))
     if noise.exact:
         return np.full(n, preprocess.plate_clearance)
@@ -144,13 +173,7 @@ def plate_heights(frame: DepthFrame, preprocess: PreprocessConfig, noise: NoiseC
     band = np.maximum(preprocess.plate_clearance, noise.plate_sigmas * depth_std(depth, noise) * vertical)
     if not noise.fit_plate:
         return band
-    horizontal = None
-    if noise.plate_fit_max_tilt_deg < 90:  # asked only where the fit looks: the points in its window
-        near = plate_window(points, noise.plate_fit_window, preprocess.workspace_radius)
-        horizontal = np.zeros(len(points), dtype=bool)
-        at = np.flatnonzero(near)
-        horizontal[at] = vertical_cosines(frame, at=at) >= math.cos(math.radians(noise.plate_fit_max_tilt_deg))
-    a, b, c = fit_plate(points, noise.plate_fit_window, preprocess.workspace_radius, horizontal)
+    a, b, c = plate_plane(frame, preprocess, noise) if plane is None else plane
     return band + a * points[:, 0] + b * points[:, 1] + c
 
 

@@ -25,7 +25,15 @@ from numpy.typing import NDArray
 from planner.candidates import propose_candidates
 from planner.config import PlannerConfig
 from planner.evaluators import Evaluation, EvaluationContext, ViewEvaluator, make_evaluator
-from planner.noise import dropouts_filled, plate_heights, registration_for, unknown_beyond_range, without_flying_pixels
+from planner.noise import (
+    dropouts_filled,
+    plane_moved,
+    plate_heights,
+    plate_plane,
+    registration_for,
+    unknown_beyond_range,
+    without_flying_pixels,
+)
 from planner.partitions import (
     azimuth_of,
     default_tolerance,
@@ -120,7 +128,8 @@ class Planner:
 
         t0 = time.perf_counter()
         frame = without_flying_pixels(frame, self.config.noise.flying_jump)
-        plate = plate_heights(frame, self.config.preprocess, self.config.noise)
+        plane = plate_plane(frame, self.config.preprocess, self.config.noise)  # from measured depths only
+        plate = plate_heights(frame, self.config.preprocess, self.config.noise, plane)
         points, dense = preprocess_frame(frame.points_world, self.voxel_map.bbox, self.config.preprocess, plate)
         timings["preprocess"] = time.perf_counter() - t0
         if len(points) == 0:
@@ -135,12 +144,16 @@ class Planner:
                 frame = frame.with_pose(registration.correction @ frame.T_world_camera)
                 points = registration.correction.apply(points)
                 dense = registration.correction.apply(dense)
+                plane = plane_moved(plane, registration.correction)
         timings["register"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
         # every point of the kept cells marks OCCUPIED (a voxel the surface only clips may hold no centroid)
         if self.config.noise.dropout_fill_px > 0:  # dropouts are unknown, not free; the plate's pixels stay free
-            carve = self._plate_as_free_space(dropouts_filled(frame, self.config.noise.dropout_fill_px))
+            filled = dropouts_filled(frame, self.config.noise.dropout_fill_px)
+            carve = self._plate_as_free_space(
+                filled, plate_heights(filled, self.config.preprocess, self.config.noise, plane)
+            )
         else:
             carve = self._plate_as_free_space(frame, plate)
         carve = unknown_beyond_range(carve, frame, self.config.candidates.max_range)

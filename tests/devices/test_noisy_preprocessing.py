@@ -63,3 +63,26 @@ def test_noise_config_of_a_camera() -> None:
     assert noise_config(CameraConfig()).exact
     flat = noise_config(CameraConfig(depth_noise_std=0.002))
     assert flat.depth_std == pytest.approx(0.002) and flat.depth_z2 == 0
+
+
+def test_one_plate_fit_per_frame_from_the_measured_depths(monkeypatch: pytest.MonkeyPatch) -> None:
+    """With a D435 the planner carves a dropout-filled copy of the frame; its plate is the measured frame's plane
+    (one fit a frame, on depths the sensor returned, none invented by the fill), not a second fit."""
+    import planner.noise as noise_module
+
+    camera = CameraConfig(sensor="realsense-d435", calibration="typical")
+    cell = make_sim_cell(make_builtin("l-block"), camera, CellConfig(), seed=0)
+    config = planner_config_for(PlannerConfig(), camera)
+    assert config.noise.fit_plate and config.noise.dropout_fill_px > 0
+    fits: list[int] = []
+    fit = noise_module.fit_plate
+
+    def counted(points_world: np.ndarray, *args: object, **kwargs: object) -> np.ndarray:
+        fits.append(len(points_world))
+        return fit(points_world, *args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(noise_module, "fit_plate", counted)
+    planner = Planner(config)
+    frame = cell.capture()
+    planner.integrate(frame)
+    assert fits == [int(np.count_nonzero(frame.valid))]  # once, on the measured frame's points

@@ -13,7 +13,9 @@ from planner.noise import (
     depth_std,
     dropouts_filled,
     fit_plate,
+    plane_moved,
     plate_heights,
+    plate_plane,
     registration_for,
     unknown_beyond_range,
     vertical_cosines,
@@ -213,3 +215,34 @@ def test_a_low_view_without_the_plate_top_fits_no_plane() -> None:
     horizontal = vertical_cosines(high) >= np.cos(np.radians(30.0))
     a, b, c = fit_plate(high.points_world, 0.01, 0.3, horizontal)
     assert (a, b) == pytest.approx((0.0, 0.0), abs=1e-4) and c == pytest.approx(0.0015, abs=1e-4)
+
+
+def test_a_plane_moves_with_the_points_a_registration_moves() -> None:
+    """plane_moved: points on the plane z = a x + b y + c, moved by a rigid correction, lie on the moved plane."""
+    rng = np.random.default_rng(7)
+    plane = np.array([0.01, -0.02, 0.0015])
+    xy = rng.uniform(-0.2, 0.2, (50, 2))
+    points = np.column_stack([xy, plane[0] * xy[:, 0] + plane[1] * xy[:, 1] + plane[2]])
+    angle = np.radians(2.0)
+    axis = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    rotation = np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+    correction = Pose(rotation, np.array([0.003, -0.002, 0.004]))
+    moved = correction.apply(points)
+    a, b, c = plane_moved(plane, correction)
+    np.testing.assert_allclose(moved[:, 2], a * moved[:, 0] + b * moved[:, 1] + c, atol=1e-12)
+    assert c != pytest.approx(plane[2], abs=1e-3)  # it did move (by the correction's 4 mm)
+    np.testing.assert_allclose(plane_moved(plane, Pose(np.eye(3), np.zeros(3))), plane)
+
+
+def test_plate_heights_from_a_given_plane_equal_the_frames_own_fit() -> None:
+    """plate_heights(plane=plate_plane(frame)) is plate_heights(frame): the planner fits once per frame and hands
+    the measured frame's plane to the dropout-filled one it carves."""
+    frame = plate_frame((0.45, 0.0, 0.17), 0.0015, with_top=True)
+    noise = NoiseConfig(depth_z2=0.001, fit_plate=True, plate_fit_max_tilt_deg=30.0)
+    plane = plate_plane(frame, PreprocessConfig(), noise)
+    assert plane[2] == pytest.approx(0.0015, abs=1e-4)
+    np.testing.assert_array_equal(
+        plate_heights(frame, PreprocessConfig(), noise, plane), plate_heights(frame, PreprocessConfig(), noise)
+    )
+    assert np.all(plate_plane(frame, PreprocessConfig(), dataclasses.replace(noise, fit_plate=False)) == 0)
