@@ -12,6 +12,13 @@ trajectories, no computing at all: what the robot itself does). The last two nee
 columns (their runs are left out otherwise). (``nbv bench`` writes the same robot-time rows into its own
 summary.md; this script pairs runs of several benches.)
 
+Repetitions: a run (model, planner, seed, placement) found in several directories counts once, with each metric the
+mean over its repetitions (``reps`` in the header). The runs are deterministic in what the robot does but not in
+the plan's and the simulated capture's wall seconds, which change with the machine's speed and the other bench job
+on the cores: the same code measured an hour apart moved the robot seconds to 95 % of `projection` by 0.1-0.3 s
+(issue 25's ninth round), so a comparison at the edge of a goal should pool benches of both planners run at
+several times.
+
     nbv bench --models ../shared/models/*.{obj,ply} ../shared/models/extra/*.{obj,off} \\
         --planners projection,tour --seeds 2 --yaws 0,90 --out out/tour-ideal
     .venv/bin/python benchmarks/bench_tour.py out/tour-ideal [more dirs] [--reference projection]
@@ -83,10 +90,11 @@ def view_seconds(row: dict[str, Any], kind: str) -> float | None:
 
 def metrics_of(
     outcomes: list[RunOutcome], ceilings: dict[tuple[str, float], float], views: int, kind: str = "robot"
-) -> dict[tuple[str, str, int, float], RunMetrics]:
-    """(model, planner, seed, yaw) -> the run's metrics with its robot times counted as ``kind`` (:data:`SECONDS`),
-    for finished runs with a ceiling (and, for the variants that need them, the columns)."""
-    out = {}
+) -> dict[tuple[str, str, int, float], list[RunMetrics]]:
+    """(model, planner, seed, yaw) -> the metrics of the run's repetitions (one per bench directory that holds it)
+    with its robot times counted as ``kind`` (:data:`SECONDS`), for finished runs with a ceiling (and, for the
+    variants that need them, the columns)."""
+    out: dict[tuple[str, str, int, float], list[RunMetrics]] = {}
     for o in outcomes:
         ceiling = ceilings.get((o.label, o.yaw))
         rows = [r for r in o.rows if r["coverage"] is not None]
@@ -94,8 +102,8 @@ def metrics_of(
             seconds = [view_seconds(r, kind) for r in rows]
             if any(s is None for s in seconds):
                 continue
-            out[(o.label, o.planner, o.seed, o.yaw)] = run_metrics(
-                [r["coverage"] for r in rows], ceiling, views, [float(s or 0.0) for s in seconds]
+            out.setdefault((o.label, o.planner, o.seed, o.yaw), []).append(
+                run_metrics([r["coverage"] for r in rows], ceiling, views, [float(s or 0.0) for s in seconds])
             )
     return out
 
@@ -109,7 +117,19 @@ def compare(outcomes: list[RunOutcome], ceilings: dict[tuple[str, float], float]
         p: statistics.median(r["plan_seconds"] for o in outcomes if o.planner == p for r in o.rows) for p in planners
     }
     ref = {(m, s, y): v for (m, p, s, y), v in metrics.items() if p == reference}
-    print(f"reference {reference}: {len(ref)} runs; median plan {plan_seconds.get(reference, float('nan')):.3f} s")
+
+    def reps(runs: dict[Any, list[RunMetrics]]) -> str:
+        """ " (k reps)" when the runs were repeated (k: the fewest and most repetitions of a run)."""
+        counts = {len(v) for v in runs.values()} or {1}
+        low, high = min(counts), max(counts)
+        if high == 1:
+            return ""
+        return f" ({low} reps)" if low == high else f" ({low}-{high} reps)"
+
+    print(
+        f"reference {reference}: {len(ref)} runs{reps(ref)}; "
+        f"median plan {plan_seconds.get(reference, float('nan')):.3f} s"
+    )
     for p in planners:
         if p == reference:
             continue
@@ -117,13 +137,12 @@ def compare(outcomes: list[RunOutcome], ceilings: dict[tuple[str, float], float]
         keys = sorted(set(mine) & set(ref))
         if not keys:
             continue
-        print(f"\n{p} vs {reference}: {len(keys)} pairs; median plan {plan_seconds[p]:.3f} s")
-        pairs_of = {
-            kind: tuple(
-                {(m, s, y): v for (m, q, s, y), v in variants[kind].items() if q == who} for who in (p, reference)
-            )
-            for kind in SECONDS[1:]
-        }
+        print(f"\n{p} vs {reference}: {len(keys)} pairs{reps(mine)}; median plan {plan_seconds[p]:.3f} s")
+
+        def runs_of(kind: str, who: str) -> dict[tuple[str, int, float], list[RunMetrics]]:
+            return {(m, s, y): v for (m, q, s, y), v in variants[kind].items() if q == who}
+
+        pairs_of = {kind: (runs_of(kind, p), runs_of(kind, reference)) for kind in SECONDS[1:]}
         lines = [("robot s to 95 %", lambda v: v.time_to[1], 1.0, (mine, ref))]
         for kind, label in zip(SECONDS[1:], ("less plan s", "plan as CPU s", "moves only"), strict=True):
             lines.append((f"  to 95 %, {label}", lambda v: v.time_to[1], 1.0, pairs_of[kind]))
@@ -137,8 +156,8 @@ def compare(outcomes: list[RunOutcome], ceilings: dict[tuple[str, float], float]
             shared = [k for k in keys if k in x and k in y]
             if not shared:
                 continue
-            a = {k: scale * get(x[k]) for k in shared}
-            b = {k: scale * get(y[k]) for k in shared}
+            a = {k: scale * statistics.fmean(get(v) for v in x[k]) for k in shared}  # the mean over repetitions
+            b = {k: scale * statistics.fmean(get(v) for v in y[k]) for k in shared}
             c = paired_comparison(a, b, higher_is_better=scale != 1.0)
             assert c is not None
             mean_a, mean_b = statistics.fmean(a.values()), statistics.fmean(b.values())
