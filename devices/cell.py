@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
+from devices.angles import wrap_angle
 from devices.config import CellConfig
 from devices.protocols import Arm, Camera, JointArm, Turntable, UnreachableError
 from devices.trajectory import JointTrajectory
@@ -53,12 +54,6 @@ def rz(theta: float) -> Pose:
     """``Rz(theta)``: rotation by ``theta`` radians about +z (counter-clockwise seen from above)."""
     c, s = math.cos(theta), math.sin(theta)
     return Pose(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), np.zeros(3))
-
-
-def wrap_angle(angle: float) -> float:
-    """``angle`` wrapped to (-pi, pi]."""
-    a = math.remainder(angle, 2 * math.pi)
-    return math.pi if a == -math.pi else a
 
 
 @dataclass(frozen=True, eq=False)

@@ -29,9 +29,10 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
+from devices.angles import wrap_angle
 from devices.arm.sim_arm import SimulatedJointArm
 from devices.calibration_error import CellErrors, calibration_named, configuration_key
-from devices.cell import Cell, rz, wrap_angle
+from devices.cell import Cell, rz
 from devices.config import CameraConfig, CellConfig, DeviceConfig
 from devices.planner_noise import cell_config_for
 from devices.protocols import CaptureError, DeviceError

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from devices.angles import wrap_angle
 from devices.arm.model import ArmModel
 from planner.types import Pose
 
@@ -80,14 +81,8 @@ def _cos_sin_equation(a: float, b: float, c: float) -> tuple[list[float], bool]:
         return [], True
     phi, delta = math.atan2(b, a), math.acos(max(-1.0, min(1.0, ratio)))
     if delta < 1e-12:
-        return [wrap(phi)], abs(ratio) <= 1.0
-    return [wrap(phi + delta), wrap(phi - delta)], True
-
-
-def wrap(angle: float) -> float:
-    """``angle`` wrapped to (-pi, pi] (the arm's one definition: :mod:`devices.arm.reach` uses it too)."""
-    a = math.remainder(angle, 2 * math.pi)
-    return math.pi if a == -math.pi else a
+        return [wrap_angle(phi)], abs(ratio) <= 1.0
+    return [wrap_angle(phi + delta), wrap_angle(phi - delta)], True
 
 
 def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -175,9 +170,9 @@ class ClosedFormIK:
                 u = _rot(w[4], -q5) @ w[1]
                 singular = bool(np.linalg.norm(u - w[5] * float(w[5] @ u)) < SINGULAR)
                 if singular:  # joint 6 is free
-                    q6 = 0.0 if reference is None else wrap(float(reference[5]))
+                    q6 = 0.0 if reference is None else wrap_angle(float(reference[5]))
                 else:
-                    q6 = wrap(-_signed_angle(u, target6, w[5]))
+                    q6 = wrap_angle(-_signed_angle(u, target6, w[5]))
                 # 4. joints 2-4: G = e^(xi2 q2) e^(xi3 q3) e^(xi4 q4), a planar arm about parallel axes
                 G = g1 @ _screw(w[5], p[5], -q6) @ _screw(w[4], p[4], -q5)
                 reach = G[:3, :3] @ p[3] + G[:3, 3]  # joint 4's axis point, moved by joints 2 and 3 only
@@ -188,8 +183,8 @@ class ClosedFormIK:
                 check = self.check or singular or not (exact1 and exact5 and exact3)
                 for q3 in elbows:
                     elbow = p[2] + _rot(w[2], q3) @ (p[3] - p[2])
-                    q2 = wrap(_signed_angle(elbow - p[1], reach - p[1], w[1]))
-                    q = np.array([q1, q2, q3, wrap(total - q2 - q3), q5, q6])
+                    q2 = wrap_angle(_signed_angle(elbow - p[1], reach - p[1], w[1]))
+                    q = np.array([q1, q2, q3, wrap_angle(total - q2 - q3), q5, q6])
                     if not check or self.pose_error(q, target) < SOLUTION_TOLERANCE:
                         out.append(q)
         return out

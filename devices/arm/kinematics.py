@@ -17,12 +17,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from devices.angles import wrap_angle
 from devices.arm.collision import CollisionWorld
 from devices.arm.config import ArmConfig
 from devices.arm.ik import dls
 from devices.arm.model import ArmModel, load_arm
 from devices.arm.motion import NoPathError, plan_path, time_path
-from devices.arm.reach import ArmReach, ArmTarget, rz_matrix, wrap
+from devices.arm.reach import ArmReach, ArmTarget, rz_matrix
 from devices.protocols import UnreachableError
 from devices.trajectory import JointTrajectory
 from planner.types import Pose
@@ -124,7 +125,7 @@ class ArmKinematics:
     def turn_blocked(self, q: NDArray[np.float64], angle: float, target_angle: float) -> str | None:
         """Why the plate cannot turn from ``angle`` to ``target_angle`` even with the arm retracted to ``home``
         first (``turn:<collision>``), or None (the turn is clear from ``q``, or from home)."""
-        turn = wrap(target_angle - angle)
+        turn = wrap_angle(target_angle - angle)
         if self.turn_collision(q, angle, turn) is None:
             return None
         hit = self.turn_collision(self.home, angle, turn)
@@ -188,7 +189,7 @@ class ArmKinematics:
         q = np.asarray(q, dtype=np.float64)
 
         def turn_check(a: float) -> str | None:
-            if plate_angle is not None and abs(wrap(a - plate_angle)) > 1e-9:
+            if plate_angle is not None and abs(wrap_angle(a - plate_angle)) > 1e-9:
                 return "plate_angle"
             return self.turn_blocked(q, angle, a)
 
@@ -196,7 +197,7 @@ class ArmKinematics:
         if target is None:
             raise UnreachableError(f"unreachable: {reason}", reason=reason or "no_ik")
         target = self._refined(T_table_camera, target)
-        turn = wrap(target.angle - angle)
+        turn = wrap_angle(target.angle - angle)
         retract = None
         start = q
         hit = self.turn_collision(q, angle, turn)

@@ -36,7 +36,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import KDTree
 
-from devices.arm.closed_form import closed_form, wrap
+from devices.angles import wrap_angle
+from devices.arm.closed_form import closed_form
 from devices.arm.collision import CollisionWorld
 from devices.arm.ik import every_branch, fixed_seeds, solve_ik
 from devices.arm.model import ArmModel
@@ -215,13 +216,13 @@ class ArmReach:
         """The plate angles tried for this view (rad), in the order of ``plate_offsets_deg``."""
         x, y = T_table_camera.translation[:2]
         if math.hypot(x, y) < 1e-9:
-            return [wrap(current_angle + o) for o in self._offsets]
-        return [wrap(self.arm_azimuth + o - math.atan2(y, x)) for o in self._offsets]
+            return [wrap_angle(current_angle + o) for o in self._offsets]
+        return [wrap_angle(self.arm_azimuth + o - math.atan2(y, x)) for o in self._offsets]
 
     def turn_seconds(self, angle_from: float, angle_to: float) -> float:
         """Seconds the turntable takes from ``angle_from`` to ``angle_to`` (rad) the short way at its speed: the
         turn of every move's estimate (:meth:`move_estimate`, :meth:`move_seconds`) and so a lower bound of it."""
-        return abs(wrap(angle_to - angle_from)) / math.radians(self.arm.config.turntable_speed_deg)
+        return abs(wrap_angle(angle_to - angle_from)) / math.radians(self.arm.config.turntable_speed_deg)
 
     def move_estimate(
         self, q_from: NDArray[np.float64], q_to: NDArray[np.float64], angle_from: float, angle_to: float

@@ -7,8 +7,9 @@ import math
 import numpy as np
 import pytest
 
+from devices.angles import wrap_angle
 from devices.builtins import make_builtin
-from devices.cell import Cell, Motion, rz, wrap_angle
+from devices.cell import Cell, Motion, rz
 from devices.config import CameraConfig, CellConfig
 from devices.protocols import DeviceError, UnreachableError
 from devices.sim import SimulatedArm, SimulatedTurntable, make_sim_cell

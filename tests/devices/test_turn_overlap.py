@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
+from devices.angles import wrap_angle
 from devices.arm.config import ArmConfig
-from devices.arm.reach import wrap
 from devices.builtins import make_builtin
 from devices.cell import Cell
 from devices.config import CameraConfig, CellConfig
@@ -50,7 +50,7 @@ def test_an_overlapped_move_takes_the_longer_of_its_turn_and_its_trajectory(smal
     for cell, together in ((small, True), (sequential, False)):
         motion = cell.plan_motion(target)
         assert motion.trajectory is not None and motion.retract is None
-        turn = abs(wrap(motion.angle - cell.angle)) / SPEED
+        turn = abs(wrap_angle(motion.angle - cell.angle)) / SPEED
         arm = motion.trajectory.duration
         assert turn > 0.3 and arm > 0.3  # both parts matter, so the two formulas differ
         assert motion.overlapped is together
@@ -77,7 +77,7 @@ def test_an_overlapped_move_never_meets_the_turning_box(box: BoundingBox) -> Non
         except UnreachableError:
             continue
         assert motion.trajectory is not None
-        turn = wrap(motion.angle - a0)
+        turn = wrap_angle(motion.angle - a0)
         if abs(turn) < 1e-6:
             continue
         if not motion.overlapped:
@@ -109,7 +109,7 @@ def test_move_seconds_overlap_only_when_both_ends_stand_clear() -> None:
     for i, (qi, ai) in enumerate(zip(states, angles, strict=True)):
         for j, (qj, aj) in enumerate(zip(states, angles, strict=True)):
             sequential = reach.move_estimate(qi, qj, ai, aj)
-            turn = abs(wrap(aj - ai)) / SPEED
+            turn = abs(wrap_angle(aj - ai)) / SPEED
             want = max(turn, sequential - turn) if clear[i] and clear[j] else sequential
             assert reach.move_seconds(qi, qj, ai, aj) == pytest.approx(want, abs=1e-9)
             assert m[i, j] == pytest.approx(want, abs=1e-9)

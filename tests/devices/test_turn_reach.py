@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from devices.arm.reach import wrap
+from devices.angles import wrap_angle
 from devices.builtins import make_builtin
 from devices.cell import Cell
 from devices.config import CameraConfig, CellConfig
@@ -49,7 +49,7 @@ def test_a_sweeping_turn_retracts_the_arm_first(close_cell: Cell) -> None:
             except UnreachableError as exc:
                 assert not ok or "plate turns" not in str(exc)
                 continue
-            standing_hit = k.turn_collision(q, angle, wrap(motion.angle - angle))
+            standing_hit = k.turn_collision(q, angle, wrap_angle(motion.angle - angle))
             assert (standing_hit is not None) == (motion.retract is not None), (az, el)
             if motion.retract is not None:
                 retracted += 1
