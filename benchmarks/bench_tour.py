@@ -119,7 +119,7 @@ def compare(outcomes: list[RunOutcome], ceilings: dict[tuple[str, float], float]
     ref = {(m, s, y): v for (m, p, s, y), v in metrics.items() if p == reference}
 
     def reps(runs: dict[Any, list[RunMetrics]]) -> str:
-        """ " (k reps)" when the runs were repeated (k: the fewest and most repetitions of a run)."""
+        """The header's note of repetitions, e.g. " (3 reps)": the fewest and most of a run; "" when none repeats."""
         counts = {len(v) for v in runs.values()} or {1}
         low, high = min(counts), max(counts)
         if high == 1:
