@@ -126,6 +126,10 @@ def compare(outcomes: list[RunOutcome], ceilings: dict[tuple[str, float], float]
             return ""
         return f" ({low} reps)" if low == high else f" ({low}-{high} reps)"
 
+    def runs_of(kind: str, who: str) -> dict[tuple[str, int, float], list[RunMetrics]]:
+        """(model, seed, yaw) -> the repetitions of ``who``'s runs, their robot times counted as ``kind``."""
+        return {(m, s, y): v for (m, q, s, y), v in variants[kind].items() if q == who}
+
     print(
         f"reference {reference}: {len(ref)} runs{reps(ref)}; "
         f"median plan {plan_seconds.get(reference, float('nan')):.3f} s"
@@ -138,10 +142,6 @@ def compare(outcomes: list[RunOutcome], ceilings: dict[tuple[str, float], float]
         if not keys:
             continue
         print(f"\n{p} vs {reference}: {len(keys)} pairs{reps(mine)}; median plan {plan_seconds[p]:.3f} s")
-
-        def runs_of(kind: str, who: str) -> dict[tuple[str, int, float], list[RunMetrics]]:
-            return {(m, s, y): v for (m, q, s, y), v in variants[kind].items() if q == who}
-
         pairs_of = {kind: (runs_of(kind, p), runs_of(kind, reference)) for kind in SECONDS[1:]}
         lines = [("robot s to 95 %", lambda v: v.time_to[1], 1.0, (mine, ref))]
         for kind, label in zip(SECONDS[1:], ("less plan s", "plan as CPU s", "moves only"), strict=True):

@@ -107,10 +107,8 @@ def solve_ik(
         if q is None:
             continue
         converged = True
-        fitted = fit_limits(q, reference, arm.lower, arm.upper)
+        fitted = _fitted_new(arm, q, reference, solutions)
         if fitted is None:
-            continue
-        if any(np.max(np.abs(fitted - s)) < 1e-3 for s in solutions):
             continue
         if accept is not None and not accept(fitted):
             continue
@@ -119,8 +117,7 @@ def solve_ik(
             break
     if not solutions:
         return [], "joint_limit" if converged else "no_ik"
-    solutions.sort(key=lambda s: float(np.linalg.norm(s - reference)))
-    return solutions, None
+    return _nearest_first(solutions, reference), None
 
 
 def every_branch(
@@ -134,14 +131,32 @@ def every_branch(
         return [], "no_ik"
     solutions: list[NDArray[np.float64]] = []
     for q in found:
-        fitted = fit_limits(q, reference, arm.lower, arm.upper)
-        if fitted is None or any(np.max(np.abs(fitted - s)) < 1e-3 for s in solutions):
-            continue
-        solutions.append(fitted)
+        fitted = _fitted_new(arm, q, reference, solutions)
+        if fitted is not None:
+            solutions.append(fitted)
     if not solutions:
         return [], "joint_limit"
-    solutions.sort(key=lambda s: float(np.linalg.norm(s - reference)))
-    return solutions, None
+    return _nearest_first(solutions, reference), None
+
+
+SAME_SOLUTION = 1e-3
+"""Radians: two solutions whose joints all differ by less than this are one."""
+
+
+def _fitted_new(
+    arm: ArmModel, q: NDArray[np.float64], reference: NDArray[np.float64], solutions: list[NDArray[np.float64]]
+) -> NDArray[np.float64] | None:
+    """``q`` turned into the limits nearest ``reference`` (:func:`fit_limits`), or None when it fits no turn or is
+    already among ``solutions``: the step :func:`solve_ik` and :func:`every_branch` share."""
+    fitted = fit_limits(q, reference, arm.lower, arm.upper)
+    if fitted is None or any(np.max(np.abs(fitted - s)) < SAME_SOLUTION for s in solutions):
+        return None
+    return fitted
+
+
+def _nearest_first(solutions: list[NDArray[np.float64]], reference: NDArray[np.float64]) -> list[NDArray[np.float64]]:
+    """``solutions`` sorted by joint distance from ``reference`` (stable: the earlier of equals first)."""
+    return sorted(solutions, key=lambda s: float(np.linalg.norm(s - reference)))
 
 
 def fixed_seeds(arm: ArmModel, count: int, seed: int = 0) -> list[NDArray[np.float64]]:
