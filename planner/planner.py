@@ -155,6 +155,8 @@ class Planner:
                 filled, plate_heights(filled, self.config.preprocess, self.config.noise, plane)
             )
         else:
+            if registration is not None and registration.accepted:  # the moved points against the moved plane
+                plate = plate_heights(frame, self.config.preprocess, self.config.noise, plane)
             carve = self._plate_as_free_space(frame, plate)
         carve = unknown_beyond_range(carve, frame, self.config.candidates.max_range)
         self.voxel_map.integrate(carve, dense)  # atomic: raises before changing anything

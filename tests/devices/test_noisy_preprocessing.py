@@ -86,3 +86,43 @@ def test_one_plate_fit_per_frame_from_the_measured_depths(monkeypatch: pytest.Mo
     frame = cell.capture()
     planner.integrate(frame)
     assert fits == [int(np.count_nonzero(frame.valid))]  # once, on the measured frame's points
+
+
+def test_a_registered_frame_carves_its_plate_from_the_moved_plane(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Without dropout filling, a frame that registration moves is carved with plate heights of the moved frame
+    against the moved plane: its plate pixels stay "no return" (free space down to the plate), however far the
+    correction lifted them. Before, the heights were the frame's before the correction, so plate points lifted by
+    a centimetre were carved as returns (the voxel layer on the plate left unknown)."""
+    import planner.planner as planner_module
+    from planner import Pose
+    from planner.registration import RegistrationResult
+
+    camera = CameraConfig(sensor="realsense-d435", calibration="typical")
+    cell = make_sim_cell(make_builtin("l-block"), camera, CellConfig(), seed=0)
+    base = planner_config_for(PlannerConfig(), camera)
+    config = base.replace(noise={"dropout_fill_px": 0}, registration={"enabled": True})
+    assert config.noise.fit_plate and config.registration.enabled
+    lift = Pose(np.eye(3), np.array([0.0, 0.0, 0.01]))
+    monkeypatch.setattr(
+        planner_module,
+        "register",
+        lambda *args, **kwargs: RegistrationResult(lift, 1.0, 0.0, True, "ok: test", 0.01),
+    )
+    planner = Planner(config)
+    planner.integrate(cell.capture())  # the first frame: nothing to register to
+    carved: list[np.ndarray] = []
+    integrate = planner.voxel_map.integrate
+
+    def spy(frame, points):  # type: ignore[no-untyped-def]
+        carved.append(frame.depth)
+        return integrate(frame, points)
+
+    monkeypatch.setattr(planner.voxel_map, "integrate", spy)
+    frame = cell.capture()
+    planner.integrate(frame)
+    moved = frame.with_pose(lift @ frame.T_world_camera)
+    on_plate = moved.points_world[:, 2] < 0.01 + 0.002  # the plate (z = 0) lifted by the correction, 2 mm band
+    v, u = np.nonzero(moved.depth > 0)
+    assert np.count_nonzero(on_plate) > 1000  # the frame sees plenty of plate
+    kept = carved[0][v[on_plate], u[on_plate]]
+    assert np.count_nonzero(kept) < 0.01 * len(kept)  # (with the heights from before the correction: 99 % kept)
