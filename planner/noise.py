@@ -88,9 +88,11 @@ def fit_plate(
     window: float,
     workspace_radius: float,
     candidates: NDArray[np.bool_] | None = None,
+    near: NDArray[np.bool_] | None = None,
 ) -> NDArray[np.float64]:
     """(3,) (a, b, c) of the plate plane ``z = a x + b y + c`` seen in one frame, from the points within ``window``
-    of z = 0 and ``workspace_radius`` of the axis.
+    of z = 0 and ``workspace_radius`` of the axis (``near`` (N,) bool: that window, when the caller has it already,
+    :func:`plate_window`).
 
     Robust to the two things besides the plate top in that window: the object's foot and the plate's rim (its
     vertical side, z from 0 down to -thickness, which a low view sees head-on while the grazing limit drops most
@@ -103,7 +105,7 @@ def fit_plate(
     top, beyond a sensor's grazing limit, is left with too few). (0, 0, 0) when there are too few points or the
     plane is implausible."""
     p = points_world
-    near = plate_window(p, window, workspace_radius)
+    near = plate_window(p, window, workspace_radius) if near is None else near.copy()
     if candidates is not None:
         near &= candidates
     q = p[near]
@@ -134,13 +136,13 @@ def plate_plane(frame: DepthFrame, preprocess: PreprocessConfig, noise: NoiseCon
     if noise.exact or not noise.fit_plate:
         return np.zeros(3)
     points = frame.points_world
+    near = plate_window(points, noise.plate_fit_window, preprocess.workspace_radius)
     horizontal = None
     if noise.plate_fit_max_tilt_deg < 90:  # asked only where the fit looks: the points in its window
-        near = plate_window(points, noise.plate_fit_window, preprocess.workspace_radius)
         horizontal = np.zeros(len(points), dtype=bool)
         at = np.flatnonzero(near)
         horizontal[at] = vertical_cosines(frame, at=at) >= math.cos(math.radians(noise.plate_fit_max_tilt_deg))
-    return fit_plate(points, noise.plate_fit_window, preprocess.workspace_radius, horizontal)
+    return fit_plate(points, noise.plate_fit_window, preprocess.workspace_radius, horizontal, near)
 
 
 def plane_moved(plane: NDArray[np.float64], T_new_old: Pose) -> NDArray[np.float64]:
