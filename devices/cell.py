@@ -183,7 +183,7 @@ class Cell:
             else:
                 self.kinematics.set_object_box(bbox.lower, bbox.upper)
 
-    def plan_motion(self, T_table_camera: Pose, plate_angle: float | None = None) -> Motion:
+    def plan_motion(self, T_table_camera: Pose, plate_angle: float | None = None, then: Sequence[Pose] = ()) -> Motion:
         """The turntable angle and arm motion that put the camera at ``T_table_camera``.
 
         URDF arm: the reachable, collision-free plate angle and IK solution with the shortest move, and its
@@ -194,11 +194,16 @@ class Cell:
         top, or farther than ``arm_reach`` / nearer than ``arm_min_reach`` from the arm base.
         plate_angle: the plate must be at this angle (rad; a calibration pose): the URDF arm takes only that
         angle (one of its tried angles, else UnreachableError ``plate_angle``), the reach sphere uses it.
+        then: the views (``T_table_camera`` each) the move after this one is expected to go to (a tour's
+        ``PlanResult.then_poses``): the URDF arm takes the target whose move plus the quickest move on to one of
+        them is shortest (:meth:`ArmReach.best_target`); the reach sphere ignores them.
         """
         if not isinstance(T_table_camera, Pose):
             raise ValueError(f"T_table_camera: expected a Pose, got {type(T_table_camera).__name__}")
         if self.kinematics is not None:
-            move = self.kinematics.plan(T_table_camera, self.arm.joint_positions(), self.turntable.angle, plate_angle)
+            move = self.kinematics.plan(
+                T_table_camera, self.arm.joint_positions(), self.turntable.angle, plate_angle, then
+            )
             t = move.target
             return Motion(
                 t.angle,
@@ -420,17 +425,17 @@ class Cell:
 
     # ------------------------------------------------------------------ actions
 
-    def move_to(self, T_table_camera: Pose, plate_angle: float | None = None) -> Motion:
+    def move_to(self, T_table_camera: Pose, plate_angle: float | None = None, then: Sequence[Pose] = ()) -> Motion:
         """Turn the plate, then move the arm, so the camera is at ``T_table_camera`` (a URDF arm retracts first
         when the turn would sweep the object's box into it: ``Motion.retract``; with ``Motion.overlapped`` the plate
         turns while the arm moves).
 
-        Plans first (``plate_angle``: as in :meth:`plan_motion`): an unreachable view raises UnreachableError and
-        moves nothing.
+        Plans first (``plate_angle``, ``then``: as in :meth:`plan_motion`): an unreachable view raises
+        UnreachableError and moves nothing.
         A device fault (DeviceError) after the turntable moved leaves the plate at its
         new angle; a fault during the trajectory leaves the arm where it stopped.
         """
-        motion = self.plan_motion(T_table_camera, plate_angle)
+        motion = self.plan_motion(T_table_camera, plate_angle, then)
         self.last_motion = motion
         if motion.retract is not None:
             self.arm.execute(motion.retract)

@@ -19,7 +19,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -187,12 +187,13 @@ class HardwareCell(Cell):
             q = last
         return "arm at joints [" + ", ".join(f"{math.degrees(float(v)):.2f}" for v in q) + "] deg"
 
-    def move_to(self, T_table_camera: Pose, plate_angle: float | None = None) -> Motion:
-        """:meth:`Cell.move_to` (``plate_angle`` as there); a DeviceError (a fault, a refused trajectory, a stop) names the arm's last joints."""
+    def move_to(self, T_table_camera: Pose, plate_angle: float | None = None, then: Sequence[Pose] = ()) -> Motion:
+        """:meth:`Cell.move_to` (``plate_angle``, ``then`` as there); a DeviceError (a fault, a refused trajectory, a
+        stop) names the arm's last joints."""
         self.stop_requested.clear()
         self.moving.set()
         try:
-            motion = super().move_to(T_table_camera, plate_angle)
+            motion = super().move_to(T_table_camera, plate_angle, then)
             if self.stop_requested.is_set():
                 raise DeviceError("stopped on request")
             return motion

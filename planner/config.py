@@ -334,6 +334,13 @@ class TourConfig:
     ring_share: float = 0.5
     """With ``opening = "ring"``: a ring view must see at least this fraction of the frontier voxels the best ring
     view sees; of those, the ``near_views`` that see the most are timed and the shortest move wins."""
+    lookahead: bool = True
+    """With ``opening = "ring"``: the ring's first plan names the other side's ring views (``TourPlan.then``), and the
+    move to its view takes the plate angle and arm configuration whose move plus the quickest move on to one of
+    them is shortest (``Cell.move_to(then=...)``), not the quickest move alone."""
+    cover_max_elevation_deg: float = 25.0
+    """The cover takes views at most this high (degrees, about the object's box centre) while any of them sees
+    frontier (then any eligible view); 90 = no limit. Measured with the ring opening, after it (docs/method.md)."""
 
     def __post_init__(self) -> None:
         require(
@@ -378,6 +385,11 @@ class TourConfig:
         require(
             finite(self.ring_share) and 0 <= self.ring_share <= 1,
             f"tour.ring_share: must be in [0, 1], got {self.ring_share!r}",
+        )
+        require(isinstance(self.lookahead, bool), f"tour.lookahead: true or false, got {self.lookahead!r}")
+        require(
+            finite(self.cover_max_elevation_deg) and -90 <= self.cover_max_elevation_deg <= 90,
+            f"tour.cover_max_elevation_deg: must be in [-90, 90], got {self.cover_max_elevation_deg!r}",
         )
 
 

@@ -260,12 +260,68 @@ def ring_view(
     move wins. (None, {}) when no view is a ring view, (None, timed) when none timed is reachable.
     """
     counts = np.asarray(counts, dtype=np.float64)
-    near_ring = np.zeros(len(counts), dtype=bool)
-    for d in directions:
-        near_ring |= azimuth_gap(azimuths, d) <= tolerance
-    ring = np.asarray(eligible, dtype=bool) & near_ring & (np.asarray(elevations) <= max_elevation) & (counts > 0)
+    ring = np.asarray(eligible, dtype=bool) & ring_mask(
+        counts, azimuths, elevations, directions, max_elevation, tolerance
+    )
     ranked = sorted(((int(i), float(counts[i])) for i in np.flatnonzero(ring)), key=lambda t: (-t[1], t[0]))
     return near_best(ranked, seconds, 1.0 - share, near_views)
+
+
+def ring_mask(
+    counts: NDArray[np.float64],
+    azimuths: NDArray[np.float64],
+    elevations: NDArray[np.float64],
+    directions: Sequence[float],
+    max_elevation: float,
+    tolerance: float,
+) -> NDArray[np.bool_]:
+    """(C,) bool: the ring's views (eligibility aside): seeing some frontier (``counts`` (C,) > 0), at most
+    ``max_elevation`` high and within ``tolerance`` in azimuth of one of ``directions`` (rad; :func:`ring_view`)."""
+    near = np.zeros(len(counts), dtype=bool)
+    for d in directions:
+        near |= azimuth_gap(azimuths, d) <= tolerance
+    return near & (np.asarray(elevations) <= max_elevation) & (np.asarray(counts) > 0)
+
+
+def other_side(
+    counts: NDArray[np.float64],
+    azimuths: NDArray[np.float64],
+    elevations: NDArray[np.float64],
+    direction: float,
+    max_elevation: float,
+    tolerance: float,
+    share: float,
+    near_views: int,
+) -> tuple[int, ...]:
+    """The ring views about azimuth ``direction`` (rad) the ring's next plan is expected to time (:func:`ring_view`'s
+    rule on this plan's counts): at most ``max_elevation`` high, within ``tolerance`` of ``direction``, seeing at least
+    ``share`` x the most any of them sees (``counts`` (C,): the frontier voxels each sees now, 0 for a view not
+    eligible in this plan, so a side the partitions still lock names only its views in an open sector), the
+    ``near_views`` that see the most, most first. ``TourPlan.then`` of the ring's first plan."""
+    counts = np.asarray(counts, dtype=np.float64)
+    ring = ring_mask(counts, azimuths, elevations, [direction], max_elevation, tolerance)
+    if not np.any(ring):
+        return ()
+    ring &= counts >= share * counts[ring].max()
+    ranked = sorted((int(i) for i in np.flatnonzero(ring)), key=lambda i: (-counts[i], i))
+    return tuple(ranked[:near_views])
+
+
+def low_views(
+    eligible: NDArray[np.bool_], seen: NDArray[np.bool_], candidates: Sequence[Candidate], max_elevation_deg: float
+) -> NDArray[np.bool_]:
+    """(C,) bool: the views the cover may take, ``eligible`` (C,) and at most ``max_elevation_deg`` high (about the
+    box centre, ``Candidate.elevation``), unless none of those sees any frontier (``seen`` (C, F)): then every
+    eligible view. 90 or more, or no ``candidates`` given (their elevations unknown): every eligible view. (After the
+    ring, views above 25 deg were predicted a few frontier voxels each and cleared almost none: docs/method.md, issue
+    25's tenth round.)"""
+    allowed = np.asarray(eligible, dtype=bool).copy()
+    if max_elevation_deg >= 90 or len(candidates) != len(allowed):
+        return allowed
+    low = np.array([c.elevation <= math.radians(max_elevation_deg) for c in candidates], dtype=bool)
+    if np.any(allowed & low & np.asarray(seen, dtype=bool).any(axis=1)):
+        allowed &= low
+    return allowed
 
 
 def seconds_from_here(
@@ -365,7 +421,7 @@ class TourEvaluator:
             best, plan = self._choose_ring(eligible, candidates, start, move_times, taken, center)
             if best is not None:
                 return best, plan
-        allowed = eligible.copy()
+        allowed = low_views(eligible, self.last_seen, candidates, cfg.cover_max_elevation_deg)
         if self.lazy_reach:  # a ring view the cell cannot reach from here is no view for the cover either
             allowed[[v for v, t in self.last_move_seconds.items() if not math.isfinite(t)]] = False
         while True:  # with lazy_reach: a view of the cover the cell cannot reach is left out and the cover made again
@@ -446,7 +502,22 @@ class TourEvaluator:
         self.last_move_seconds.update(timed)
         if best is None:
             return None, None
-        return best, TourPlan(views=(best,), gains=(int(counts[best]),), seconds=(timed[best],), method="ring")
+        then: tuple[int, ...] = ()
+        if cfg.lookahead and len(directions) == 2:  # the other side opens the next plan: the move here plans for it
+            azimuths = np.array([c.azimuth for c in candidates])
+            side = int(np.argmin([float(azimuth_gap(azimuths[best], d)) for d in directions]))
+            then = other_side(
+                counts,
+                azimuths,
+                np.array([c.elevation for c in candidates]),
+                directions[1 - side],
+                math.radians(cfg.ring_max_elevation_deg),
+                tolerance,
+                cfg.ring_share,
+                cfg.near_views,
+            )
+        plan = TourPlan(views=(best,), gains=(int(counts[best]),), seconds=(timed[best],), method="ring", then=then)
+        return best, plan
 
     def _choose_near_best(
         self, scores: Sequence[ViewScore], candidates: Sequence[Candidate], start: Pose, move_times: MoveTimes | None

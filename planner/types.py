@@ -449,6 +449,10 @@ class TourPlan:
     gains: tuple[int, ...]
     seconds: tuple[float, ...]
     method: str
+    then: tuple[int, ...] = ()
+    """Candidate indices the plan after the first view is expected to choose among (the ring's first plan: the other
+    side's ring views; ``tour.lookahead``): the move to the first view takes the plate angle and arm configuration
+    that also make the quickest of the moves on to them short (:meth:`PlanResult.then_poses`). Empty: none named."""
 
     @property
     def total_seconds(self) -> float:
@@ -462,6 +466,7 @@ class TourPlan:
             "seconds": list(self.seconds),
             "method": self.method,
             "total_seconds": self.total_seconds,
+            "then": list(self.then),
         }
 
 
@@ -533,6 +538,15 @@ class PlanResult:
     @property
     def best(self) -> Candidate | None:
         return None if self.best_index is None else self.candidates[self.best_index]
+
+    def then_poses(self, index: int | None) -> list[Pose]:
+        """``T_world_camera`` of the views the tour expects after candidate ``index`` (``TourPlan.then``) when
+        ``index`` is the tour's first view; [] otherwise (another view taken, no tour, none named). What a move to
+        ``index`` may plan for (``Cell.move_to(..., then=...)``)."""
+        tour = self.tour
+        if tour is None or not tour.then or not tour.views or index != tour.views[0]:
+            return []
+        return [self.candidates[i].T_world_camera for i in tour.then]
 
     @property
     def occupied_ellipsoids(self) -> tuple[Ellipsoid, ...]:

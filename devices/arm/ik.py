@@ -78,6 +78,19 @@ def fit_limits(
     return out
 
 
+def fit_limits_toward(
+    q: NDArray[np.float64], reference: NDArray[np.float64], lower: NDArray[np.float64], upper: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """(M, n) the configurations ``q`` (M, n), each already inside [lower, upper], with every joint moved by whole
+    turns to the turn inside the limits nearest ``reference`` (n,): :func:`fit_limits` of many at once, towards
+    another reference (a branch solved towards one configuration, measured from another)."""
+    two_pi = 2 * math.pi
+    k_lo = np.ceil((lower - q) / two_pi - 1e-12)
+    k_hi = np.floor((upper - q) / two_pi + 1e-12)
+    k = np.clip(np.round((reference - q) / two_pi), k_lo, k_hi)
+    return np.clip(q + k * two_pi, lower, upper)
+
+
 def solve_ik(
     arm: ArmModel,
     T_base_camera: Pose,

@@ -12,6 +12,7 @@ import dataclasses
 import itertools
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -179,12 +180,19 @@ class ArmKinematics:
         return ArmTarget(target.angle, q, self.camera_pose(q), target.move_estimate)
 
     def plan(
-        self, T_table_camera: Pose, q: NDArray[np.float64], angle: float, plate_angle: float | None = None
+        self,
+        T_table_camera: Pose,
+        q: NDArray[np.float64],
+        angle: float,
+        plate_angle: float | None = None,
+        then: Sequence[Pose] = (),
     ) -> ArmMove:
         """The move to a view from the state (q (n,), plate angle): the reachable, collision-free target with the
         shortest move and its trajectory. UnreachableError(reason) when there is none.
         plate_angle: only this plate angle (rad) is allowed (a calibration pose; it must be one of the angles
-        :meth:`ArmReach.plate_angles` tries, reason ``plate_angle`` otherwise)."""
+        :meth:`ArmReach.plate_angles` tries, reason ``plate_angle`` otherwise). then: the views the next move is
+        expected to go to; the target is then the one whose move plus the quickest move on is shortest
+        (:meth:`ArmReach.best_target`)."""
         t0 = time.perf_counter()
         q = np.asarray(q, dtype=np.float64)
 
@@ -193,7 +201,7 @@ class ArmKinematics:
                 return "plate_angle"
             return self.turn_blocked(q, angle, a)
 
-        target, reason = self.reach.best_target(T_table_camera, q, angle, turn_check)
+        target, reason = self.reach.best_target(T_table_camera, q, angle, turn_check, then)
         if target is None:
             raise UnreachableError(f"unreachable: {reason}", reason=reason or "no_ik")
         target = self._refined(T_table_camera, target)

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import cast
 
@@ -39,7 +39,7 @@ from scipy.spatial import KDTree
 from devices.angles import wrap_angle
 from devices.arm.closed_form import closed_form
 from devices.arm.collision import CollisionWorld
-from devices.arm.ik import every_branch, fixed_seeds, solve_ik
+from devices.arm.ik import every_branch, fit_limits_toward, fixed_seeds, solve_ik
 from devices.arm.model import ArmModel
 from planner.types import Pose
 
@@ -382,6 +382,7 @@ class ArmReach:
         q_current: NDArray[np.float64],
         angle_current: float,
         turn_check: Callable[[float], str | None] | None = None,
+        then: Sequence[Pose] = (),
     ) -> tuple[ArmTarget | None, str | None]:
         """Among every plate angle and IK branch, the free target with the shortest estimated move (the first of
         the tried angles, :meth:`plate_angles`, among equals).
@@ -392,7 +393,15 @@ class ArmReach:
         or the longer of the two), so no branch there can be shorter. The answer is the one every angle's IK would
         give (the shortest, ties to the earlier angle), with less IK: measured on the UR5 over 100 views of the
         default hemisphere from 6 arm states, 20.9 -> 14.0 ms a call (turn then arm), 17.0 -> 6.8 ms (turning while
-        moving), the same answers (tests/devices/test_arm_reach.py)."""
+        moving), the same answers (tests/devices/test_arm_reach.py).
+
+        then: the views (``T_table_camera`` each) the move after this one is expected to go to (the tour's ring:
+        ``PlanResult.then_poses``): the target is instead the one whose move plus the quickest move on to one of them
+        is shortest (:meth:`_best_chained`; without a free target among them, as without ``then``)."""
+        if then:
+            chained = self._best_chained(T_table_camera, q_current, angle_current, turn_check, then)
+            if chained is not None:
+                return chained
         best: ArmTarget | None = None
         best_order = -1
         worst = "no_ik"
@@ -417,6 +426,85 @@ class ArmReach:
                     target = ArmTarget(target.angle, target.q, target.T_base_camera, seconds)
                 if best is None or (target.move_estimate, order) < (best.move_estimate, best_order):
                     best, best_order = target, order
+        return (best, None) if best is not None else (None, worst)
+
+    def _free_branches(
+        self, T_table_camera: Pose, angle: float, reference: NDArray[np.float64]
+    ) -> tuple[list[NDArray[np.float64]], str | None]:
+        """Every free IK branch (n,) of a view at plate ``angle`` (nearest ``reference`` first), and why there is
+        none (``no_ik``, ``joint_limit`` or the first branch's collision)."""
+        R = rz_matrix(angle)
+        T_base_camera = Pose.trusted(R @ T_table_camera.rotation, R @ T_table_camera.translation)
+        if self.out_of_reach(T_base_camera):
+            return [], "no_ik"
+        solutions, reason = self._ik(T_base_camera, reference, first=False)
+        free: list[NDArray[np.float64]] = []
+        for q in solutions:
+            hit = self.world.collision(q, angle)
+            if hit is None:
+                free.append(q)
+            elif reason is None:
+                reason = hit
+        return free, None if free else reason or "no_ik"
+
+    def _best_chained(
+        self,
+        T_table_camera: Pose,
+        q_current: NDArray[np.float64],
+        angle_current: float,
+        turn_check: Callable[[float], str | None] | None,
+        then: Sequence[Pose],
+    ) -> tuple[ArmTarget | None, str | None] | None:
+        """:meth:`best_target` with a look-ahead: among every plate angle and free IK branch of the view, the target
+        with the shortest move from the current state plus the quickest move from it on to any free target (every
+        plate angle and branch, each turned towards the target's joints) of the views ``then``. The angles are tried
+        nearest turn first and stop where the turn alone outlasts the best sum. ArmTarget.move_estimate is the
+        move's own estimate. None when no view of ``then`` has a free target (the caller then chooses without it)."""
+        q_next: list[NDArray[np.float64]] = []
+        angle_next: list[float] = []
+        for pose in then:
+            for angle in self.plate_angles(pose, angle_current):
+                free, _ = self._free_branches(pose, angle, self.home)
+                q_next += free
+                angle_next += [angle] * len(free)
+        if not q_next:
+            return None
+        qb, ab = np.stack(q_next), np.array(angle_next)
+        best: ArmTarget | None = None
+        best_total = math.inf
+        worst = "no_ik"
+        angles = self.plate_angles(T_table_camera, angle_current)
+        turns = [self.turn_seconds(angle_current, angle) for angle in angles]
+        for order in sorted(range(len(angles)), key=lambda i: (turns[i], i)):
+            if turns[order] > best_total:
+                break  # this turn, and every later one, outlasts the best move and its next one together
+            angle = angles[order]
+            free, reason = self._free_branches(T_table_camera, angle, q_current)
+            if free and turn_check is not None:
+                blocked = turn_check(angle)
+                if blocked is not None:
+                    free, reason = [], blocked
+            if not free:
+                if reason is not None and _severity(reason) > _severity(worst):
+                    worst = reason
+                continue
+            qa = np.stack(free)
+            here = np.array([angle_current])
+            first = self.seconds_between(q_current[None, :], here, qa, np.full(len(qa), angle))[0]  # (A,)
+            lower, upper = self.arm.lower, self.arm.upper
+            onward = np.array(
+                [
+                    self.seconds_between(
+                        q[None, :], np.array([angle]), fit_limits_toward(qb, q, lower, upper), ab
+                    ).min()
+                    for q in qa
+                ]
+            )  # (A,) the quickest next move from each branch
+            total = first + onward
+            i = int(np.argmin(total))
+            if total[i] < best_total - 1e-9:  # the earlier angle (and the nearer branch) among equals
+                best_total = float(total[i])
+                best = ArmTarget(angle, free[i], self.arm.camera_pose(free[i], self._data), float(first[i]))
         return (best, None) if best is not None else (None, worst)
 
     def _try(

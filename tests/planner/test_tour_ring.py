@@ -10,7 +10,7 @@ import pytest
 
 from planner import Planner, PlannerConfig
 from planner.partitions import azimuth_of
-from planner.tour import azimuth_gap, ring_directions, ring_view
+from planner.tour import azimuth_gap, low_views, other_side, ring_directions, ring_view
 
 DEG = math.pi / 180.0
 
@@ -65,6 +65,9 @@ def test_the_ring_settings_are_validated() -> None:
         ({"ring_tolerance_deg": -5}, "tour.ring_tolerance_deg"),
         ({"ring_share": 1.5}, "tour.ring_share"),
         ({"ring_share": "half"}, "tour.ring_share"),
+        ({"lookahead": "yes"}, "tour.lookahead"),
+        ({"cover_max_elevation_deg": 91}, "tour.cover_max_elevation_deg"),
+        ({"cover_max_elevation_deg": math.inf}, "tour.cover_max_elevation_deg"),
     ):
         with pytest.raises(ValueError, match=f"^{match}"):
             PlannerConfig.from_dict({"tour": bad})
@@ -144,11 +147,17 @@ def test_the_ring_is_chosen_by_exact_moves_in_the_first_two_plans_only() -> None
     assert asked == [([0, 1, 2], True)]
     assert best == 2 and plan is not None and plan.method == "ring" and plan.views == (2,) and plan.seconds == (2.0,)
     assert evaluator.last_move_seconds == {0: 3.0, 1: 2.5, 2: 2.0}
+    assert plan.then == (0, 1)  # the other side's ring views, most frontier first: what the move plans for
+    alone = TourEvaluator(PlannerConfig().replace(tour={"lookahead": False}))
+    alone.last_seen = seen
+    _, lone = alone.choose(scores, candidates, first, move_times, taken=[first], center=np.zeros(3))
+    assert lone is not None and lone.views == (2,) and lone.then == ()
     # the -120 side taken: the other side's shortest move next
     taken = [first, candidates[2].T_world_camera]
     asked.clear()
     best, plan = evaluator.choose(scores, candidates, taken[-1], move_times, taken=taken, center=np.zeros(3))
     assert (best, plan.method if plan else None, asked) == (1, "ring", [([0, 1], True)])
+    assert plan is not None and plan.then == ()  # the ring's last view: nothing named after it
     # both sides held, or a third plan: the tour (the cover's best view first), timed by the cached estimates
     for taken in ([first, candidates[2].T_world_camera, candidates[1].T_world_camera], [first, first, first]):
         asked.clear()
@@ -212,3 +221,48 @@ def test_the_projection_score_keeps_its_own_choice_from_the_first_plan() -> None
     first = Pose.look_at(np.array([0.5, 0.0, 0.2]), np.zeros(3))
     best, plan = evaluator.choose(scores, candidates, first, move_times, taken=[first], center=np.zeros(3))
     assert best == 1 and plan is not None and plan.method == "near"
+
+
+def test_the_other_side_names_the_ring_views_the_next_plan_will_time() -> None:
+    """The views the ring's next plan chooses among (ring_view's rule, eligibility aside): low, near the other side's
+    azimuth, seeing at least half the most any of them sees; the ``near_views`` that see most, most first."""
+    #                    0    1    2    3    4    5    6
+    azimuths = np.array([240, 250, 235, 240, 120, 230, 300]) * DEG
+    elevations = np.array([10, 20, 10, 60, 10, 0, 10]) * DEG
+    counts = np.array([50, 80, 30, 500, 400, 80, 90], dtype=np.float64)
+    args = (azimuths, elevations, 240 * DEG, 30 * DEG, 30 * DEG, 0.5)
+    # 3 too high, 4 the other side, 6 60 degrees off, 2 less than half of 80
+    assert other_side(counts, *args, 8) == (1, 5, 0)
+    assert other_side(counts, *args, 2) == (1, 5)
+    assert other_side(np.zeros(7), *args, 8) == ()  # no ring view sees frontier there
+
+
+def test_the_cover_takes_low_views_while_one_of_them_sees_frontier() -> None:
+    """After the ring, views above ``tour.cover_max_elevation_deg`` (25) are left to the cover only when no lower
+    one sees frontier; 90 leaves every view."""
+    from planner.baselines.evaluators import gain_scores
+    from planner.tour import TourEvaluator
+    from planner.types import Pose
+
+    #                              0 high, sees most   1 low          2 low, sees nothing   3 high
+    candidates = ring_candidates([(170, 60), (180, 10), (200, 20), (190, 40)])
+    seen = np.zeros((4, 40), dtype=bool)
+    seen[0, :30] = seen[1, 20:32] = seen[3, :5] = True
+    eligible = np.ones(4, dtype=bool)
+    assert low_views(eligible, seen, candidates, 25.0).tolist() == [False, True, True, False]
+    assert low_views(eligible, seen, candidates, 90.0).tolist() == [True] * 4
+    assert low_views(eligible, seen[[0, 2, 2, 3]], candidates, 25.0).tolist() == [True] * 4  # no low view sees any
+    assert low_views(~eligible, seen, candidates, 25.0).tolist() == [False] * 4
+    assert low_views(eligible, seen, [], 25.0).tolist() == [True] * 4  # elevations unknown: no limit
+
+    def move_times(cands: object, views: list[int], exact: bool = False) -> np.ndarray:
+        return np.ones((len(views) + 1, len(views) + 1)) - np.eye(len(views) + 1)
+
+    scores = gain_scores(seen.sum(axis=1).astype(np.float64), eligible)
+    first = Pose.look_at(np.array([0.5, 0.0, 0.2]), np.zeros(3))
+    taken = [first, first, first]  # the ring is over
+    for max_elevation, expected in ((25.0, 1), (90.0, 0)):
+        evaluator = TourEvaluator(PlannerConfig().replace(tour={"cover_max_elevation_deg": max_elevation}))
+        evaluator.last_seen = seen
+        best, plan = evaluator.choose(scores, candidates, first, move_times, taken=taken, center=np.zeros(3))
+        assert best == expected and plan is not None and plan.views[0] == expected

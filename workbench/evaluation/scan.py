@@ -170,8 +170,10 @@ def _move(
         tries += [(s.index, plan.candidates[s.index].T_world_camera) for s in ranked]
     refused: list[dict[str, Any]] = []
     for index, target in tries:
+        then = [] if plan is None else plan.then_poses(index)  # the views the tour expects next, if any
         try:
-            return index, target, cell.move_to(target), refused
+            motion = cell.move_to(target, then=then) if then else cell.move_to(target)
+            return index, target, motion, refused
         except UnreachableError as exc:
             if plan is None:
                 raise

@@ -265,7 +265,8 @@ def take_view(
     planners_choice = entry is not None and not decision.custom and decision.index == decision.best_index
     while True:
         try:
-            outcome = s.step_runner.run(s.planner, decision.pose, s.add_move)
+            then = entry.plan.then_poses(decision.index) if entry is not None and not decision.custom else []
+            outcome = s.step_runner.run(s.planner, decision.pose, s.add_move, then)
             s.publish_view(outcome, decision)
             break
         except (UnreachableError, UnusableFrame) as exc:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -85,8 +85,9 @@ class ViewStep:
     _surface: LiveSurface | None = field(default=None, repr=False)
     """The surface when integration runs in this process (a worker keeps its own)."""
 
-    def run(self, planner: Planner, pose: Pose, moved: Callable[[], None]) -> ViewOutcome:
+    def run(self, planner: Planner, pose: Pose, moved: Callable[[], None], then: Sequence[Pose] = ()) -> ViewOutcome:
         """Take the view at ``T_table_camera = pose`` into ``planner``; ``moved()`` is called once the cell moved.
+        ``then``: the views the plan expects next (``PlanResult.then_poses``), for the cell's choice of the move.
 
         A move that timed out was stopped (the devices' ``stop()``); the next run waits until it has really
         ended before it moves again (DeviceTimeoutError if it does not within ``move_timeout``): never two moves.
@@ -99,7 +100,12 @@ class ViewStep:
                 self.worker.start()  # a worker that is (re)starting does not count against the device deadlines
             self._wait_for_the_last_move()
             try:
-                call_with_timeout(lambda: self.cell.move_to(pose), self.move_timeout, "cell move", self._stop)
+                call_with_timeout(
+                    (lambda: self.cell.move_to(pose, then=then)) if then else (lambda: self.cell.move_to(pose)),
+                    self.move_timeout,
+                    "cell move",
+                    self._stop,
+                )
             except DeviceTimeoutError as exc:
                 self._moving = exc.pending
                 raise
