@@ -139,8 +139,9 @@ class ReplayCell(Cell):
     def initial_pose(self) -> Pose:
         return self.frames[0].T_world_camera
 
-    def move_to(self, T_table_camera: Pose) -> Motion:
-        """Put the (virtual) camera at ``T_table_camera`` without turning the plate; no reach check."""
+    def move_to(self, T_table_camera: Pose, plate_angle: float | None = None, then: Sequence[Pose] = ()) -> Motion:
+        """Put the (virtual) camera at ``T_table_camera`` without turning the plate; no reach check. ``plate_angle``
+        and ``then`` (:meth:`Cell.move_to`'s) are accepted and ignored: the views were taken already."""
         motion = Motion(self.turntable.angle, rz(self.turntable.angle) @ T_table_camera)
         self.arm.move_to(motion.T_base_camera)
         return motion

@@ -140,6 +140,16 @@ def test_sequence_and_nearest_playback(frames) -> None:
     ).is_reachable(VIEWS[0])
 
 
+def test_a_replay_cell_takes_a_move_planned_for_the_next_view(frames) -> None:
+    """The tour's ring asks its first move with the views after it (``Cell.move_to(then=...)``): a replay cell
+    accepts the request and moves as without it (the views were taken already)."""
+    a, b = ReplayCell(frames, mode="nearest"), ReplayCell(frames, mode="nearest")
+    near_2 = Pose.look_at(VIEWS[2].translation + 0.02, [0, 0, 0.08])
+    ma, mb = a.move_to(near_2, then=[VIEWS[0], VIEWS[1]]), b.move_to(near_2)
+    assert ma.angle == mb.angle and np.allclose(ma.T_base_camera.matrix, mb.T_base_camera.matrix)
+    assert a.capture() is b.capture() is frames[2]
+
+
 def test_replay_camera_refuses_mixed_intrinsics(frames) -> None:
     other = DepthFrame(np.zeros((10, 10), np.float32), Pose.identity(), Intrinsics(10, 10, 10, 10, 4.5, 4.5))
     with pytest.raises(ValueError, match="intrinsics differ"):
