@@ -140,21 +140,23 @@ FUZZ = [-1e308, 1e308, -1, 0, 1e-300, 10**30, -(10**30), 0.5, 3, "1", True, None
 
 
 @pytest.mark.slow
-def test_numeric_fuzz_of_every_config_field_is_2xx_or_4xx_json(client: TestClient) -> None:
-    """Every field of BOUNDS with FUZZ values and its own two ends: never a 5xx; accepted values plan safely."""
+def test_numeric_fuzz_of_every_config_field_is_2xx_or_4xx_json(settings: AppSettings) -> None:
+    """Every field of BOUNDS with FUZZ values and its own two ends: never a 5xx; accepted values create a session.
+    The sessions have no worker process (admission is the same; alone the test takes 9.7 s instead of 12.1 s)."""
     seen: dict[int, int] = {}
     accepted = 0
-    for name, (low, high) in BOUNDS.items():
-        section, key = name.split(".")
-        for value in [*FUZZ, low, high]:
-            raw = json.dumps({"config": {section: {key: value}}})
-            r = client.post("/api/sessions", content=raw, headers={"content-type": "application/json"})
-            seen[r.status_code] = seen.get(r.status_code, 0) + 1
-            assert r.status_code < 500 and r.headers["content-type"] == "application/json", (name, value, r.text)
-            if r.status_code == 201:
-                accepted += 1
-                assert isinstance(value, int | float) and math.isfinite(value) and low <= value <= high
-                client.delete(f"/api/sessions/{r.json()['id']}")
-            else:
-                assert isinstance(r.json()["detail"], str | list), r.text
+    with TestClient(create_app(settings.replace(workers=False)), base_url=BASE_URL) as client:
+        for name, (low, high) in BOUNDS.items():
+            section, key = name.split(".")
+            for value in [*FUZZ, low, high]:
+                raw = json.dumps({"config": {section: {key: value}}})
+                r = client.post("/api/sessions", content=raw, headers={"content-type": "application/json"})
+                seen[r.status_code] = seen.get(r.status_code, 0) + 1
+                assert r.status_code < 500 and r.headers["content-type"] == "application/json", (name, value, r.text)
+                if r.status_code == 201:
+                    accepted += 1
+                    assert isinstance(value, int | float) and math.isfinite(value) and low <= value <= high
+                    client.delete(f"/api/sessions/{r.json()['id']}")
+                else:
+                    assert isinstance(r.json()["detail"], str | list), r.text
     assert seen.get(422, 0) > 300 and accepted > 60, seen
