@@ -487,11 +487,13 @@ class TourEvaluator:
         if not directions or not candidates:
             return None, None
         counts = self.last_seen.sum(axis=1).astype(np.float64)
+        azimuths = np.array([c.azimuth for c in candidates])
+        elevations = np.array([c.elevation for c in candidates])
         best, timed = ring_view(
             counts,
             eligible,
-            np.array([c.azimuth for c in candidates]),
-            np.array([c.elevation for c in candidates]),
+            azimuths,
+            elevations,
             directions,
             math.radians(cfg.ring_max_elevation_deg),
             tolerance,
@@ -504,12 +506,11 @@ class TourEvaluator:
             return None, None
         then: tuple[int, ...] = ()
         if cfg.lookahead and len(directions) == 2:  # the other side opens the next plan: the move here plans for it
-            azimuths = np.array([c.azimuth for c in candidates])
             side = int(np.argmin([float(azimuth_gap(azimuths[best], d)) for d in directions]))
             then = other_side(
                 counts,
                 azimuths,
-                np.array([c.elevation for c in candidates]),
+                elevations,
                 directions[1 - side],
                 math.radians(cfg.ring_max_elevation_deg),
                 tolerance,

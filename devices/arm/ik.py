@@ -66,16 +66,8 @@ def fit_limits(
 ) -> NDArray[np.float64] | None:
     """(n,) ``q`` with each joint moved by whole turns to lie in [lower, upper], nearest ``reference``; None if a
     joint fits no turn."""
-    two_pi = 2 * math.pi
-    out = np.empty_like(q)
-    for j in range(len(q)):
-        k_lo = math.ceil((lower[j] - q[j]) / two_pi - 1e-12)
-        k_hi = math.floor((upper[j] - q[j]) / two_pi + 1e-12)
-        if k_lo > k_hi:
-            return None
-        k = min(max(round((reference[j] - q[j]) / two_pi), k_lo), k_hi)
-        out[j] = min(max(q[j] + k * two_pi, lower[j]), upper[j])
-    return out
+    fitted, fits = _turned(q, reference, lower, upper)
+    return fitted if bool(np.all(fits)) else None
 
 
 def fit_limits_toward(
@@ -84,11 +76,19 @@ def fit_limits_toward(
     """(M, n) the configurations ``q`` (M, n), each already inside [lower, upper], with every joint moved by whole
     turns to the turn inside the limits nearest ``reference`` (n,): :func:`fit_limits` of many at once, towards
     another reference (a branch solved towards one configuration, measured from another)."""
+    return _turned(q, reference, lower, upper)[0]
+
+
+def _turned(
+    q: NDArray[np.float64], reference: NDArray[np.float64], lower: NDArray[np.float64], upper: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """(q turned, fits), both shaped as ``q`` (..., n): each joint moved by the whole turns, among those that put it in
+    [lower, upper], nearest ``reference``, and whether any turn does (where none does, the value is meaningless)."""
     two_pi = 2 * math.pi
     k_lo = np.ceil((lower - q) / two_pi - 1e-12)
     k_hi = np.floor((upper - q) / two_pi + 1e-12)
-    k = np.clip(np.round((reference - q) / two_pi), k_lo, k_hi)
-    return np.clip(q + k * two_pi, lower, upper)
+    k = np.minimum(np.maximum(np.round((reference - q) / two_pi), k_lo), k_hi)
+    return np.minimum(np.maximum(q + k * two_pi, lower), upper), k_lo <= k_hi
 
 
 def solve_ik(

@@ -428,16 +428,23 @@ class ArmReach:
                     best, best_order = target, order
         return (best, None) if best is not None else (None, worst)
 
+    def _branches(
+        self, T_table_camera: Pose, angle: float, reference: NDArray[np.float64], *, first: bool
+    ) -> tuple[Pose, list[NDArray[np.float64]], str | None]:
+        """(T_base_camera, IK solutions, why none) of a view at plate ``angle`` (:meth:`_ik`; ``no_ik`` at once when
+        the pose is out of the arm's reach)."""
+        R = rz_matrix(angle)
+        T_base_camera = Pose.trusted(R @ T_table_camera.rotation, R @ T_table_camera.translation)
+        if self.out_of_reach(T_base_camera):
+            return T_base_camera, [], "no_ik"
+        return T_base_camera, *self._ik(T_base_camera, reference, first=first)
+
     def _free_branches(
         self, T_table_camera: Pose, angle: float, reference: NDArray[np.float64]
     ) -> tuple[list[NDArray[np.float64]], str | None]:
         """Every free IK branch (n,) of a view at plate ``angle`` (nearest ``reference`` first), and why there is
         none (``no_ik``, ``joint_limit`` or the first branch's collision)."""
-        R = rz_matrix(angle)
-        T_base_camera = Pose.trusted(R @ T_table_camera.rotation, R @ T_table_camera.translation)
-        if self.out_of_reach(T_base_camera):
-            return [], "no_ik"
-        solutions, reason = self._ik(T_base_camera, reference, first=False)
+        _, solutions, reason = self._branches(T_table_camera, angle, reference, first=False)
         free: list[NDArray[np.float64]] = []
         for q in solutions:
             hit = self.world.collision(q, angle)
@@ -475,6 +482,7 @@ class ArmReach:
         worst = "no_ik"
         angles = self.plate_angles(T_table_camera, angle_current)
         turns = [self.turn_seconds(angle_current, angle) for angle in angles]
+        here, lower, upper = np.array([angle_current]), self.arm.lower, self.arm.upper
         for order in sorted(range(len(angles)), key=lambda i: (turns[i], i)):
             if turns[order] > best_total:
                 break  # this turn, and every later one, outlasts the best move and its next one together
@@ -489,9 +497,7 @@ class ArmReach:
                     worst = reason
                 continue
             qa = np.stack(free)
-            here = np.array([angle_current])
             first = self.seconds_between(q_current[None, :], here, qa, np.full(len(qa), angle))[0]  # (A,)
-            lower, upper = self.arm.lower, self.arm.upper
             onward = np.array(
                 [
                     self.seconds_between(
@@ -553,11 +559,7 @@ class ArmReach:
     def _attempt(
         self, T_table_camera: Pose, angle: float, q_current: NDArray[np.float64], angle_current: float, *, first: bool
     ) -> tuple[ArmTarget | None, str | None]:
-        R = rz_matrix(angle)
-        T_base_camera = Pose.trusted(R @ T_table_camera.rotation, R @ T_table_camera.translation)
-        if self.out_of_reach(T_base_camera):
-            return None, "no_ik"
-        solutions, reason = self._ik(T_base_camera, q_current, first=first)
+        T_base_camera, solutions, reason = self._branches(T_table_camera, angle, q_current, first=first)
         if not solutions:
             return None, reason
         if not first:  # a move: the shortest free branch, collisions checked nearest move first
