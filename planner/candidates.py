@@ -68,6 +68,18 @@ MIN_STANDOFF = 0.05
 """A range-limited sensor's candidates stay at least this far outside B's enclosing sphere, metres."""
 
 
+def held_aim(previous: BoundingBox | None, box: BoundingBox, tolerance: float) -> BoundingBox:
+    """The box the candidate sphere is built about after a frame: ``previous`` while every face of the new ``box`` lies
+    within ``tolerance`` (metres) of its own, else ``box`` (also with no ``previous``, or ``tolerance`` 0).
+
+    The held box is compared with the new one, not with the one before, so the aim never drifts more than
+    ``tolerance`` from the content box, however many small steps it takes (``candidates.aim_hold_voxels``)."""
+    if previous is None or tolerance <= 0:
+        return box
+    moved = max(float(np.max(np.abs(box.lower - previous.lower))), float(np.max(np.abs(box.upper - previous.upper))))
+    return previous if moved <= tolerance else box
+
+
 def sphere_radius(config: CandidateConfig, half_diagonal: float) -> float:
     """R of the candidate sphere about B's centre for B's half-diagonal ``d_b``: the paper's ``d_c + d_b``, cut
     so that B's far corner (``R + d_b`` from the camera) stays within the sensor's ``max_range`` (a D405 ends at

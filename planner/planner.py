@@ -22,7 +22,7 @@ from typing import cast
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.candidates import propose_candidates
+from planner.candidates import held_aim, propose_candidates
 from planner.config import PlannerConfig
 from planner.evaluators import Evaluation, EvaluationContext, ViewEvaluator, make_evaluator
 from planner.noise import (
@@ -87,6 +87,9 @@ class Planner:
         self.intrinsics: Intrinsics | None = None
         self.last_plan: PlanResult | None = None
         self._rng = np.random.default_rng(self.config.cluster.seed)
+        self._aim: BoundingBox | None = None
+        """With ``candidates.aim = "content"``: the box the candidates are built about, held after each frame
+        (:func:`planner.candidates.held_aim`)."""
 
     @property
     def iteration(self) -> int:
@@ -160,6 +163,10 @@ class Planner:
             carve = self._plate_as_free_space(frame, plate)
         carve = unknown_beyond_range(carve, frame, self.config.candidates.max_range)
         self.voxel_map.integrate(carve, dense)  # atomic: raises before changing anything
+        if self.config.candidates.aim == "content":
+            voxels = self.config.candidates.aim_hold_voxels  # faces lie on the voxel grid: half a voxel of slack
+            hold = (voxels + 0.5) * self.voxel_map.resolution if voxels > 0 else 0.0
+            self._aim = held_aim(self._aim, self._content_box(), hold)
         timings["integrate"] = time.perf_counter() - t0
 
         merged = np.concatenate([self.cloud, points]) if len(self.cloud) else points
@@ -208,12 +215,19 @@ class Planner:
 
     def candidate_box(self) -> BoundingBox:
         """The box the candidate sphere is built about (``candidates.aim``): B, or the box of the OCCUPIED and
-        FRONTIER voxels (B when there are none). ValueError before the first frame."""
+        FRONTIER voxels (B when there are none) as held after the last frame (``candidates.aim_hold_voxels``).
+        ValueError before the first frame."""
         bbox = self.voxel_map.bbox
         if bbox is None:
             raise ValueError("candidate_box: no frame has been integrated yet")
         if self.config.candidates.aim == "bbox":
             return bbox
+        return self._aim if self._aim is not None else self._content_box()
+
+    def _content_box(self) -> BoundingBox:
+        """The box of the OCCUPIED and FRONTIER voxels now (B when there are none; the map has a frame)."""
+        bbox = self.voxel_map.bbox
+        assert bbox is not None
         classes = self.voxel_map.classes
         idx = np.argwhere((classes == VoxelClass.OCCUPIED) | (classes == VoxelClass.FRONTIER))
         if len(idx) == 0:

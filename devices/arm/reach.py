@@ -122,6 +122,12 @@ class ArmReach:
         mount = arm.T_base_mount.translation
         self.arm_azimuth = math.atan2(mount[1], mount[0])
         self._offsets = [math.radians(o) for o in arm.config.plate_offsets_deg]
+        self._aims = [self.arm_azimuth + o for o in self._offsets]
+        """Per plate offset, the azimuth (rad) a view's own azimuth is turned to (:meth:`plate_angles`)."""
+        n = len(self._offsets)
+        self._orders = [[k, *(i for i in range(n) if i != k)] for k in range(n)]
+        """Per last serving offset k, the order :meth:`reachability` tries the offsets in (k first)."""
+        self._box_seen: tuple[object, bytes] = (None, b"")
         self._wrist_joint = int(arm.model.frames[arm.camera_frame].parentJoint)
         self._library, self._library_tree, self._wrist_in_camera, self._root, self.reach = self._seed_library()
         self._cache: dict[tuple[object, ...], tuple[list[NDArray[np.float64]], str | None]] = {}
@@ -217,7 +223,8 @@ class ArmReach:
         x, y = T_table_camera.translation[:2]
         if math.hypot(x, y) < 1e-9:
             return [wrap_angle(current_angle + o) for o in self._offsets]
-        return [wrap_angle(self.arm_azimuth + o - math.atan2(y, x)) for o in self._offsets]
+        azimuth = math.atan2(y, x)
+        return [wrap_angle(aim - azimuth) for aim in self._aims]
 
     def turn_seconds(self, angle_from: float, angle_to: float) -> float:
         """Seconds the turntable takes from ``angle_from`` to ``angle_to`` (rad) the short way at its speed: the
@@ -284,8 +291,13 @@ class ArmReach:
         return np.where(together, np.maximum(turn, arm), turn + arm)
 
     def _box_key(self) -> bytes:
+        """The padded object box as bytes (b"" without one), computed once per box the world is given."""
         box = self.world.box
-        return b"" if box is None else box[0].tobytes() + box[1].tobytes()
+        seen, key = self._box_seen
+        if box is not seen:
+            key = b"" if box is None else box[0].tobytes() + box[1].tobytes()
+            self._box_seen = (box, key)
+        return key
 
     def _ik(
         self, T_base_camera: Pose, reference: NDArray[np.float64], *, first: bool
@@ -365,9 +377,9 @@ class ArmReach:
         served the previous query is tried first), or (None, reason)."""
         worst = "no_ik"
         angles = self.plate_angles(T_table_camera, angle_current)
-        order = [self._last_offset, *(i for i in range(len(angles)) if i != self._last_offset)]
-        for i in order:  # the offset that served the previous view first: neighbours behave alike
-            target, reason = self._try(T_table_camera, angles[i], q_current, angle_current, first=True)
+        view = (T_table_camera.translation.tobytes(), T_table_camera.rotation.tobytes())
+        for i in self._orders[self._last_offset]:  # the offset that served the previous view first: alike neighbours
+            target, reason = self._try(T_table_camera, angles[i], q_current, angle_current, first=True, view=view)
             if target is not None:
                 self._last_offset = i
                 return target, None
@@ -514,11 +526,20 @@ class ArmReach:
         return (best, None) if best is not None else (None, worst)
 
     def _try(
-        self, T_table_camera: Pose, angle: float, q_current: NDArray[np.float64], angle_current: float, *, first: bool
+        self,
+        T_table_camera: Pose,
+        angle: float,
+        q_current: NDArray[np.float64],
+        angle_current: float,
+        *,
+        first: bool,
+        view: tuple[bytes, bytes] | None = None,
     ) -> tuple[ArmTarget | None, str | None]:
+        """:meth:`_attempt`, for reachability (``first``) through the attempt cache. view: the view's key bytes
+        (translation, rotation), when the caller has them."""
         if not first or not self.use_attempt_cache:
             return self._attempt(T_table_camera, angle, q_current, angle_current, first=first)
-        key = self._attempt_key(T_table_camera, angle)
+        key = self._attempt_key(T_table_camera, angle) if view is None else (*view, float(angle), self._box_key())
         hit = self._attempts.get(key)
         if hit is None:
             target, reason = self._attempt(T_table_camera, angle, q_current, angle_current, first=True)

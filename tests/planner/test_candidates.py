@@ -114,3 +114,27 @@ def test_a_range_limited_sensor_pulls_the_sphere_in() -> None:
     assert radius + 0.5 * box.diagonal == pytest.approx(0.5)
     with pytest.raises(ValueError, match=r"candidates\.max_range"):
         CandidateConfig(max_range=-1.0)
+
+
+def test_held_aim_keeps_the_box_while_every_face_stays_within_the_tolerance() -> None:
+    """``held_aim``: the previous box while no face moved more than the tolerance, else the new one; measured against
+    the held box, so many small steps cannot drift it further than the tolerance; no previous box or tolerance 0:
+    the new box."""
+    from planner.candidates import held_aim
+
+    a = BoundingBox(np.array([0.0, 0.0, 0.0]), np.array([0.2, 0.2, 0.2]))
+    near = BoundingBox(np.array([-0.01, 0.0, 0.0]), np.array([0.2, 0.21, 0.2]))  # two faces one voxel out
+    far = BoundingBox(np.array([-0.02, 0.0, 0.0]), np.array([0.2, 0.2, 0.2]))  # one face two voxels out
+    assert held_aim(None, a, 0.015) is a
+    assert held_aim(a, near, 0.015) is a
+    assert held_aim(a, near, 0.0) is near
+    assert held_aim(a, far, 0.015) is far
+    assert held_aim(a, far, 0.025) is a
+    # one voxel a step: held for the first step, the third box (two voxels from the held one) is taken
+    steps = [BoundingBox(np.array([-0.01 * k, 0.0, 0.0]), np.array([0.2, 0.2, 0.2])) for k in (1, 2)]
+    held = a
+    taken = []
+    for box in steps:
+        held = held_aim(held, box, 0.015)
+        taken.append(held)
+    assert taken[0] is a and taken[1] is steps[1]

@@ -41,6 +41,8 @@ def test_nested_override_and_round_trip(tmp_path) -> None:
         ({"cluster": {"seed": -1}}, "cluster.seed: must be an integer >= 0"),
         ({"registration": {"max_iterations": 0.5}}, "registration.max_iterations: must be an integer >= 1"),
         ({"partitions": {"revisit_deg": 180}}, r"partitions.revisit_deg: must be in \[0, 180\)"),
+        ({"candidates": {"aim_hold_voxels": -1}}, "candidates.aim_hold_voxels: must be an integer >= 0"),
+        ({"candidates": {"aim_hold_voxels": 0.5}}, "candidates.aim_hold_voxels: must be an integer >= 0"),
     ],
 )
 def test_invalid_settings_name_the_field(data: dict, message: str) -> None:

@@ -222,3 +222,50 @@ def test_content_aim_builds_the_sphere_about_the_object_seen_not_all_of_b(cell) 
     np.testing.assert_allclose(plan.hemisphere_center, box.center)
     assert plan.hemisphere_radius == pytest.approx(sphere_radius(SMALL.candidates, 0.5 * box.diagonal))
     np.testing.assert_allclose(paper.plan().hemisphere_center, b.center)
+
+
+def test_content_aim_is_held_while_the_box_moves_by_at_most_aim_hold_voxels(cell) -> None:
+    """After each frame the content aim keeps the box it was built about while no face of the new content box moved
+    more than ``aim_hold_voxels`` voxels from it (``held_aim``, step by step), else takes the new box; 0 follows every
+    change. Three frames of the l-block from views 120 deg apart (1 cm voxels): the second moves its content box by a
+    voxel (the test fails if it does not), so with 1 the first frame's box is kept and with 0 it is not."""
+    from planner.candidates import held_aim
+
+    frames = []
+    for azimuth in (0.0, 120.0, 240.0):
+        eye = np.array([0.45 * np.cos(np.radians(azimuth)), 0.45 * np.sin(np.radians(azimuth)), 0.3])
+        pose = Pose.look_at(eye, np.array([0.0, 0.0, 0.05]))
+        cell.move_to(pose)
+        frames.append(cell.capture())
+    res = 0.01
+    config = SMALL.replace(voxel={"resolution": res})
+    planners = {n: Planner(config.replace(candidates={"aim": "content", "aim_hold_voxels": n})) for n in (0, 1, 50)}
+    boxes: dict[int, list] = {n: [] for n in planners}
+    contents = []
+    for frame in frames:
+        for n, planner in planners.items():
+            planner.integrate(frame)
+            boxes[n].append(planner.candidate_box())
+        contents.append(planners[0]._content_box())
+
+    def moved(a, b) -> float:
+        return float(max(np.abs(b.lower - a.lower).max(), np.abs(b.upper - a.upper).max()))
+
+    for n in planners:  # the content box itself does not depend on the hold
+        np.testing.assert_array_equal(planners[n]._content_box().upper, contents[-1].upper)
+    assert round(moved(contents[0], contents[1]) / res) == 1  # the second view moves a face by a voxel
+    for i, content in enumerate(contents):  # 0: the content box of every frame
+        np.testing.assert_array_equal(boxes[0][i].lower, content.lower)
+        np.testing.assert_array_equal(boxes[0][i].upper, content.upper)
+    expected = None
+    for i, content in enumerate(contents):  # 1: the rule step by step, never more than 1.5 voxels off
+        expected = held_aim(expected, content, 1.5 * res)
+        np.testing.assert_array_equal(boxes[1][i].lower, expected.lower)
+        np.testing.assert_array_equal(boxes[1][i].upper, expected.upper)
+        assert moved(boxes[1][i], content) <= 1.5 * res
+    assert boxes[1][1] is boxes[1][0] and moved(boxes[1][1], contents[1]) > 0.5 * res  # held though it moved
+    for i in range(3):  # 50 voxels: the first frame's box throughout
+        assert boxes[50][i] is boxes[50][0]
+    plan = planners[1].plan()
+    np.testing.assert_allclose(plan.hemisphere_center, boxes[1][0].center)  # the plan is built about the held box
+    assert moved(boxes[1][0], contents[-1]) > 0.5 * res
