@@ -151,10 +151,10 @@ class ArmKinematics:
     def reachability(self, T_table_camera: Pose, q: NDArray[np.float64], angle: float) -> tuple[bool, str | None]:
         """(reachable, reason) of a view from the state (q, plate angle): a free IK target at some plate angle,
         and a plate turn to it that does not sweep the object's box into the arm (standing, or retracted)."""
-        target, reason = self.reach.reachability(T_table_camera, q, angle)
-        if target is None:
+        target_angle, reason = self.reach.reachable_angle(T_table_camera, q, angle)
+        if target_angle is None:
             return False, reason
-        if self.turn_blocked(q, angle, target.angle) is None:
+        if self.turn_blocked(q, angle, target_angle) is None:
             return True, None
         target, reason = self.reach.best_target(  # another plate angle may turn clear
             T_table_camera, q, angle, lambda a: self.turn_blocked(q, angle, a)

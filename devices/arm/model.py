@@ -97,7 +97,14 @@ class ArmModel:
         buffers: Any = data if data is not None else self.model.createData()
         pin.framesForwardKinematics(self.model, buffers, np.asarray(q, dtype=np.float64))
         M = buffers.oMf[self.camera_frame]
-        return Pose(np.array(M.rotation), np.array(M.translation))
+        rotation, translation = np.array(M.rotation), np.array(M.translation)
+        if not (np.isfinite(rotation).all() and np.isfinite(translation).all()):
+            return Pose(rotation, translation)  # raises, naming the field
+        # forward kinematics of finite joints is a proper rotation: Pose's orthonormality check (about 0.1 ms, a
+        # cold plan asks for hundreds) is left out, the arrays made read-only as Pose's own are
+        rotation.setflags(write=False)
+        translation.setflags(write=False)
+        return Pose.trusted(rotation, translation)
 
     def frame_pose(self, name: str, q: NDArray[np.float64]) -> Pose:
         """``T_base_<name>`` of any frame of the model at configuration (n,) ``q``."""

@@ -220,11 +220,21 @@ class ArmReach:
 
     def plate_angles(self, T_table_camera: Pose, current_angle: float) -> list[float]:
         """The plate angles tried for this view (rad), in the order of ``plate_offsets_deg``."""
+        azimuth = self._azimuth(T_table_camera)
+        return [self._plate_angle(i, azimuth, current_angle) for i in range(len(self._offsets))]
+
+    @staticmethod
+    def _azimuth(T_table_camera: Pose) -> float | None:
+        """The view's azimuth about the plate's axis (rad), None on the axis itself."""
         x, y = T_table_camera.translation[:2]
-        if math.hypot(x, y) < 1e-9:
-            return [wrap_angle(current_angle + o) for o in self._offsets]
-        azimuth = math.atan2(y, x)
-        return [wrap_angle(aim - azimuth) for aim in self._aims]
+        return None if math.hypot(x, y) < 1e-9 else math.atan2(y, x)
+
+    def _plate_angle(self, i: int, azimuth: float | None, current_angle: float) -> float:
+        """Plate angle (rad) of offset ``i`` for a view at ``azimuth`` (:meth:`_azimuth`; on the axis: the current
+        angle plus the offset)."""
+        if azimuth is None:
+            return wrap_angle(current_angle + self._offsets[i])
+        return wrap_angle(self._aims[i] - azimuth)
 
     def turn_seconds(self, angle_from: float, angle_to: float) -> float:
         """Seconds the turntable takes from ``angle_from`` to ``angle_to`` (rad) the short way at its speed: the
@@ -375,18 +385,38 @@ class ArmReach:
     ) -> tuple[ArmTarget | None, str | None]:
         """A plate angle whose IK solution is inside the limits and free (the first found; the offset that
         served the previous query is tried first), or (None, reason)."""
+        found = self._first_free(T_table_camera, q_current, angle_current)
+        if isinstance(found, str):
+            return None, found
+        angle, q, T_base_camera = found
+        return ArmTarget(angle, q, T_base_camera, self.move_estimate(q_current, q, angle_current, angle)), None
+
+    def reachable_angle(
+        self, T_table_camera: Pose, q_current: NDArray[np.float64], angle_current: float
+    ) -> tuple[float | None, str | None]:
+        """:meth:`reachability`'s plate angle alone (no move estimate: the planner's 400 questions a plan), or
+        (None, reason)."""
+        found = self._first_free(T_table_camera, q_current, angle_current)
+        return (None, found) if isinstance(found, str) else (found[0], None)
+
+    def _first_free(
+        self, T_table_camera: Pose, q_current: NDArray[np.float64], angle_current: float
+    ) -> tuple[float, NDArray[np.float64], Pose] | str:
+        """(plate angle, q (n,), T_base_camera) of the first plate angle with a free target, the offset that served
+        the previous query first (neighbours behave alike; the verdict does not depend on the order), or the worst
+        reason of all. Plate angles are computed as they are tried."""
         worst = "no_ik"
-        angles = self.plate_angles(T_table_camera, angle_current)
+        azimuth = self._azimuth(T_table_camera)
         view = (T_table_camera.translation.tobytes(), T_table_camera.rotation.tobytes())
-        for i in self._orders[self._last_offset]:  # the offset that served the previous view first: alike neighbours
-            target, reason = self._try(T_table_camera, angles[i], q_current, angle_current, first=True, view=view)
-            if target is not None:
+        for i in self._orders[self._last_offset]:
+            angle = self._plate_angle(i, azimuth, angle_current)
+            hit = self._cached_attempt(T_table_camera, angle, q_current, angle_current, view)
+            if not isinstance(hit, str):
                 self._last_offset = i
-                return target, None
-            assert reason is not None
-            if _severity(reason) > _severity(worst):
-                worst = reason
-        return None, worst
+                return (angle, *hit)
+            if _severity(hit) > _severity(worst):
+                worst = hit
+        return worst
 
     def best_target(
         self,
@@ -526,19 +556,31 @@ class ArmReach:
         return (best, None) if best is not None else (None, worst)
 
     def _try(
+        self, T_table_camera: Pose, angle: float, q_current: NDArray[np.float64], angle_current: float, *, first: bool
+    ) -> tuple[ArmTarget | None, str | None]:
+        """:meth:`_attempt`, for reachability (``first``) through the attempt cache (:meth:`_cached_attempt`)."""
+        if not first:
+            return self._attempt(T_table_camera, angle, q_current, angle_current, first=False)
+        hit = self._cached_attempt(T_table_camera, angle, q_current, angle_current)
+        if isinstance(hit, str):
+            return None, hit
+        q, T_base_camera = hit
+        return ArmTarget(angle, q, T_base_camera, self.move_estimate(q_current, q, angle_current, angle)), None
+
+    def _cached_attempt(
         self,
         T_table_camera: Pose,
         angle: float,
         q_current: NDArray[np.float64],
         angle_current: float,
-        *,
-        first: bool,
         view: tuple[bytes, bytes] | None = None,
-    ) -> tuple[ArmTarget | None, str | None]:
-        """:meth:`_attempt`, for reachability (``first``) through the attempt cache. view: the view's key bytes
-        (translation, rotation), when the caller has them."""
-        if not first or not self.use_attempt_cache:
-            return self._attempt(T_table_camera, angle, q_current, angle_current, first=first)
+    ) -> tuple[NDArray[np.float64], Pose] | str:
+        """The reachability attempt at plate ``angle`` ((q (n,), T_base_camera) or why none), from the cache when
+        :attr:`use_attempt_cache` (computed and kept on a miss). view: the view's key bytes (translation,
+        rotation), when the caller has them."""
+        if not self.use_attempt_cache:
+            target, reason = self._attempt(T_table_camera, angle, q_current, angle_current, first=True)
+            return (target.q, target.T_base_camera) if target is not None else str(reason)
         key = self._attempt_key(T_table_camera, angle) if view is None else (*view, float(angle), self._box_key())
         hit = self._attempts.get(key)
         if hit is None:
@@ -547,11 +589,7 @@ class ArmReach:
             if len(self._attempts) >= ATTEMPT_CACHE_SIZE:
                 self._attempts.clear()
             self._attempts[key] = hit
-            return target, reason
-        if isinstance(hit, str):
-            return None, hit
-        q, T_base_camera = hit
-        return ArmTarget(angle, q, T_base_camera, self.move_estimate(q_current, q, angle_current, angle)), None
+        return hit
 
     def _attempt_key(self, T_table_camera: Pose, angle: float) -> tuple[bytes, bytes, float, bytes]:
         return T_table_camera.translation.tobytes(), T_table_camera.rotation.tobytes(), float(angle), self._box_key()

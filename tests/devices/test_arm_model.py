@@ -50,6 +50,19 @@ def test_forward_kinematics_mount_and_hand_eye(ur5) -> None:
     np.testing.assert_allclose(flange.translation[0], -0.85 + 0.39225 + 0.425, atol=1e-6)
 
 
+def test_camera_pose_is_a_read_only_proper_pose_and_refuses_non_finite_joints(ur5) -> None:
+    """``camera_pose`` skips Pose's orthonormality check (forward kinematics of finite joints is a rotation): its
+    poses still are proper and read-only like every Pose's, and NaN joints are still refused by name."""
+    rng = np.random.default_rng(3)
+    for q in rng.uniform(-3.0, 3.0, size=(20, 6)):
+        pose = ur5.camera_pose(q)
+        np.testing.assert_allclose(pose.rotation.T @ pose.rotation, np.eye(3), atol=1e-12)
+        assert np.linalg.det(pose.rotation) == pytest.approx(1.0, abs=1e-12)
+        assert not pose.rotation.flags.writeable and not pose.translation.flags.writeable
+    with pytest.raises(ValueError, match="non-finite"):
+        ur5.camera_pose(np.array([0.0, np.nan, 0.0, 0.0, 0.0, 0.0]))
+
+
 def test_a_turned_mount_turns_the_whole_arm() -> None:
     turned = load_arm(ArmConfig(base_yaw_deg=90.0), (0.0, -0.6, 0.0))
     straight = load_arm(ArmConfig(), (0.0, -0.6, 0.0))
