@@ -24,7 +24,11 @@ One scan of the model with the UR5 (the default cell) and one with the reach-sph
    (every plan's chosen view and eligible set);
 
 and the share of the first hemisphere the arm reaches, with the reasons for the rest.
-``--sensor realsense-d435 --calibration typical`` scans with a realistic sensor.
+``--sensor realsense-d435 --calibration typical`` scans with a realistic sensor. ``--repeat N`` makes N scans with
+each cell, alternating, and prints each scan's median plan and their median (and the arm's plan CPU seconds): the
+two shared cores' speed changes by up to 2x within minutes, so one scan's median is no verdict. Scans after the
+first find its IK anchors (kept per process, as a server's sessions of one object find them); sections 1, 2, 4 and 6
+are of the first scan.
 """
 
 from __future__ import annotations
@@ -131,6 +135,7 @@ def timed_scan(
         "motion": motion_seconds[1:],  # the first is the move to the initial view, already there
         "motion_cpu": motion_cpu[1:],
         "plan_seconds": [r.plan_seconds for r in result.records],
+        "plan_cpu_seconds": [r.plan_cpu_seconds for r in result.records],
         "robot_seconds": result.robot_seconds,
         "move_seconds": sum(float((r.move or {}).get("move_duration") or 0.0) for r in result.records),
         "paths": dict(paths),
@@ -183,11 +188,23 @@ def main() -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--sensor", default="ideal", help="the depth sensor's model (e.g. realsense-d435)")
     p.add_argument("--calibration", default="none", help="the cell's calibration error (e.g. typical)")
+    p.add_argument(
+        "--repeat",
+        type=int,
+        default=1,
+        help="scans with the UR5 and with the reach sphere, alternating (3: the median plan of each scan and their "
+        "median: the machine's speed changes by up to 2x within minutes, so one scan is not a verdict)",
+    )
     args = p.parse_args()
+    if args.repeat < 1:
+        p.error("--repeat: must be >= 1")
     camera = CameraConfig(sensor=args.sensor, calibration=args.calibration)
-    arm = timed_scan(args.model, args.views, "urdf", args.seed, camera=camera)
+    arms, spheres = [], []
+    for _ in range(args.repeat):
+        arms.append(timed_scan(args.model, args.views, "urdf", args.seed, camera=camera))
+        spheres.append(timed_scan(args.model, args.views, "reach_sphere", args.seed, camera=camera))
+    arm, sphere = arms[0], spheres[0]
     uncached = timed_scan(args.model, args.views, "urdf", args.seed, cache=False, camera=camera)
-    sphere = timed_scan(args.model, args.views, "reach_sphere", args.seed, camera=camera)
     print(f"{arm['name']}, {args.views} views, seed {args.seed} (UR5 cell built in {arm['build']:.2f} s)")
     print(f"1. IK + collisions of the 400 candidates, per plan: {stats(arm['reach_per_plan'])}")
     print(f"   its CPU time (the wall time on an idle core): {stats(arm['reach_per_plan_cpu'])}")
@@ -199,6 +216,22 @@ def main() -> int:
         f"3. median plan_seconds: arm {arm_plan:.3f} s, reach sphere {sphere_plan:.3f} s, "
         f"the arm adds {arm_plan - sphere_plan:+.3f} s"
     )
+    if args.repeat > 1:
+        per_arm = [statistics.median(a["plan_seconds"]) for a in arms]
+        per_sphere = [statistics.median(s["plan_seconds"]) for s in spheres]
+        cpu_arm = [statistics.median(a["plan_cpu_seconds"]) for a in arms]
+        print(
+            f"   {args.repeat} scans each: arm "
+            + " ".join(f"{v:.3f}" for v in per_arm)
+            + f" s (median {statistics.median(per_arm):.3f} s), reach sphere "
+            + " ".join(f"{v:.3f}" for v in per_sphere)
+            + f" s (median {statistics.median(per_sphere):.3f} s)"
+        )
+        print(
+            "   the arm's median plan CPU seconds: "
+            + " ".join(f"{v:.3f}" for v in cpu_arm)
+            + f" (median {statistics.median(cpu_arm):.3f} s); the same plans in every scan: {all(a['choices'] == arm['choices'] for a in arms)}"
+        )
     total = sum(arm["reasons"].values())
     parts = ", ".join(f"{k} {v}" for k, v in arm["reasons"].most_common())
     print(f"first hemisphere: {arm['reasons']['reachable']}/{total} reachable by the UR5 ({parts})")

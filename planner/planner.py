@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.candidates import held_aim, propose_candidates
+from planner.clustering import single_thread_blas
 from planner.config import PlannerConfig
 from planner.evaluators import Evaluation, EvaluationContext, ViewEvaluator, make_evaluator
 from planner.noise import (
@@ -119,8 +120,13 @@ class Planner:
 
         Raises ValueError (state unchanged) for an empty frame, a frame with no
         point on the object after preprocessing, or intrinsics that differ from
-        the first frame's.
+        the first frame's. BLAS runs on one thread meanwhile (:func:`planner.clustering.single_thread_blas`: the
+        same results, half the CPU; the other core stays with the server and the other sessions).
         """
+        with single_thread_blas():
+            return self._integrate(frame)
+
+    def _integrate(self, frame: DepthFrame) -> IntegrationReport:
         if not isinstance(frame, DepthFrame):
             raise ValueError(f"frame: expected a DepthFrame, got {type(frame).__name__}")
         if self.intrinsics is not None and frame.intrinsics != self.intrinsics:
@@ -273,8 +279,18 @@ class Planner:
         without it, straight lines at a nominal speed.
         progress: called with a :class:`planner.progress.PlanProgress` at each stage (candidates,
         reachability, the evaluator's stages, move costs, select) and as its items are done.
-        Raises ValueError before the first frame.
+        Raises ValueError before the first frame. BLAS runs on one thread meanwhile (as in :meth:`integrate`).
         """
+        with single_thread_blas():
+            return self._plan(reachable, move_cost, progress, move_times)
+
+    def _plan(
+        self,
+        reachable: Callable[[Pose], bool] | None,
+        move_cost: Callable[[Sequence[Candidate], NDArray[np.bool_]], NDArray[np.float64]] | None,
+        progress: ProgressFn | None,
+        move_times: Callable[[Sequence[Candidate], Sequence[int]], NDArray[np.float64]] | None,
+    ) -> PlanResult:
         if self.iteration == 0 or self.voxel_map.bbox is None or self.intrinsics is None:
             raise ValueError("plan: no frame has been integrated yet; capture one first")
         cfg = self.config
