@@ -69,6 +69,27 @@ def test_cached_targets_are_the_targets_computed_afresh(pair) -> None:
                 assert a.move_estimate == pytest.approx(b.move_estimate, abs=1e-12)
 
 
+def test_reachable_angle_is_the_angle_of_reachability_cached_or_not(pair) -> None:
+    """``reachable_angle`` (the planner's question: no move estimate) gives the plate angle and reason
+    ``reachability`` gives, from the cache and afresh, in the same order of questions (the offset that served the
+    previous one first)."""
+    for kin in pair:
+        kin.set_object_box(OTHER_BOX.lower, OTHER_BOX.upper)
+    found = 0
+    for T in hemisphere(OTHER_BOX, step=7):
+        for kin in pair:
+            last = kin.reach._last_offset
+            angle, reason = kin.reach.reachable_angle(T, kin.home, 0.7)
+            kin.reach._last_offset = last  # the same question again, from the same state
+            target, why = kin.reach.reachability(T, kin.home, 0.7)
+            assert reason == why
+            assert (angle is None) == (target is None)
+            if target is not None:
+                assert angle == target.angle
+                found += 1
+    assert 0 < found < 2 * len(hemisphere(OTHER_BOX, step=7))  # both kinds of answer
+
+
 def test_sweep_test_agrees_with_the_turn_grid(pair) -> None:
     cached, reference = pair
     low_box = BoundingBox(np.array([-0.1, -0.1, 0.0]), np.array([0.35, 0.1, 0.25]))
