@@ -453,7 +453,7 @@ class ArmReach:
             if best is not None and turns[order] > best.move_estimate:
                 break  # this turn, and every later one, outlasts the best move
             angle = angles[order]
-            target, reason = self._try(T_table_camera, angle, q_current, angle_current, first=False)
+            target, reason = self._attempt(T_table_camera, angle, q_current, angle_current, first=False)
             if target is not None and turn_check is not None:
                 blocked = turn_check(target.angle)
                 if blocked is not None:
@@ -555,18 +555,6 @@ class ArmReach:
                 best = ArmTarget(angle, free[i], self.arm.camera_pose(free[i], self._data), float(first[i]))
         return (best, None) if best is not None else (None, worst)
 
-    def _try(
-        self, T_table_camera: Pose, angle: float, q_current: NDArray[np.float64], angle_current: float, *, first: bool
-    ) -> tuple[ArmTarget | None, str | None]:
-        """:meth:`_attempt`, for reachability (``first``) through the attempt cache (:meth:`_cached_attempt`)."""
-        if not first:
-            return self._attempt(T_table_camera, angle, q_current, angle_current, first=False)
-        hit = self._cached_attempt(T_table_camera, angle, q_current, angle_current)
-        if isinstance(hit, str):
-            return None, hit
-        q, T_base_camera = hit
-        return ArmTarget(angle, q, T_base_camera, self.move_estimate(q_current, q, angle_current, angle)), None
-
     def _cached_attempt(
         self,
         T_table_camera: Pose,
@@ -578,21 +566,26 @@ class ArmReach:
         """The reachability attempt at plate ``angle`` ((q (n,), T_base_camera) or why none), from the cache when
         :attr:`use_attempt_cache` (computed and kept on a miss). view: the view's key bytes (translation,
         rotation), when the caller has them."""
-        if not self.use_attempt_cache:
-            target, reason = self._attempt(T_table_camera, angle, q_current, angle_current, first=True)
-            return (target.q, target.T_base_camera) if target is not None else str(reason)
-        key = self._attempt_key(T_table_camera, angle) if view is None else (*view, float(angle), self._box_key())
-        hit = self._attempts.get(key)
-        if hit is None:
-            target, reason = self._attempt(T_table_camera, angle, q_current, angle_current, first=True)
-            hit = (target.q, target.T_base_camera) if target is not None else str(reason)
+        key = self._attempt_key(T_table_camera, angle, view) if self.use_attempt_cache else None
+        if key is not None:
+            hit = self._attempts.get(key)
+            if hit is not None:
+                return hit
+        target, reason = self._attempt(T_table_camera, angle, q_current, angle_current, first=True)
+        found = (target.q, target.T_base_camera) if target is not None else str(reason)
+        if key is not None:
             if len(self._attempts) >= ATTEMPT_CACHE_SIZE:
                 self._attempts.clear()
-            self._attempts[key] = hit
-        return hit
+            self._attempts[key] = found
+        return found
 
-    def _attempt_key(self, T_table_camera: Pose, angle: float) -> tuple[bytes, bytes, float, bytes]:
-        return T_table_camera.translation.tobytes(), T_table_camera.rotation.tobytes(), float(angle), self._box_key()
+    def _attempt_key(
+        self, T_table_camera: Pose, angle: float, view: tuple[bytes, bytes] | None = None
+    ) -> tuple[bytes, bytes, float, bytes]:
+        """The attempt cache's key: the view's bytes (``view`` when the caller has them), the plate angle, the box."""
+        if view is None:
+            view = (T_table_camera.translation.tobytes(), T_table_camera.rotation.tobytes())
+        return view[0], view[1], float(angle), self._box_key()
 
     def cached_target(self, T_table_camera: Pose, angle: float) -> tuple[NDArray[np.float64], Pose] | None:
         """(q (n,), T_base_camera) of the reachability attempt at plate ``angle`` with the current object box, if
@@ -610,9 +603,9 @@ class ArmReach:
         cold, microseconds when cached). Empty when the view is unreachable."""
         found: list[tuple[NDArray[np.float64], float]] = []
         for angle in self.plate_angles(T_table_camera, angle_current):
-            target, _ = self._try(T_table_camera, angle, q_current, angle_current, first=True)
-            if target is not None:
-                found.append((target.q, angle))
+            hit = self._cached_attempt(T_table_camera, angle, q_current, angle_current)
+            if not isinstance(hit, str):
+                found.append((hit[0], angle))
         return found
 
     def _attempt(
