@@ -117,7 +117,7 @@ class SessionArm:
                 return None
             then = [] if kind == "custom" or data.plan is None else data.plan.then_poses(index)
             try:  # the move the approve will make (planned for the views the tour expects next, if any)
-                motion, reason = (self.cell.plan_motion(pose, then=then) if then else self.cell.plan_motion(pose)), None
+                motion, reason = self.cell.plan_motion(pose, then=then), None
             except UnreachableError as exc:
                 motion, reason = None, str(exc)
             if motion is not None and (motion.q is None or motion.trajectory is None):

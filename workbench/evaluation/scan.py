@@ -172,8 +172,7 @@ def _move(
     for index, target in tries:
         then = [] if plan is None else plan.then_poses(index)  # the views the tour expects next, if any
         try:
-            motion = cell.move_to(target, then=then) if then else cell.move_to(target)
-            return index, target, motion, refused
+            return index, target, cell.move_to(target, then=then), refused
         except UnreachableError as exc:
             if plan is None:
                 raise

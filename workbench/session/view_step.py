@@ -101,10 +101,7 @@ class ViewStep:
             self._wait_for_the_last_move()
             try:
                 call_with_timeout(
-                    (lambda: self.cell.move_to(pose, then=then)) if then else (lambda: self.cell.move_to(pose)),
-                    self.move_timeout,
-                    "cell move",
-                    self._stop,
+                    lambda: self.cell.move_to(pose, then=then), self.move_timeout, "cell move", self._stop
                 )
             except DeviceTimeoutError as exc:
                 self._moving = exc.pending
