@@ -9,6 +9,7 @@ Read top-down against the paper:
 - ``raycast``, ``voxel_map``, ``frontier``, ``bbox``   §III-C voxel structure and B's growth
 - ``mixture``, ``bic_search``, ``clustering``         §III-D GMM, BIC and the choice of T
 - ``mvee``, ``ellipsoids``                             §III-D minimum-volume ellipsoids per cluster
+- ``small_linalg``                                     their stacks of 3x3 / 4x4 inverses, bit-identical, faster
 - ``fit_quality``                                      how well each ellipsoid fills (debugging a fit by eye)
 - ``candidates``                                       §III-B hemisphere of candidate views
 - ``projection``, ``scoring``                          §III-E dual quadric -> conic, rank weights, F

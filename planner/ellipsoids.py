@@ -15,6 +15,9 @@ Speed. Candidate support points are the cube corners that are extreme along 64 f
 candidates missed (more than 1 % outside) are added and the affected clusters solved once more from
 their weights. Finally each ellipsoid is scaled so that every corner of every voxel of its cluster is
 inside: containment is exact; the volume is within a few per cent of the minimum (benchmarks/bench_fit.py).
+A plan fits two kinds: ``EllipsoidFitter.cluster`` each, then ``enclose`` puts both kinds' clusters through
+the first solve together (its cost is per iteration, not per set; each set's answer does not depend on the
+others in the batch, all having 64 candidates, so the ellipsoids are those of one kind at a time, bit for bit).
 
 Warm start. The fitter keeps the last chosen mixture and starts the next BIC search from it; voxel sets
 change a little between iterations, so a few EM runs near the previous T suffice (``reset()`` forgets).
@@ -23,14 +26,15 @@ change a little between iterations, so a few EM runs near the previous T suffice
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from planner import clustering
 from planner.config import ClusterConfig
-from planner.mixture import Mixture, assign
+from planner.mixture import Mixture, Selection, assign
 from planner.mvee import checked_points, solve
 from planner.types import ClusterFit, Ellipsoid, EllipsoidKind
 
@@ -107,30 +111,22 @@ class EllipsoidFitter:
         """Ellipsoids of the clusters of ``points_world`` (N, 3) voxel centres, and the model selection.
 
         progress: ``(done, total)`` values of T fitted (the exhaustive search; the fast one reports its end)."""
+        return fit_together([(self, points_world, progress)])[0]
+
+    def cluster(self, points_world: ArrayLike, progress: Callable[[int, int], None] | None = None) -> Clusters:
+        """The first half of :meth:`fit`: the BIC model selection of ``points_world`` (N, 3) and each voxel's
+        cluster, with the clusters' hull candidates (what :func:`enclose` solves for); the warm start moves on."""
         p = checked_points("points_world", points_world)
         with clustering.single_thread_blas():
-            return self._fit(p, progress)
-
-    def _fit(
-        self, p: NDArray[np.float64], progress: Callable[[int, int], None] | None = None
-    ) -> tuple[tuple[Ellipsoid, ...], ClusterFit]:
-        t0 = time.perf_counter()
-        n = p.shape[0]
-        if n == 0:
-            self.last_timings = {"cluster": 0.0, "ellipsoids": 0.0}
-            return (), ClusterFit(self.kind, 0, (), 0, 0.0)
-        x = p / self.resolution
-        sel = clustering.select_mixture(x, self.config, self._mixture, progress)
-        self._mixture = sel.mixture
-        labels = assign(x, sel.mixture)
-        t1 = time.perf_counter()
-        ellipsoids = self._ellipsoids(x, labels, sel.mixture)
-        t2 = time.perf_counter()
-        self.last_timings = {"cluster": t1 - t0, "ellipsoids": t2 - t1}
-        fit = ClusterFit(
-            self.kind, sel.mixture.n_components, tuple(sorted(sel.evaluated.items())), n, t2 - t0, dense(labels)
-        )
-        return ellipsoids, fit
+            t0 = time.perf_counter()
+            if p.shape[0] == 0:
+                return Clusters(self, np.zeros((0, 3)), None, None, None, 0.0)
+            x = p / self.resolution
+            sel = clustering.select_mixture(x, self.config, self._mixture, progress)
+            self._mixture = sel.mixture
+            labels = assign(x, sel.mixture)
+            hulls = _Hulls.of(x, labels)
+            return Clusters(self, x, labels, sel, hulls, time.perf_counter() - t0)
 
     def fit_at(self, points_world: ArrayLike, t: int) -> tuple[tuple[Ellipsoid, ...], ClusterFit]:
         """Ellipsoids of ``points_world`` (N, 3), N >= 1, clustered by a GMM of exactly ``t`` components (no BIC
@@ -145,25 +141,22 @@ class EllipsoidFitter:
         with clustering.single_thread_blas():
             bic, mix = clustering.fit_fixed_t(x, int(t), self.config)
             labels = assign(x, mix)
-            ellipsoids = self._ellipsoids(x, labels, mix)
+            hulls = _Hulls.of(x, labels)
+            ellipsoids = self._enclosed(hulls, _solved([hulls], self._mvee)[0], mix)
         return ellipsoids, ClusterFit(
             self.kind, int(t), ((int(t), bic),), p.shape[0], time.perf_counter() - t0, dense(labels)
         )
 
-    def _ellipsoids(self, x: NDArray[np.float64], labels: NDArray[np.int64], mix: Mixture) -> tuple[Ellipsoid, ...]:
-        """One ellipsoid per non-empty cluster, ordered by component index. x: (N, 3) voxel units."""
-        order = np.argsort(labels, kind="stable")
-        lab, xs = labels[order], x[order]
-        comps, starts, counts = np.unique(lab, return_index=True, return_counts=True)
-        n_c, n_d = len(comps), len(_DIRS)
-        # The cube union's extreme point along each direction: an extreme centre + 0.5 sign(direction).
-        proj = xs @ _DIRS.T  # (N, K)
-        top = np.maximum.reduceat(proj, starts, axis=0)  # (C, K)
-        rows, cols = np.nonzero(proj == np.repeat(top, counts, axis=0))
-        key = np.repeat(np.arange(n_c), counts)[rows] * n_d + cols
-        _, first = np.unique(key, return_index=True)  # one maximiser per (cluster, direction)
-        cand = list(xs[rows[first].reshape(n_c, n_d)] + 0.5 * np.sign(_DIRS)[None])  # C x (K, 3)
-        centers, A, u = solve(cand, tol=self.mvee_tol, max_iter=self.mvee_max_iter, warmup=self.mvee_warmup)
+    @property
+    def _mvee(self) -> tuple[float, int, int]:
+        return self.mvee_tol, self.mvee_max_iter, self.mvee_warmup
+
+    def _enclosed(self, hulls: _Hulls, solved: _Solved, mix: Mixture) -> tuple[Ellipsoid, ...]:
+        """One ellipsoid per non-empty cluster, ordered by component index, from the clusters' first MVEE solve:
+        missed hull vertices added and solved again, then each scaled to contain every corner of its voxels."""
+        xs, starts, counts, cand = hulls.xs, hulls.starts, hulls.counts, list(hulls.cand)
+        centers, A, u = solved
+        n_c = len(hulls.comps)
         seg = np.repeat(np.arange(n_c), counts)
         for round_ in range(_ACTIVE_ROUNDS + 1):
             # Every corner x + o_k of every voxel against its cluster's ellipsoid (1 = on the surface):
@@ -193,7 +186,7 @@ class EllipsoidFitter:
         A = A / (np.maximum(worst, 1e-300) * (1.0 + 1e-12))[:, None, None]  # exact containment, tight
         out: list[Ellipsoid] = []
         res = self.resolution
-        for ci, (comp, c) in enumerate(zip(comps, counts, strict=True)):
+        for ci, (comp, c) in enumerate(zip(hulls.comps, counts, strict=True)):
             lam, V = np.linalg.eigh(0.5 * (A[ci] + A[ci].T))
             if np.linalg.det(V) < 0:
                 V[:, 2] = -V[:, 2]
@@ -210,6 +203,116 @@ class EllipsoidFitter:
                 )
             )
         return tuple(out)
+
+
+@dataclass(frozen=True, eq=False)
+class _Hulls:
+    """One kind's voxels sorted by cluster, and each cluster's hull candidates (voxel units).
+
+    xs: (N, 3) centres by cluster; comps: (C,) the non-empty components; starts, counts: (C,) each cluster's
+    rows of xs; cand: C x (K, 3) the cube corners extreme along the K = 64 fixed directions."""
+
+    xs: NDArray[np.float64]
+    comps: NDArray[np.int64]
+    starts: NDArray[np.intp]
+    counts: NDArray[np.intp]
+    cand: tuple[NDArray[np.float64], ...]
+
+    @staticmethod
+    def of(x: NDArray[np.float64], labels: NDArray[np.int64]) -> _Hulls:
+        """The hull candidates of the clusters ``labels`` (N,) of the centres x (N, 3), N >= 1."""
+        order = np.argsort(labels, kind="stable")
+        lab, xs = labels[order], x[order]
+        comps, starts, counts = np.unique(lab, return_index=True, return_counts=True)
+        n_c, n_d = len(comps), len(_DIRS)
+        # The cube union's extreme point along each direction: an extreme centre + 0.5 sign(direction).
+        proj = xs @ _DIRS.T  # (N, K)
+        top = np.maximum.reduceat(proj, starts, axis=0)  # (C, K)
+        rows, cols = np.nonzero(proj == np.repeat(top, counts, axis=0))
+        key = np.repeat(np.arange(n_c), counts)[rows] * n_d + cols
+        _, first = np.unique(key, return_index=True)  # one maximiser per (cluster, direction)
+        cand = xs[rows[first].reshape(n_c, n_d)] + 0.5 * np.sign(_DIRS)[None]  # (C, K, 3)
+        return _Hulls(xs, comps, starts, counts, tuple(cand))
+
+
+_Solved = tuple[NDArray[np.float64], NDArray[np.float64], list[NDArray[np.float64]]]
+
+
+def _solved(hulls: Sequence[_Hulls], mvee: tuple[float, int, int]) -> list[_Solved]:
+    """The first MVEE solve of every cluster of every ``hulls``, in one batch (its cost is per iteration, not per
+    set: two kinds cost about one; each set's answer does not depend on the others in the batch, all having K
+    candidates), split back per hulls: (centres (C, 3), A (C, 3, 3), weights C x (K,))."""
+    tol, max_iter, warmup = mvee
+    centers, A, u = solve([c for h in hulls for c in h.cand], tol=tol, max_iter=max_iter, warmup=warmup)
+    out: list[_Solved] = []
+    at = 0
+    for h in hulls:
+        n = len(h.cand)
+        out.append((centers[at : at + n].copy(), A[at : at + n].copy(), u[at : at + n]))
+        at += n
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class Clusters:
+    """One kind's clusters (:meth:`EllipsoidFitter.cluster`), before their ellipsoids (:func:`enclose`).
+
+    x: (N, 3) the voxel centres in voxel units; labels: (N,) each one's component; selection: the BIC model
+    selection; hulls: the clusters' hull candidates; seconds: the clustering's wall time. labels, selection and
+    hulls are None for no voxels."""
+
+    fitter: EllipsoidFitter
+    x: NDArray[np.float64]
+    labels: NDArray[np.int64] | None
+    selection: Selection | None
+    hulls: _Hulls | None
+    seconds: float
+
+
+def enclose(clusters: Sequence[Clusters]) -> list[tuple[tuple[Ellipsoid, ...], ClusterFit]]:
+    """The ellipsoids and model selection of each :class:`Clusters` (its fitter's ``last_timings`` set): the first
+    MVEE solve of all of them in one batch where their fitters' MVEE settings agree, then each kind's own."""
+    with clustering.single_thread_blas():
+        t0 = time.perf_counter()
+        hulls = {i: c.hulls for i, c in enumerate(clusters) if c.hulls is not None}
+        groups: dict[tuple[float, int, int], list[int]] = {}
+        for i in hulls:
+            groups.setdefault(clusters[i].fitter._mvee, []).append(i)
+        solved: dict[int, _Solved] = {}
+        for mvee, members in groups.items():
+            solved.update(zip(members, _solved([hulls[i] for i in members], mvee), strict=True))
+        shared = time.perf_counter() - t0
+        total_sets = sum(len(h.cand) for h in hulls.values()) or 1
+        out: list[tuple[tuple[Ellipsoid, ...], ClusterFit]] = []
+        for i, c in enumerate(clusters):
+            fitter = c.fitter
+            t1 = time.perf_counter()
+            if c.selection is None or c.hulls is None or c.labels is None:
+                fitter.last_timings = {"cluster": 0.0, "ellipsoids": 0.0}
+                out.append(((), ClusterFit(fitter.kind, 0, (), 0, 0.0)))
+                continue
+            mix = c.selection.mixture
+            ellipsoids = fitter._enclosed(c.hulls, solved[i], mix)
+            seconds = time.perf_counter() - t1 + shared * len(c.hulls.cand) / total_sets  # its share of the batch
+            fitter.last_timings = {"cluster": c.seconds, "ellipsoids": seconds}
+            fit = ClusterFit(
+                fitter.kind,
+                mix.n_components,
+                tuple(sorted(c.selection.evaluated.items())),
+                len(c.x),
+                c.seconds + seconds,
+                dense(c.labels),
+            )
+            out.append((ellipsoids, fit))
+        return out
+
+
+def fit_together(
+    jobs: Sequence[tuple[EllipsoidFitter, ArrayLike, Callable[[int, int], None] | None]],
+) -> list[tuple[tuple[Ellipsoid, ...], ClusterFit]]:
+    """:meth:`EllipsoidFitter.fit` of each (fitter, points (N, 3), progress), the MVEE solves batched
+    (:func:`enclose`): the same ellipsoids as one fit at a time, in less time."""
+    return enclose([fitter.cluster(points, progress) for fitter, points, progress in jobs])
 
 
 def fit_at_t(

@@ -16,9 +16,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from planner import small_linalg
+
 _LOG2PI = float(np.log(2.0 * np.pi))
 _EPS10 = 10.0 * float(np.finfo(np.float64).eps)  # sklearn's floor on component mass
 _SYM = np.array([0, 3, 4, 3, 1, 5, 4, 5, 2])  # feature index of each entry of x x^T
+_DIAG = np.array([0, 4, 8])  # flat indices of P_00, P_11, P_22 in a 3x3 matrix
+_OFF = np.array([1, 2, 5])  # flat indices of P_01, P_02, P_12
+_REG_EYE: dict[float, NDArray[np.float64]] = {}
 
 
 @dataclass(frozen=True, eq=False)
@@ -79,12 +84,13 @@ def features(x: NDArray[np.float64]) -> NDArray[np.float64]:
 
 def weight_matrix(w: NDArray, mu: NDArray, cov: NDArray) -> NDArray[np.float64]:
     """(T, 10) W with features(x) @ W.T = log w_t + log N(x | mu_t, cov_t)."""
-    P = np.linalg.inv(cov)
-    log_det = np.linalg.slogdet(cov)[1]
+    P = small_linalg.inv(cov)
+    log_det = small_linalg.logdet(cov)
     Pm = np.einsum("tij,tj->ti", P, mu)
     W = np.empty((len(w), 10))
-    W[:, 0], W[:, 1], W[:, 2] = -0.5 * P[:, 0, 0], -0.5 * P[:, 1, 1], -0.5 * P[:, 2, 2]
-    W[:, 3], W[:, 4], W[:, 5] = -P[:, 0, 1], -P[:, 0, 2], -P[:, 1, 2]
+    P9 = P.reshape(-1, 9)
+    np.multiply(P9[:, _DIAG], -0.5, out=W[:, 0:3])  # the squares' weights: -P_ii / 2
+    np.negative(P9[:, _OFF], out=W[:, 3:6])  # the cross terms': -P_ij (i < j; P symmetric)
     W[:, 6:9] = Pm
     W[:, 9] = np.log(w) - 0.5 * (3 * _LOG2PI + log_det + np.einsum("ti,ti->t", mu, Pm))
     return W
@@ -95,5 +101,16 @@ def moments(S: NDArray[np.float64], reg: float) -> tuple[NDArray, NDArray, NDArr
     nk = S[:, 9] + _EPS10
     mu = S[:, 6:9] / nk[:, None]
     cov = S[:, _SYM].reshape(-1, 3, 3) / nk[:, None, None] - mu[:, :, None] * mu[:, None, :]
-    cov += reg * np.eye(3)
+    cov += _identity_times(reg)
     return nk, mu, cov
+
+
+def _identity_times(reg: float) -> NDArray[np.float64]:
+    """``reg * np.eye(3)``, kept per value (EM adds it thousands of times a plan)."""
+    out = _REG_EYE.get(reg)
+    if out is None:
+        out = reg * np.eye(3)
+        out.flags.writeable = False
+        if len(_REG_EYE) < 64:
+            _REG_EYE[reg] = out
+    return out

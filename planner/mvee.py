@@ -25,6 +25,8 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from planner import small_linalg
+
 _D = 3
 _N = _D + 1.0
 _HULL_ABOVE = 20  # mvee(): reduce to convex-hull vertices above this many points
@@ -99,7 +101,7 @@ def solve(
     u = _wa_ty(Q, _multiplicative(Q, u, warmup), tol, max_iter)
     c = np.matmul(u[:, None, :], P)[:, 0]
     d = P - c[:, None, :]
-    A = np.linalg.inv(np.matmul(np.transpose(d, (0, 2, 1)) * u[:, None, :], d))
+    A = small_linalg.inv(np.matmul(np.transpose(d, (0, 2, 1)) * u[:, None, :], d))
     reach = np.einsum("smi,smi->sm", np.matmul(d, A), d).max(axis=1)
     A /= (reach * (1.0 + 1e-12))[:, None, None]
     return c + mean, A, [u[i, : counts[i]] for i in range(S)]
@@ -115,15 +117,14 @@ def _multiplicative(Q: NDArray, u: NDArray, steps: int) -> NDArray[np.float64]:
     """``steps`` Titterington updates u_i <- u_i w_i / 4 on lifted points Q (S, m, 4), weights u (S, m)."""
     QT = np.ascontiguousarray(np.transpose(Q, (0, 2, 1)))
     for _ in range(steps):
-        Xinv = np.linalg.inv(np.matmul(QT * u[:, None, :], Q))
+        Xinv = small_linalg.inv(np.matmul(QT * u[:, None, :], Q))
         u = u * np.einsum("smi,smi->sm", np.matmul(Q, Xinv), Q) / _N
     return u
 
 
 def _wa_ty(Q: NDArray, u: NDArray, tol: float, max_iter: int) -> NDArray[np.float64]:
     """WA-TY iterations on lifted points Q (S, m, 4) from weights u (S, m); the better of start and end."""
-    S, m, _ = Q.shape
-    flat, rows = np.arange(S) * m, np.arange(S)
+    rows = np.arange(Q.shape[0])
     Xinv, w = _exact(Q, u)
     u_start, v_start = u.copy(), _contained_volume(Xinv, w)
     for it in range(max_iter):
@@ -131,24 +132,27 @@ def _wa_ty(Q: NDArray, u: NDArray, tol: float, max_iter: int) -> NDArray[np.floa
             Xinv, w = _exact(Q, u)
         j = np.argmax(w, axis=1)
         k = np.argmin(np.where(u > 0, w, np.inf), axis=1)
-        wj, wk, uk = w.ravel()[flat + j], w.ravel()[flat + k], u.ravel()[flat + k]
+        wj, wk, uk = w[rows, j], w[rows, k], u[rows, k]
         up, down = wj / _N - 1.0, 1.0 - wk / _N
         active = np.maximum(up, down) > tol
         if not active.any():
             break
         toward = up >= down
         b_away = (_N - wk) / (_N * (wk - 1.0))
-        drop = ~toward & (b_away >= uk / (1.0 - uk))  # an away step that removes point k
-        b = np.where(toward, (wj - _N) / (_N * (wj - 1.0)), -np.minimum(b_away, uk / (1.0 - uk))) * active
+        b_drop = uk / (1.0 - uk)  # the away step that removes point k
+        drop = ~toward & (b_away >= b_drop)
+        b = np.where(toward, (wj - _N) / (_N * (wj - 1.0)), -np.minimum(b_away, b_drop)) * active
         i, wi = np.where(toward, j, k), np.where(toward, wj, wk)
-        u *= (1.0 - b)[:, None]
-        u.ravel()[flat + i] += b
-        u.ravel()[(flat + k)[drop & active]] = 0.0
+        shrink = 1.0 - b
+        u *= shrink[:, None]
+        u[rows, i] += b
+        dropped = drop & active
+        u[rows[dropped], k[dropped]] = 0.0
         Xq = np.matmul(Xinv, Q[rows, i][:, :, None])  # (S, 4, 1)
-        coef = b / ((1.0 - b) + b * wi)
-        Xinv = (Xinv - coef[:, None, None] * Xq * np.transpose(Xq, (0, 2, 1))) / (1.0 - b)[:, None, None]
+        coef = b / (shrink + b * wi)
+        Xinv = (Xinv - coef[:, None, None] * Xq * np.transpose(Xq, (0, 2, 1))) / shrink[:, None, None]
         g = np.matmul(Q, Xq)[:, :, 0]  # (S, m)
-        w = (w - coef[:, None] * g * g) / (1.0 - b)[:, None]
+        w = (w - coef[:, None] * g * g) / shrink[:, None]
     worse = _contained_volume(*_exact(Q, u)) > v_start  # early WA-TY steps can enlarge the contained ellipsoid
     u[worse] = u_start[worse]
     return u
@@ -156,7 +160,7 @@ def _wa_ty(Q: NDArray, u: NDArray, tol: float, max_iter: int) -> NDArray[np.floa
 
 def _exact(Q: NDArray, u: NDArray) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """X(u)^-1 (S, 4, 4) and w (S, m) from scratch."""
-    Xinv = np.linalg.inv(np.matmul(np.transpose(Q, (0, 2, 1)) * u[:, None, :], Q))
+    Xinv = small_linalg.inv(np.matmul(np.transpose(Q, (0, 2, 1)) * u[:, None, :], Q))
     return Xinv, np.einsum("smi,smi->sm", np.matmul(Q, Xinv), Q)
 
 

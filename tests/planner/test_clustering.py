@@ -198,3 +198,21 @@ def test_fast_search_never_chooses_or_reports_t_outside_the_range() -> None:
         assert all(lo <= t <= hi for t in sel.evaluated), (seed, sorted(sel.evaluated))
         checked += lo == 2
     assert checked > 250  # the range really starts at t_min = 2 for most sets
+
+
+def test_k_means_draws_are_numpys_choice() -> None:
+    """bic_search._draw (k-means++'s weighted pick without rng.choice's argument checks) draws what
+    Generator.choice(N, size, p=p) draws, and leaves the generator in the same state."""
+    from planner.bic_search import _draw
+
+    for seed in range(100):
+        ours, numpys = np.random.default_rng((seed, 3)), np.random.default_rng((seed, 3))
+        n = 1 + 13 * seed
+        p = np.random.default_rng(seed).random(n) ** 4
+        p[np.random.default_rng(seed).random(n) < 0.3] = 0.0  # zero weights (already chosen centres) too
+        if p.sum() == 0:
+            p[0] = 1.0
+        p /= p.sum()
+        for size in (1, 2, 3, 5):
+            assert np.array_equal(_draw(ours, p, size), numpys.choice(n, size=size, p=p))
+        assert ours.random() == numpys.random()

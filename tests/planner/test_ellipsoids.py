@@ -142,3 +142,38 @@ def test_bad_input_names_the_problem(sphere_voxels: np.ndarray) -> None:
         EllipsoidFitter(CFG, -1.0, "occupied")
     with pytest.raises(ValueError, match="kind"):
         EllipsoidFitter(CFG, RES, "empty")  # type: ignore[arg-type]
+
+
+def _same(a: tuple[tuple[Ellipsoid, ...], object], b: tuple[tuple[Ellipsoid, ...], object]) -> bool:
+    """Bit-identical ellipsoids, GMM parameters, model selections and labels."""
+    (ea, fa), (eb, fb) = a, b
+    if len(ea) != len(eb) or fa.bic != fb.bic or not np.array_equal(fa.labels, fb.labels):  # type: ignore[attr-defined]
+        return False
+    fields = ("center", "axes", "rotation", "gmm_mean", "gmm_covariance", "gmm_weight", "n_points", "kind")
+    return all(np.array_equal(getattr(x, f), getattr(y, f)) for x, y in zip(ea, eb, strict=True) for f in fields)
+
+
+def test_kinds_fitted_together_give_the_ellipsoids_of_one_at_a_time(sphere_voxels: np.ndarray) -> None:
+    """enclose() solves both kinds' MVEEs in one batch: the same ellipsoids, bit for bit, as fitting each alone,
+    warm starts included (two frames in a row), whatever the other kind holds (empty, one voxel, many)."""
+    from planner.ellipsoids import enclose, fit_together
+
+    rng = np.random.default_rng(3)
+    cap = sphere_voxels[sphere_voxels[:, 2] > np.quantile(sphere_voxels[:, 2], 0.7)]
+    others = [np.zeros((0, 3)), sphere_voxels[:1], cap, cap[rng.permutation(len(cap))[: len(cap) // 2]]]
+    for other in others:
+        alone = [EllipsoidFitter(CFG, RES, "occupied"), EllipsoidFitter(CFG, RES, "frontier")]
+        together = [EllipsoidFitter(CFG, RES, "occupied"), EllipsoidFitter(CFG, RES, "frontier")]
+        for frame in (sphere_voxels[sphere_voxels[:, 0] < 0.12], sphere_voxels):
+            one = [alone[0].fit(frame), alone[1].fit(other)]
+            both = enclose([together[0].cluster(frame), together[1].cluster(other)])
+            assert all(_same(x, y) for x, y in zip(one, both, strict=True))
+            assert together[0].last_timings["ellipsoids"] > 0.0
+    fresh = EllipsoidFitter(CFG, RES, "occupied")
+    assert _same(fit_together([(fresh, cap, None)])[0], EllipsoidFitter(CFG, RES, "occupied").fit(cap))
+    # fitters with other MVEE settings are solved in their own batch, with their own settings
+    loose = EllipsoidFitter(CFG, RES, "frontier", mvee_tol=1e-1, mvee_max_iter=2, mvee_warmup=1)
+    mixed = enclose([EllipsoidFitter(CFG, RES, "occupied").cluster(sphere_voxels), loose.cluster(cap)])
+    ref = EllipsoidFitter(CFG, RES, "frontier", mvee_tol=1e-1, mvee_max_iter=2, mvee_warmup=1).fit(cap)
+    assert _same(mixed[1], ref)
+    assert not _same(mixed[1], EllipsoidFitter(CFG, RES, "frontier").fit(cap))
