@@ -94,6 +94,11 @@ class CollisionWorld:
         self._sweep: object | None = None  # the cylinder the padded box sweeps as the plate turns (coal.Cylinder)
         self._sweep_z = 0.0
         self._sweep_geoms = [i for i in self._arm_geoms if joints[i] != 0]
+        pairs = [(p.first, p.second) for p in geometry.collisionPairs]
+        self._object_pairs = [k for k, pair in enumerate(pairs) if self._object in pair]  # in the pairs' order
+        self._fixed_pairs = [k for k, pair in enumerate(pairs) if self._object not in pair]
+        self._placed: bytes | None = None  # the configuration the arm's geometries are placed at
+        self._fixed_first: tuple[bytes, int | None] | None = None  # (configuration, its first colliding fixed pair)
 
     @property
     def pair_count(self) -> int:
@@ -122,6 +127,7 @@ class CollisionWorld:
         self._box_center_table = 0.5 * (lo + hi)
         self.geometry.geometryObjects[self._object].geometry = coal.Box(*(hi - lo))
         self._gdata = pin.GeometryData(self.geometry)
+        self._placed = self._fixed_first = None
         corners_xy = np.array([[x, y] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])])
         self._sweep = coal.Cylinder(float(np.max(np.linalg.norm(corners_xy, axis=1))), float(hi[2] - lo[2]))
         self._sweep_z = float(0.5 * (lo[2] + hi[2]))
@@ -156,9 +162,35 @@ class CollisionWorld:
             return None
         for k, result in enumerate(self._gdata.collisionResults):
             if result.isCollision():
-                pair = self.geometry.collisionPairs[k]
-                return f"collision:{self.names[pair.first]}:{self.names[pair.second]}"
+                return self._reason(k)
         return "collision:unknown:unknown"  # pragma: no cover - computeCollisions said yes
+
+    def turning_collision(self, q: NDArray[np.float64], plate_angle: float) -> str | None:
+        """:meth:`collision` of a configuration asked at many plate angles (a turn's grid of checks): the same answer.
+        Only the object's box moves with the plate, so the other pairs (the arm with itself, the plate, the table) are
+        checked once per configuration and only the box's pairs at each angle, in the pairs' order (the first
+        collision in that order is the reason, as :meth:`collision` reports it)."""
+        import pinocchio as pin  # pyright: ignore[reportMissingImports]  (under cmeel.prefix)
+
+        key = q.tobytes()
+        if self._placed != key:
+            pin.updateGeometryPlacements(self.arm.model, self._data, self.geometry, self._gdata, q)
+            self._placed = key
+        if self._fixed_first is None or self._fixed_first[0] != key:
+            first = next((k for k in self._fixed_pairs if pin.computeCollision(self.geometry, self._gdata, k)), None)
+            self._fixed_first = (key, first)
+        fixed = self._fixed_first[1]
+        self._gdata.oMg[self._object] = self._object_placement(plate_angle)
+        for k in self._object_pairs:
+            if fixed is not None and k > fixed:
+                break
+            if pin.computeCollision(self.geometry, self._gdata, k):
+                return self._reason(k)
+        return None if fixed is None else self._reason(fixed)
+
+    def _reason(self, k: int) -> str:
+        pair = self.geometry.collisionPairs[k]
+        return f"collision:{self.names[pair.first]}:{self.names[pair.second]}"
 
     def path_collision(
         self, qa: NDArray[np.float64], qb: NDArray[np.float64], plate_angle: float, resolution: float
@@ -176,9 +208,16 @@ class CollisionWorld:
         import pinocchio as pin  # pyright: ignore[reportMissingImports]  (under cmeel.prefix)
 
         pin.updateGeometryPlacements(self.arm.model, self._data, self.geometry, self._gdata, q)
+        self._placed = q.tobytes() if isinstance(q, np.ndarray) and q.dtype == np.float64 else None
+        self._gdata.oMg[self._object] = self._object_placement(plate_angle)
+
+    def _object_placement(self, plate_angle: float) -> object:
+        """The object box's placement (pin.SE3) with the plate at ``plate_angle``."""
+        import pinocchio as pin  # pyright: ignore[reportMissingImports]  (under cmeel.prefix)
+
         c, s = math.cos(plate_angle), math.sin(plate_angle)
         R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        self._gdata.oMg[self._object] = pin.SE3(R, R @ self._box_center_table)
+        return pin.SE3(R, R @ self._box_center_table)
 
 
 def _link_name(geometry_name: str) -> str:

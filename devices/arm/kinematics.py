@@ -85,6 +85,8 @@ class ArmKinematics:
         self.home: NDArray[np.float64] = np.clip(home, self.model.lower, self.model.upper)
         self.reach = ArmReach(self.model, self.world, self.home, turn_while_moving=config.turn_while_moving)
         self._turn_hits: dict[tuple[bytes, float], str | None] = {}
+        # (configuration, plate angle, direction) -> (grid points walked, (k, collision) of the first that collides)
+        self._turn_walks: dict[tuple[bytes, float, float], tuple[int, tuple[int, str] | None]] = {}
         self.use_sweep_test = True
         """False: every turn is checked on its grid (the reference the sweep test is tested against)."""
 
@@ -100,28 +102,48 @@ class ArmKinematics:
         """The object's box (table frame, (3,) corners) the arm must keep clear of; None = no object model yet."""
         self.world.set_object_box(lower_table, upper_table)
         self._turn_hits.clear()
+        self._turn_walks.clear()
 
     def turn_collision(self, q: NDArray[np.float64], angle: float, turn: float) -> str | None:
         """The first collision of the arm standing at (n,) ``q`` while the plate turns from ``angle`` by ``turn``
         radians (the object's box turning with it), or None. Checked on a fixed grid of plate angles
         (``TURN_CHECKS_PER_RADIAN``) plus the end, cached per configuration: the planner's reachability of 400
-        views and the move ask the same question with the same answer."""
+        views and the move ask the same question with the same answer. The grid's first collision each way from
+        ``angle`` is kept too, so the 400 views' turns from one state cost one walk of the grid, not one each."""
         q = np.asarray(q, dtype=np.float64)
         if self.use_sweep_test and self.reach.sweep_free(q):
             return None  # clear of everything the box sweeps: no turn collides (the same answer as the checks)
-        step = 1.0 / TURN_CHECKS_PER_RADIAN
-        n = math.floor(abs(turn) / step)
-        offsets = [math.copysign(k * step, turn) for k in range(n + 1)] + [turn]
-        for offset in offsets:
-            key = (q.tobytes(), round(angle + offset, 9))
-            if key not in self._turn_hits:
-                if len(self._turn_hits) >= 100_000:
-                    self._turn_hits.clear()
-                self._turn_hits[key] = self.world.collision(q, angle + offset)
-            hit = self._turn_hits[key]
-            if hit is not None:
-                return hit
-        return None
+        q_key = q.tobytes()
+        n = math.floor(abs(turn) / (1.0 / TURN_CHECKS_PER_RADIAN))
+        hit = self._grid_turn_hit(q, q_key, angle, math.copysign(1.0, turn), n)
+        return hit if hit is not None else self._turn_hit(q, q_key, angle + turn)
+
+    def _grid_turn_hit(self, q: NDArray[np.float64], q_key: bytes, angle: float, sign: float, n: int) -> str | None:
+        """The first collision at the grid angles ``angle + sign * k / TURN_CHECKS_PER_RADIAN``, k = 0 .. n, or None;
+        the grid is walked once per (configuration, angle, direction) and only as far as asked."""
+        key = (q_key, angle, sign)
+        walked, first = self._turn_walks.get(key, (0, None))
+        if first is None and walked <= n:
+            step = 1.0 / TURN_CHECKS_PER_RADIAN
+            for k in range(walked, n + 1):
+                hit = self._turn_hit(q, q_key, angle + math.copysign(k * step, sign))
+                if hit is not None:
+                    first = (k, hit)
+                    break
+            walked = max(walked, n + 1) if first is None else first[0] + 1
+            if len(self._turn_walks) >= 10_000:
+                self._turn_walks.clear()
+            self._turn_walks[key] = (walked, first)
+        return first[1] if first is not None and first[0] <= n else None
+
+    def _turn_hit(self, q: NDArray[np.float64], q_key: bytes, plate_angle: float) -> str | None:
+        """The collision of the arm at ``q`` with the plate at ``plate_angle`` (cached per configuration and angle)."""
+        key = (q_key, round(plate_angle, 9))
+        if key not in self._turn_hits:
+            if len(self._turn_hits) >= 100_000:
+                self._turn_hits.clear()
+            self._turn_hits[key] = self.world.turning_collision(q, plate_angle)
+        return self._turn_hits[key]
 
     def turn_blocked(self, q: NDArray[np.float64], angle: float, target_angle: float) -> str | None:
         """Why the plate cannot turn from ``angle`` to ``target_angle`` even with the arm retracted to ``home``

@@ -100,3 +100,73 @@ def test_a_retracted_move_ends_at_the_view(close_cell: Cell) -> None:
     assert close_cell.kinematics is not None
     assert close_cell.kinematics.violations(close_cell.arm.joint_positions(), close_cell.angle) is None
     assert motion.duration > motion.retract.duration > 0
+
+
+def test_turn_answers_match_a_walk_of_the_whole_grid() -> None:
+    """turn_collision keeps the grid's first collision per (configuration, angle, direction) and walks the grid only
+    as far as asked: every answer, asked in any order, short turns after long ones and back, is the first collision
+    of the turn's own grid (k / TURN_CHECKS_PER_RADIAN, k = 0 .. n, then the end), checked afresh here."""
+    from devices.arm.kinematics import TURN_CHECKS_PER_RADIAN
+
+    close_cell = make_sim_cell(make_builtin("l-block"), CameraConfig(), CellConfig(), seed=0)
+    close_cell.move_to(view(180.0, 10.0, 0.3))
+    box = BoundingBox(np.array([-0.1, -0.1, 0.0]), np.array([0.3, 0.1, 0.2]))
+    close_cell.set_object_box(box)
+    k = close_cell.kinematics
+    assert k is not None
+    world = k.world
+
+    def reference(q: np.ndarray, angle: float, turn: float) -> str | None:
+        step = 1.0 / TURN_CHECKS_PER_RADIAN
+        offsets = [math.copysign(i * step, turn) for i in range(math.floor(abs(turn) / step) + 1)] + [turn]
+        for offset in offsets:
+            hit = world.collision(q, angle + offset)
+            if hit is not None:
+                return hit
+        return None
+
+    q, angle = close_cell.arm.joint_positions(), close_cell.angle
+    turns = [math.pi, 0.3, -0.2, 2.9, -math.pi, 0.0, -0.0, 1.234, -2.5, 0.05, math.pi - 1e-9, -1.7]
+    rng = np.random.default_rng(0)
+    hits = 0
+    for turn in [*turns, *rng.uniform(-math.pi, math.pi, 40)]:
+        for config in (q, k.home):
+            expected = reference(config, angle, float(turn))
+            assert k.turn_collision(config, angle, float(turn)) == expected, (turn, expected)
+            hits += expected is not None
+    assert hits >= 10  # the close arm is hit by many of these turns: the walks' collisions are exercised
+    # a new box forgets the walks (the collisions change with it)
+    before = k.turn_collision(q, angle, math.pi)
+    close_cell.set_object_box(BoundingBox(np.array([-0.02, -0.02, 0.0]), np.array([0.02, 0.02, 0.02])))
+    assert before is not None
+    assert k.turn_collision(q, angle, math.pi) == reference(q, angle, math.pi) is None
+    close_cell.set_object_box(box)
+    assert k.turn_collision(q, angle, math.pi) == before
+
+
+def test_turning_collision_is_collision_at_every_angle() -> None:
+    """CollisionWorld.turning_collision checks the pairs the plate does not move once per configuration and the
+    box's pairs per angle: the same answer (and reason: the first colliding pair in the pairs' order) as a full
+    collision check, for configurations free, hitting the box, the plate or the table, or themselves, asked in any
+    order and interleaved with other configurations' checks."""
+    cell = make_sim_cell(make_builtin("l-block"), CameraConfig(), CellConfig(), seed=0)
+    cell.move_to(view(180.0, 10.0, 0.3))  # low and close: turned half a turn, the box meets the arm
+    cell.set_object_box(BoundingBox(np.array([-0.1, -0.1, 0.0]), np.array([0.3, 0.1, 0.2])))
+    k = cell.kinematics
+    assert k is not None
+    world, model = k.world, k.model
+    rng = np.random.default_rng(5)
+    configs = [k.home, cell.arm.joint_positions(), *rng.uniform(model.lower, model.upper, (60, model.nq))]
+    angles = [0.0, 0.4, -1.3, math.pi, 2.2, *rng.uniform(-math.pi, math.pi, 6)]
+    reasons: set[str] = set()
+    for _ in range(2):
+        for q in configs:
+            for angle in angles:
+                expected = world.collision(q, angle)
+                other = configs[int(rng.integers(len(configs)))]
+                world.collision(other, float(rng.uniform(-3, 3)))  # moves the geometries elsewhere meanwhile
+                assert world.turning_collision(q, angle) == expected, (q, angle)
+                assert world.turning_collision(q, angle) == expected
+                reasons.add("free" if expected is None else expected.split(":")[2])
+        rng.shuffle(configs)
+    assert {"free", "object"} <= reasons and len(reasons) >= 4, reasons  # the box, the fixed obstacles, free
