@@ -166,10 +166,10 @@ def plate_heights(
     plus ``max(plate_clearance, plate_sigmas * sigma_z)``, where sigma_z is the depth std at the point's depth
     times the vertical component of its ray (a ray along the vertical moves the point up and down by its whole
     error, a grazing one hardly at all)."""
-    n = int(np.count_nonzero(frame.valid))
+    v, u = frame.pixels
     if noise.exact:
-        return np.full(n, preprocess.plate_clearance)
-    depth = frame.depth[frame.valid].astype(np.float64)
+        return np.full(len(v), preprocess.plate_clearance)
+    depth = frame.depth[v, u].astype(np.float64)
     points = frame.points_world
     vertical = np.abs(points[:, 2] - frame.T_world_camera.translation[2]) / np.maximum(depth, 1e-9)
     band = np.maximum(preprocess.plate_clearance, noise.plate_sigmas * depth_std(depth, noise) * vertical)
@@ -211,7 +211,16 @@ def dropouts_filled(frame: DepthFrame, radius_px: int) -> DepthFrame:
     hole = d == 0
     if not np.any(hole):
         return frame
-    near = minimum_filter(np.where(hole, np.float32(np.inf), d), size=2 * radius_px + 1, mode="constant", cval=np.inf)
+    rows, cols = np.flatnonzero(~hole.all(axis=1)), np.flatnonzero(~hole.all(axis=0))
+    if len(rows) == 0:  # no return at all: nothing to fill from
+        return frame
+    # Only the returns' box, widened by the radius, can be filled: the filter runs there (outside it every pixel in
+    # reach is a hole, as outside the image: the same minimum as over the whole image).
+    r0, r1 = max(rows[0] - radius_px, 0), min(rows[-1] + radius_px + 1, d.shape[0])
+    c0, c1 = max(cols[0] - radius_px, 0), min(cols[-1] + radius_px + 1, d.shape[1])
+    near = np.full(d.shape, np.inf, dtype=np.float32)
+    crop = np.where(hole[r0:r1, c0:c1], np.float32(np.inf), d[r0:r1, c0:c1])
+    near[r0:r1, c0:c1] = minimum_filter(crop, size=2 * radius_px + 1, mode="constant", cval=np.inf)
     filled = np.where(hole & np.isfinite(near), near, d).astype(np.float32)
     return DepthFrame(filled, frame.T_world_camera, frame.intrinsics)
 

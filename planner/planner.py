@@ -209,7 +209,7 @@ class Planner:
             return frame
         if plate is None:
             plate = plate_heights(frame, self.config.preprocess, self.config.noise)
-        v, u = np.nonzero(frame.depth > 0)  # the order of frame.points_world
+        v, u = frame.pixels  # the order of frame.points_world
         on_plate = frame.points_world[:, 2] < self.config.voxel.floor_height + plate
         if not np.any(on_plate):
             return frame

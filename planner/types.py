@@ -235,9 +235,15 @@ class DepthFrame:
         return self.depth > 0
 
     @cached_property
+    def pixels(self) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """(rows (N,), columns (N,)) of the valid pixels, row-major: the order of ``points_camera``."""
+        v, u = np.nonzero(self.depth > 0)
+        return v, u
+
+    @cached_property
     def points_camera(self) -> NDArray[np.float64]:
         """(N, 3) float64 back-projected valid pixels, camera frame, row-major pixel order."""
-        v, u = np.nonzero(self.depth > 0)
+        v, u = self.pixels
         z = self.depth[v, u].astype(np.float64)
         k = self.intrinsics
         return np.column_stack([(u - k.cx) * z / k.fx, (v - k.cy) * z / k.fy, z])

@@ -94,6 +94,35 @@ def test_dropouts_carve_to_the_nearest_depth_around_them() -> None:
     assert dropouts_filled(frame, 0) is frame
 
 
+def test_dropout_filling_is_the_whole_image_minimum_filter() -> None:
+    """dropouts_filled filters only the returns' box widened by the radius: the same depths as the window minimum
+    over the whole image (returns at the image's edges and corners, one return, scattered returns, none)."""
+    from scipy.ndimage import minimum_filter
+
+    def reference(depth: np.ndarray, radius: int) -> np.ndarray:
+        hole = depth == 0
+        near = minimum_filter(
+            np.where(hole, np.float32(np.inf), depth), size=2 * radius + 1, mode="constant", cval=np.inf
+        )
+        return np.where(hole & np.isfinite(near), near, depth).astype(np.float32)
+
+    rng = np.random.default_rng(4)
+    cases = []
+    for _ in range(30):
+        depth = np.zeros((K.height, K.width), dtype=np.float32)
+        n = int(rng.integers(1, 40))
+        v, u = rng.integers(0, K.height, n), rng.integers(0, K.width, n)
+        depth[v, u] = rng.uniform(0.2, 0.9, n).astype(np.float32)
+        cases.append(depth)
+    edges = np.zeros((K.height, K.width), dtype=np.float32)
+    edges[0, 5], edges[K.height - 1, K.width - 1], edges[7, 0] = 0.5, 0.6, 0.7
+    cases += [edges, step_frame().depth, np.zeros((K.height, K.width), dtype=np.float32)]
+    for depth in cases:
+        frame = DepthFrame(depth, DOWN, K)
+        for radius in (1, 3, 4, 9):
+            assert np.array_equal(dropouts_filled(frame, radius).depth, reference(depth, radius))
+
+
 def test_no_return_is_free_only_up_to_the_sensor_range() -> None:
     """A camera 0.8 m above the floor looking down, a 0.5 m sensor: the floor returns nothing. The paper's rule
     carves the whole column EMPTY (for good); with the range, voxels whose far side is beyond 0.5 m of depth
