@@ -96,7 +96,8 @@ def propose_candidates(
     """The candidate views for bounding box ``bbox``.
 
     Returns (candidates, center (3,) float64, radius): ``config.count`` candidates in
-    the order described in the module docstring, ``candidates[i].index == i``.
+    the order described in the module docstring, ``candidates[i].index == i``. The same box, config and partitions
+    give the same (immutable) objects: the last sets are kept.
     """
     if not isinstance(bbox, BoundingBox):
         raise ValueError(f"bbox: expected a BoundingBox, got {type(bbox).__name__}")
@@ -104,6 +105,26 @@ def propose_candidates(
         raise ValueError(f"config: expected a CandidateConfig, got {type(config).__name__}")
     if not isinstance(partitions, PartitionConfig):
         raise ValueError(f"partitions: expected a PartitionConfig, got {type(partitions).__name__}")
+    key = (np.asarray(bbox.lower).tobytes(), np.asarray(bbox.upper).tobytes(), config, partitions)
+    hit = _RECENT.get(key)
+    if hit is not None:
+        return hit
+    out = _proposed(bbox, config, partitions)
+    if len(_RECENT) >= _RECENT_SIZE:
+        _RECENT.pop(next(iter(_RECENT)))  # the oldest
+    _RECENT[key] = out
+    return out
+
+
+_RECENT_SIZE = 16
+_RECENT: dict[tuple[bytes, bytes, CandidateConfig, PartitionConfig], tuple[tuple[Candidate, ...], NDArray, float]] = {}
+"""The last candidate sets by (box, config, partitions): a plan whose box is held (``candidates.aim_hold_voxels``)
+or unchanged gets the same (immutable) candidates without building 400 poses again."""
+
+
+def _proposed(
+    bbox: BoundingBox, config: CandidateConfig, partitions: PartitionConfig
+) -> tuple[tuple[Candidate, ...], NDArray[np.float64], float]:
     center = np.array(bbox.center, dtype=np.float64)
     radius = sphere_radius(config, 0.5 * bbox.diagonal)
     elevations = parallel_elevations(config)

@@ -138,3 +138,32 @@ def test_held_aim_keeps_the_box_while_every_face_stays_within_the_tolerance() ->
         held = held_aim(held, box, 0.015)
         taken.append(held)
     assert taken[0] is a and taken[1] is steps[1]
+
+
+def test_the_same_box_gives_the_same_candidates_without_building_them_again() -> None:
+    """A held or unchanged box: the kept set (the same objects), equal to a fresh build; another box, config or
+    partition layout: its own set; the kept sets are bounded."""
+    import planner.candidates as module
+
+    box = BoundingBox(np.array([-0.1, -0.1, 0.0]), np.array([0.1, 0.12, 0.2]))
+    first = propose_candidates(box, CandidateConfig(), PartitionConfig())
+    again = propose_candidates(BoundingBox(box.lower.copy(), box.upper.copy()), CandidateConfig(), PartitionConfig())
+    assert again is first
+    fresh = module._proposed(box, CandidateConfig(), PartitionConfig())
+    assert fresh[0] is not first[0] and fresh[2] == first[2] and np.array_equal(fresh[1], first[1])
+    for a, b in zip(fresh[0], first[0], strict=True):
+        assert np.array_equal(a.T_world_camera.matrix, b.T_world_camera.matrix)
+        assert (a.index, a.elevation, a.azimuth, a.parallel, a.sector) == (
+            b.index,
+            b.elevation,
+            b.azimuth,
+            b.parallel,
+            b.sector,
+        )
+    moved = BoundingBox(box.lower, box.upper + np.array([0.0, 0.0, 0.01]))
+    assert propose_candidates(moved, CandidateConfig(), PartitionConfig()) is not first
+    assert propose_candidates(box, CandidateConfig(count=200), PartitionConfig()) is not first
+    assert propose_candidates(box, CandidateConfig(), PartitionConfig(sectors=6)) is not first
+    for k in range(3 * module._RECENT_SIZE):
+        propose_candidates(BoundingBox(box.lower, box.upper + 0.001 * k), CandidateConfig(), PartitionConfig())
+    assert len(module._RECENT) <= module._RECENT_SIZE
