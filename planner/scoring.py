@@ -146,17 +146,9 @@ def view_scores(
     weighted: NDArray[np.float64],
 ) -> tuple[ViewScore, ...]:
     """One :class:`ViewScore` per candidate from (C,) totals and (C, E) per-ellipsoid terms (row i: candidate i)."""
+    columns = (score.tolist(), frontier.tolist(), occupied.tolist(), np.asarray(eligible, dtype=bool).tolist())
+    rows = (ranks, weights, pixels, weighted)  # iterating a (C, E) array gives its rows: no index a candidate
     return tuple(
-        ViewScore(
-            index=c.index,
-            score=float(score[i]),
-            frontier=float(frontier[i]),
-            occupied=float(occupied[i]),
-            eligible=bool(eligible[i]),
-            ranks=ranks[i],
-            weights=weights[i],
-            pixels=pixels[i],
-            weighted=weighted[i],
-        )
-        for i, c in enumerate(candidates)
+        ViewScore(c.index, s, f, o, e, r, w, p, x)
+        for c, s, f, o, e, r, w, p, x in zip(candidates, *columns, *rows, strict=True)
     )
