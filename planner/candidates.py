@@ -25,6 +25,7 @@ Layout (documented choices where the paper gives none):
 from __future__ import annotations
 
 import math
+import threading
 
 import numpy as np
 from numpy.typing import NDArray
@@ -110,13 +111,15 @@ def propose_candidates(
     if hit is not None:
         return hit
     out = _proposed(bbox, config, partitions)
-    if len(_RECENT) >= _RECENT_SIZE:
-        _RECENT.pop(next(iter(_RECENT)))  # the oldest
-    _RECENT[key] = out
+    with _RECENT_LOCK:  # planners in several threads share the sets
+        while len(_RECENT) >= _RECENT_SIZE:
+            _RECENT.pop(next(iter(_RECENT)))  # the oldest
+        _RECENT[key] = out
     return out
 
 
 _RECENT_SIZE = 16
+_RECENT_LOCK = threading.Lock()
 _RECENT: dict[tuple[bytes, bytes, CandidateConfig, PartitionConfig], tuple[tuple[Candidate, ...], NDArray, float]] = {}
 """The last candidate sets by (box, config, partitions): a plan whose box is held (``candidates.aim_hold_voxels``)
 or unchanged gets the same (immutable) candidates without building 400 poses again."""
