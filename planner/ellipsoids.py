@@ -120,13 +120,13 @@ class EllipsoidFitter:
         with clustering.single_thread_blas():
             t0 = time.perf_counter()
             if p.shape[0] == 0:
-                return Clusters(self, np.zeros((0, 3)), None, None, None, 0.0)
+                return Clusters(self, 0, None, None, None, 0.0)
             x = p / self.resolution
             sel = clustering.select_mixture(x, self.config, self._mixture, progress)
             self._mixture = sel.mixture
             labels = assign(x, sel.mixture)
             hulls = _Hulls.of(x, labels)
-            return Clusters(self, x, labels, sel, hulls, time.perf_counter() - t0)
+            return Clusters(self, len(x), labels, sel, hulls, time.perf_counter() - t0)
 
     def fit_at(self, points_world: ArrayLike, t: int) -> tuple[tuple[Ellipsoid, ...], ClusterFit]:
         """Ellipsoids of ``points_world`` (N, 3), N >= 1, clustered by a GMM of exactly ``t`` components (no BIC
@@ -257,12 +257,12 @@ def _solved(hulls: Sequence[_Hulls], mvee: tuple[float, int, int]) -> list[_Solv
 class Clusters:
     """One kind's clusters (:meth:`EllipsoidFitter.cluster`), before their ellipsoids (:func:`enclose`).
 
-    x: (N, 3) the voxel centres in voxel units; labels: (N,) each one's component; selection: the BIC model
-    selection; hulls: the clusters' hull candidates; seconds: the clustering's wall time. labels, selection and
-    hulls are None for no voxels."""
+    n_points: the voxels clustered (N); labels: (N,) each one's component; selection: the BIC model selection; hulls:
+    the clusters' hull candidates; seconds: the clustering's wall time. labels, selection and hulls are None for no
+    voxels."""
 
     fitter: EllipsoidFitter
-    x: NDArray[np.float64]
+    n_points: int
     labels: NDArray[np.int64] | None
     selection: Selection | None
     hulls: _Hulls | None
@@ -299,7 +299,7 @@ def enclose(clusters: Sequence[Clusters]) -> list[tuple[tuple[Ellipsoid, ...], C
                 fitter.kind,
                 mix.n_components,
                 tuple(sorted(c.selection.evaluated.items())),
-                len(c.x),
+                c.n_points,
                 c.seconds + seconds,
                 dense(c.labels),
             )

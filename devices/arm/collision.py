@@ -97,7 +97,7 @@ class CollisionWorld:
         pairs = [(p.first, p.second) for p in geometry.collisionPairs]
         self._object_pairs = [k for k, pair in enumerate(pairs) if self._object in pair]  # in the pairs' order
         self._fixed_pairs = [k for k, pair in enumerate(pairs) if self._object not in pair]
-        self._placed: bytes | None = None  # the configuration the arm's geometries are placed at
+        self._placed: bytes | None = None  # the configuration turning_collision placed the arm at (None: another since)
         self._fixed_first: tuple[bytes, int | None] | None = None  # (configuration, its first colliding fixed pair)
 
     @property
@@ -208,7 +208,7 @@ class CollisionWorld:
         import pinocchio as pin  # pyright: ignore[reportMissingImports]  (under cmeel.prefix)
 
         pin.updateGeometryPlacements(self.arm.model, self._data, self.geometry, self._gdata, q)
-        self._placed = q.tobytes() if isinstance(q, np.ndarray) and q.dtype == np.float64 else None
+        self._placed = None  # placed by a full check: turning_collision places its configuration again
         self._gdata.oMg[self._object] = self._object_placement(plate_angle)
 
     def _object_placement(self, plate_angle: float) -> object:
