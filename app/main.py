@@ -79,7 +79,7 @@ def create_app(settings: AppSettings | None = None) -> FastAPI:
         app.state.registry = registry
         app.state.viser = server
         app.state.scene = scene
-        app.state.calibrations = calibrations = Calibrations(settings)  # issue 27: app/api/calibration.py
+        app.state.calibrations = calibrations = Calibrations(settings)  # calibrate mode: app/api/calibration.py
         app.state.calibration_views = None if scene is None else CalibrationViews(scene, calibrations)
         try:
             yield

@@ -40,7 +40,7 @@ def _row(r: IterationRecord) -> str:
 
 
 def metrics_json(scan: SimScan, planner_name: str) -> dict[str, Any]:
-    """The metrics.json document of issue 2."""
+    """The metrics.json document `nbv scan` writes (docs/cli.md)."""
     records = scan.result.records
     seconds = [r.robot_seconds for r in records]
     time_to: dict[str, float | None] = {f"time_to_{round(100 * t)}": None for t in TIME_THRESHOLDS}

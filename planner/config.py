@@ -332,7 +332,7 @@ class TourConfig:
     plans after the first and second views each take a low view near one of the two azimuths ``ring_spread_deg``
     either side of the scan's first view (about the object) that no view taken since is near, the shortest move
     (timed as the cell would make it) among those that see the most frontier; then the tour. "none": the tour from
-    the first plan on (before issue 25's sixth round; docs/method.md measures both). With ``score = "frontier"``
+    the first plan on (docs/method.md measures both). With ``score = "frontier"``
     only: ``score = "projection"`` chooses by its own rule from the first plan."""
     ring_spread_deg: float = 120.0
     """With ``opening = "ring"``: the ring's two azimuths, degrees either side of the first view's."""

@@ -1,5 +1,5 @@
 """The ``tour`` planner: a receding-horizon tour of views that together cover the predicted frontier, in the order
-the robot reaches them fastest (issue 25; not in the paper).
+the robot reaches them fastest (not in the paper: it minimises robot time to coverage).
 
 The paper's greedy rule (§III-F) picks the single view with the largest score F and never looks at what the move
 costs; in the simulated UR5 cell the robot's moves are about 97 % of a scan's time. Each plan here:
@@ -21,7 +21,7 @@ costs; in the simulated UR5 cell the robot's moves are about 97 % of a scan's ti
 
 With ``tour.opening = "ring"`` the scan's first plans come before the tour (:func:`ring_view`): a turntable
 scanner's ring of low views about ``tour.ring_spread_deg`` either side of the scan's first view, which the oracle's
-sequences share across objects (docs/method.md, issue 25's fifth round); each plan takes the shortest move among the
+sequences share across objects (docs/method.md, the oracle's tours); each plan takes the shortest move among the
 ring views that see the most frontier, until both sides of the ring hold a view.
 
 With ``tour.lazy_reach`` (the default) the plan skips its reachability pass over every candidate

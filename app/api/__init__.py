@@ -1,4 +1,4 @@
-"""The REST API (the paths are a contract of issue 4; OpenAPI at /docs): one router per resource.
+"""The REST API (the paths are a contract with clients; OpenAPI at /docs): one router per resource.
 
 Thin routes: each calls the session (workbench/session/session.py) or the registry and returns a schema object.
 Heavy routes are plain ``def`` (FastAPI runs them in its thread pool). Errors are ``{"detail": ...}`` with

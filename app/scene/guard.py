@@ -1,4 +1,4 @@
-"""The 3D viewer's front door: Origin and ticket checks on viser's websocket handshake (issue 17 item 2).
+"""The 3D viewer's front door: Origin and ticket checks on viser's websocket handshake (docs/security.md).
 
 viser itself authenticates nothing. Its websocket server calls its connection callbacks before it sends a
 single message to a new client, with the handshake request already recorded; :func:`install_guard` adds one

@@ -1,4 +1,4 @@
-// Calibrate mode (issue 27): /?calibrate=new opens a calibration of a cell, /?calibrate=ID shows one.
+// Calibrate mode: /?calibrate=new opens a calibration of a cell, /?calibrate=ID shows one.
 // The 3D view shows the calibration (plate, target, each pose's camera, the arm and the previewed move); the panels
 // list the poses to preview, approve or skip, each capture's residual, the estimate with its uncertainty, and
 // "write to cell file". Uses app.js's api(), pageUrl() and showError() (globals of the page's scripts).

@@ -1,4 +1,4 @@
-"""Baseline planners for comparison with the projection evaluator (issue 5).
+"""Baseline planners for comparison with the projection evaluator (the ray-casting planners the paper compares against).
 
 Importing this package registers in ``planner.evaluators.EVALUATORS``:
 

@@ -9,7 +9,7 @@ returns ``(...,) float64``: one value per ray. The gain of a view is the sum
 over its rays (``planner.baselines.evaluators``). The ``*Accumulator`` classes
 compute the same gains step by step inside the traversal (no (R, S) array).
 
-Voxel classes -> occupancy probability ``P_o`` (issue 5; our map stores classes,
+Voxel classes -> occupancy probability ``P_o`` (our map stores classes,
 the formulas need probabilities):
 
 =========================  =====  ============

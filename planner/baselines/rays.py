@@ -3,7 +3,7 @@
 This is where ray-casting planners spend their time, so it is written to be a fair
 baseline: every ray the method needs, vectorised over all rays of all candidates.
 
-Rays of one candidate view (issue 5):
+Rays of one candidate view:
 
 - The 8 corners of the bounding box B are projected into the candidate's image;
   the rays go through pixel centres of the axis-aligned pixel rectangle around

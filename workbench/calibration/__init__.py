@@ -1,4 +1,4 @@
-"""Supervised calibration of a cell (issue 27): the routine of devices/calibration/ one approved pose at a time.
+"""Supervised calibration of a cell: the routine of devices/calibration/ one approved pose at a time.
 
 - ``run``   CalibrationRun: the poses (preview, approve, skip), the captures, the estimate, the write
 - ``book``  Calibrations: the open calibrations of a server, each on its own (simulated or hardware) cell

@@ -22,7 +22,7 @@ from workbench.session.summaries import voxel_counts
 
 STAGES = ("preprocess", "register", "integrate", "cluster", "ellipsoids", "candidates", "score", "select")
 PLAN_STAGES = ("integrate", "cluster", "ellipsoids", "candidates", "score", "select")
-"""Issue 3's plan time, frame in -> next view out. Preprocessing and ICP are timed but not counted:
+"""The plan time the paper's Table I compares, frame in -> next view out. Preprocessing and ICP are timed but not counted:
 they are the same work for every planner and for the paper's comparison."""
 
 

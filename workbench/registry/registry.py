@@ -85,7 +85,7 @@ class SessionRegistry:
                     self._dormant[dormant.id] = dormant
                 else:  # deleted by an earlier server that kept deleted journals in place
                     self._trash(directory)
-            with contextlib.suppress(OSError):  # deleted in an earlier run: kept until this restart (issue 12)
+            with contextlib.suppress(OSError):  # deleted in an earlier run: kept in the trash until this restart
                 prune(settings.data_dir, 0, settings.trash_max_age)
         self._sweeper = (
             IdleSweeper(self.sleep_idle, min(30.0, settings.idle_sleep / 4))
