@@ -4,7 +4,7 @@ Run: ``.venv/bin/python benchmarks/bench_calibration.py [--seeds 10] [--calibrat
 
 Per seed (one random draw of the cell's errors at ``--calibration``): the errors of the recovered hand-eye
 transform (mm, degrees) and axis (mm at the plate top, degrees), the nominal errors before calibration, the
-reported one-sigma uncertainty, captures and seconds; then the median and max of each. Goal (issue 27): hand-eye
+reported one-sigma uncertainty, captures and seconds; then the median and max of each. Goal: hand-eye
 and axis within 1 mm and 0.2 degrees at 'poor'. Then how honest the reported uncertainty is: per quantity, in how
 many draws the true error lies within the reported 95 % bound (``*_bound95_*``: ~95 % of the draws should), and
 the RMS of error / one-sigma (1 for an exact sigma).

@@ -6,7 +6,7 @@ Per seed: the calibration routine runs on the simulated cell (the sphere target 
 the model, same seed, same sensor: with no calibration error ('none'), with the drawn 'poor' errors and the nominal
 values, and with the same physical cell after applying the recovered hand-eye transform and axis offset (the arm
 model's ``T_flange_camera`` set to the estimate, its base moved by the axis offset, so the true camera is the same
-one: the drawn error re-expressed against the new nominal values, ``E' = X_est^-1 @ X_true``). Goal (issue 27): the
+one: the drawn error re-expressed against the new nominal values, ``E' = X_est^-1 @ X_true``). Goal: the
 calibrated scan's F@5mm within 1 point of the 'none' scan's.
 """
 

@@ -1,4 +1,4 @@
-"""Mesh bombs against a running server (issue 21): refusal time, the server's RSS growth, /api/health latency.
+"""Mesh bombs against a running server: refusal time, the server's RSS growth, /api/health latency.
 
 Starts ``nbv serve`` on 127.0.0.1 (a free port, a temporary data and models directory), then for instancing
 GLBs of 400, 1,500 and 5,000 nodes (one 20k-triangle mesh used by N nodes) and for OBJ / PLY parser bombs:

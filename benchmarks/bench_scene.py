@@ -17,7 +17,7 @@ times plan + approve of the planner's choice. Printed per model (medians over th
 - status pushed: when the page's event stream (``/api/events``) delivered the ``captured`` / ``planned``
   status, relative to the answer of the request that caused it (negative: before the answer).
 
-Budget (issue 12): median bytes per approve on the bunny at 0.01 m <= 150 kB; approve click -> next plan drawn
+Budget: median bytes per approve on the bunny at 0.01 m <= 150 kB; approve click -> next plan drawn
 <= capture time + 0.5 s (the plan's own computation aside).
 """
 

@@ -15,7 +15,7 @@ Ceilings are computed once, before the timings (the cache), so only the runs are
 render-based reference on the same samples and views, and prints: reachable views, both ceilings,
 the share of samples classified the same, the two wall times, and (unless ``--no-scan``) the
 wall time of a 10-view projection scan of the model and the ceiling's share of it.
-Budget (issue 14): <= 2 s per model, <= 15 % of a 10-view scan, >= 99 % agreement.
+Budget: <= 2 s per model, <= 15 % of a 10-view scan, >= 99 % agreement.
 The machine is shared: say under what load the numbers were taken.
 """
 

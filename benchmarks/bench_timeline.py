@@ -15,7 +15,7 @@ Then ``PUT /api/scene/{viewer}/timeline`` steps the viewer over every view and b
   views), the scene's share, the request's time; and the recording of the journal alone (``nbv record``'s path:
   the journal replayed here in a replay cell, then drawn and serialised).
 
-Goal (issue 26): timeline step -> drawn <= 0.5 s on the bunny.
+Goal: timeline step -> drawn <= 0.5 s on the bunny.
 """
 
 from __future__ import annotations

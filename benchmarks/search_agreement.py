@@ -1,6 +1,6 @@
 """`make bench-agreement`: final coverage of the fast BIC search against the exhaustive sweep.
 
-Issue 3 asks that the fast search leave final coverage within 1 point of the slow,
+The goal: the fast search should leave final coverage within 1 point of the slow,
 exhaustive configuration. One scan per model is a poor measure of that: the greedy
 planner is chaotic, and any change to the ellipsoids (even between two equally good
 mixtures) sends it down another path that ends up to 1.5 points higher or lower.

@@ -1,4 +1,4 @@
-"""Mesh files that cost far more to load than their size (issue 21), for the tests and benchmarks/bench_mesh_bombs.py."""
+"""Mesh files that cost far more to load than their size, for the tests and benchmarks/bench_mesh_bombs.py."""
 
 from __future__ import annotations
 

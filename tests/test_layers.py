@@ -119,7 +119,7 @@ def test_the_check_sees_a_circle_and_an_upward_import(tmp_path: Path) -> None:
 
 
 def test_the_check_counts_type_checking_imports(tmp_path: Path) -> None:
-    """An import under ``if TYPE_CHECKING:`` ties the files too (the circle issue 22 found hid behind one)."""
+    """An import under ``if TYPE_CHECKING:`` ties the files too (a circle between two files once hid behind one)."""
     known = {"workbench.a": tmp_path / "a.py", "workbench.b": tmp_path / "b.py"}
     known["workbench.a"].write_text(
         "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from workbench.b import B\n"

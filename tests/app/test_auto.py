@@ -66,7 +66,7 @@ def test_the_stop_button_ends_auto_mode_after_the_action_in_flight(client: TestC
 
 def test_auto_mode_goes_on_past_a_refused_move_and_an_unusable_frame(client: TestClient) -> None:
     """The planner's choice refused at move time (arm action 2) or its frame unusable (capture 4): auto mode takes
-    the plan's next eligible candidate each time and runs all its steps (issue 23)."""
+    the plan's next eligible candidate each time and runs all its steps."""
     faults = {"schedule": [{"kind": "move_refused", "at": 2}, {"kind": "empty_frame", "at": 4}]}
     config = {**SMALL, "termination": {"max_views": 30, "stop_without_frontier": False}}  # the rule never stops it
     sid = client.post("/api/sessions", json={"config": config, "faults": faults}).json()["id"]

@@ -1,5 +1,5 @@
 """The page previews the move an approve makes: for the tour ring's first view, the move planned for the views named
-after it (``PlanResult.then_poses``), not the plain shortest one (issue 25's tenth round)."""
+after it (``PlanResult.then_poses``), not the plain shortest one."""
 
 from __future__ import annotations
 

@@ -9,7 +9,7 @@ type. Examples are derandomized (reproducible). The module's budget is ``BUDGET_
 
 What it found and what was fixed: error answers (``{"detail": "..."}``) did not match the documented 422
 schema (pydantic's list) -> every error status is now documented with ``ErrorOut``. No 5xx was found. With
-every default check (issue 17): a 405 listed only the methods of the first route of its path in ``Allow``
+every default check: a 405 listed only the methods of the first route of its path in ``Allow``
 (``GET`` for ``/api/models``, which also takes ``POST``) -> app/main.py lists every method of the path; loose
 types (``true`` or ``"1"`` for an index) were accepted though the schema says integer -> strict types.
 """

@@ -1,4 +1,4 @@
-"""Sessions on a simulated sensor and calibration error (issue 23): the create request's ``camera``, the planner
+"""Sessions on a simulated sensor and calibration error: the create request's ``camera``, the planner
 config that follows it, accuracy per view, the refusal rule of the session loop and auto mode, resume.
 
 All on the default simulated UR5 cell (real ray casting, real kinematics); refusals are forced with the fault

@@ -1,4 +1,4 @@
-"""A move planned for the next one (``ArmReach.best_target(then=...)``, the tour's ring, issue 25's tenth round): the
+"""A move planned for the next one (``ArmReach.best_target(then=...)``, the tour's ring): the
 target minimises this move plus the quickest move on to one of the next views, over every plate angle and IK branch
 of both; without a reachable next view it is the plain shortest move."""
 

@@ -1,5 +1,5 @@
 """The calibration routine on a simulated cell: the UR5 visits the poses, the D435 model sees the spheres, the
-recovered hand-eye transform and turntable axis match the drawn truth (issue 27: 1 mm and 0.2 degrees)."""
+recovered hand-eye transform and turntable axis match the drawn truth (within 1 mm and 0.2 degrees)."""
 
 from __future__ import annotations
 

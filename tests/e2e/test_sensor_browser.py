@@ -1,4 +1,4 @@
-"""The page's sensor and calibration selects in real Chromium against a live server (issue 23): a session created
+"""The page's sensor and calibration selects in real Chromium against a live server: a session created
 from the form with the RealSense D435 model scans with it, and the coverage chart shows its precision and F."""
 
 from __future__ import annotations

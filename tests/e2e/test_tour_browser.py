@@ -1,4 +1,4 @@
-"""The ``tour`` planner in the page, real Chromium against a live server (issue 25): its predicted tour drawn in
+"""The ``tour`` planner in the page, real Chromium against a live server: its predicted tour drawn in
 the tab's 3D view (numbered frustums and the path through them), each candidate's move time and tour place in
 the table, and the predicted robot time to done."""
 

@@ -1,4 +1,4 @@
-"""Ray-casting baselines (issue 5): gain formulas on hand-made rays, traversal, candidate rays, evaluators."""
+"""Ray-casting baselines: gain formulas on hand-made rays, traversal, candidate rays, evaluators."""
 
 from __future__ import annotations
 

@@ -171,7 +171,7 @@ def test_the_ring_is_chosen_by_exact_moves_in_the_first_two_plans_only() -> None
     without.last_seen = seen
     _, plan = without.choose(scores, candidates, first, move_times, taken=[first], center=np.zeros(3))
     assert plan is not None and plan.method != "ring"
-    assert PlannerConfig().tour.opening == "ring"  # the default since issue 25's sixth round
+    assert PlannerConfig().tour.opening == "ring"  # the default
 
 
 def test_a_ring_view_the_cell_cannot_reach_is_left_out_of_the_cover_too() -> None:

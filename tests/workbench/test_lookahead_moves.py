@@ -1,6 +1,6 @@
 """The tour's ring names the views its next plan chooses among (``TourPlan.then``), and the move to the ring's first
 view is planned for them, in a headless scan and in a session alike: the cell is asked with ``then`` = those views'
-poses, only for that move, and the arm's move is the look-ahead's (issue 25's tenth round)."""
+poses, only for that move, and the arm's move is the look-ahead's."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """A session's metrics carry each view's robot seconds (its move, capture and plan), and the robot time to 90 / 95 %
-of the ceiling once the ceiling is known (issue 25)."""
+of the ceiling once the ceiling is known."""
 
 from __future__ import annotations
 
