@@ -66,7 +66,7 @@ def test_the_site_builds_strictly(tmp_path: Path) -> None:
     problems = [line for line in built.stderr.splitlines() if line.startswith(("WARNING", "ERROR"))]
     assert built.returncode == 0 and not problems, "\n".join(problems) or built.stderr[-3000:]
     site = tmp_path / "site"
-    for page in ("index.html", "getting-started/index.html", "cli/index.html", "rest/index.html"):
+    for page in ("index.html", "getting-started.html", "cli.html", "rest.html", "bench/index.html"):
         assert (site / page).is_file(), page
     home = (site / "index.html").read_text(encoding="utf-8")
     assert "fonts.googleapis" not in home  # the theme loads no fonts from the internet
