@@ -11,8 +11,8 @@ sensor, in line of sight of the second viewpoint too. Printed per sensor: the sh
 they passed (delivered, second-viewpoint shadow, grazing, range, outside every image, occluded) and the recall@5mm
 of the deliverable samples (share of samples within 5 mm of one): what no planner on this candidate set can
 exceed. ``--min-elevation``: the candidates' lowest parallel, degrees (10, the paper's cell; the cell gives a sensor
-with a grazing limit -5, ``devices.planner_noise.LOW_ELEVATION_DEG``). docs/method.md, "Where the D405 and structured
-light lose recall" and "The sphere about the object and the low parallels".
+with a grazing limit -5, ``devices.planner_noise.LOW_ELEVATION_DEG``). docs/experiments/sensors.md, "Why do the D405 and
+structured light lose recall?" and "The sphere about the object and the low parallels".
 """
 
 from __future__ import annotations

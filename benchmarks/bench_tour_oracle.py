@@ -15,7 +15,7 @@ to 95 % are measured as the scans' are; after its sequence the scan goes on with
     .venv/bin/python benchmarks/bench_tour_oracle.py ../shared/models/bunny.obj --yaws 0,90 --overhead 0.3
 
 Prints one line per (mesh, placement) and the means with the paired difference oracle - projection. It bounds what
-a planner could save, not what one does: the oracle knows the surface no planner has seen (docs/method.md, issue 25).
+a planner could save, not what one does: the oracle knows the surface no planner has seen (docs/experiments/tour.md).
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ each error; :class:`CellErrors` draws one cell's errors from a seed:
   drawn from the seed and the configuration reached, so the same move lands the same way (a resumed session too).
 
 The reported pose is the nominal kinematics, ``Rz(-theta) @ T_base_camera``; the camera renders from
-:meth:`CellErrors.true_T_table_camera`. Sources of the figures: docs/method.md ("Calibration and motion error").
+:meth:`CellErrors.true_T_table_camera`. Sources of the figures: docs/experiments/sensors.md ("Calibration and motion error").
 """
 
 from __future__ import annotations

@@ -37,7 +37,7 @@ class CameraConfig(Intrinsics):
     """Std of the error of the reported camera orientation, per rotation-vector component, degrees."""
     sensor: str = "ideal"
     """The depth sensor's error model, a name of ``devices.sensors.SENSORS``: 'ideal' (exact depth, the default),
-    'realsense-d435', 'realsense-d405', 'structured-light' (docs/method.md, "Sensor models"). Its noise adds to
+    'realsense-d435', 'realsense-d405', 'structured-light' (docs/experiments/sensors.md, "Sensor models"). Its noise adds to
     ``depth_noise_std``; its range narrows [min_depth, max_depth]."""
     calibration: str = "none"
     """The cell's calibration and motion error, a name of ``devices.calibration_error.CALIBRATIONS``: 'none' (the

@@ -60,7 +60,8 @@ DROPOUT_FILL_PX = 6
 this many pixels of a return is a dropout, free space only up to the nearest depth around it
 (``NoiseConfig.dropout_fill_px``). Measured over the 17 development meshes (seed 0, typical calibration):
 structured-light recall 0.910 -> 0.914; on the fertility (structured light, seed 0) the surface samples whose voxel
-was carved EMPTY for good 1,346 -> 121 (docs/method.md, "Where the D405 and structured light lose recall")."""
+was carved EMPTY for good 1,346 -> 121 (docs/experiments/sensors.md, "Why do the D405 and structured light lose
+recall?")."""
 
 SUPPORT_MIN_POINTS = 5
 """For a sensor with flying pixels: a 1 cm cell with fewer of a frame's points is not surface
@@ -73,8 +74,8 @@ the sphere's centre). A surface whose normal points beta below the horizon retur
 when beta + e is within the limit (70-75 degrees against the perfect camera's 90), so the low parallels are where
 such a sensor's downward and steep faces are measured. Measured over the 17 development meshes (seed 0, typical
 calibration, with ``candidates.aim = "content"`` and the plate fit on horizontal points), recall@5mm for 10, 0, -5
-and -10 degrees: D405 0.934, 0.943, 0.953, 0.957; structured light 0.916, 0.931, 0.939, 0.934 (docs/method.md, "Where
-the D405 and structured light lose recall"). The cell's reachability (the UR5, the plate, the table below it)
+and -10 degrees: D405 0.934, 0.943, 0.953, 0.957; structured light 0.916, 0.931, 0.939, 0.934 (docs/experiments/sensors.md,
+"The sphere about the object and the low parallels"). The cell's reachability (the UR5, the plate, the table below it)
 decides which of the low views can be taken."""
 
 PLATE_FIT_MAX_TILT_DEG = 30.0

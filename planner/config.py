@@ -131,13 +131,13 @@ class CandidateConfig:
     "content", the box of the OCCUPIED and FRONTIER voxels (``Planner.candidate_box``: the object and frontier seen
     so far, without what B's growth along the first view and the gamma-spheres added). The cell sets "content" for
     a sensor with a finite range (``devices.planner_config_for``): with B's centre the bunny's aim lay 10 cm off the
-    object, and the range rule put a D405's cameras 5 cm nearer still (docs/method.md)."""
+    object, and the range rule put a D405's cameras 5 cm nearer still (docs/experiments/sensors.md)."""
     aim_hold_voxels: int = 1
     """With ``aim = "content"``: after a frame, the sphere stays about the box it was built about while no face of the
     new content box lies more than this many voxels from that box's (``planner.candidates.held_aim``; 0: rebuilt at
     every change). Views then stay the same views from plan to plan while noise moves the box by a voxel, and so do
     the cell's answers about them (its reachability cache is per view): measured with the D435 model (bunny, UR5)
-    the plans whose 400 views were new fell from 5-6 to 3 of 10 (docs/method.md, "the content aim held")."""
+    the plans whose 400 views were new fell from 5-6 to 3 of 10 (docs/experiments/planning-speed.md)."""
     min_elevation_deg: float = 10.0
     """Lowest parallel's elevation above the sphere's centre, degrees (negative: below it; the cell's reachability
     leaves out the views it cannot take). The cell sets -5 for a sensor with a grazing limit
@@ -201,16 +201,16 @@ class ZBufferConfig:
 
     width: int = 40
     """Raster columns per candidate view (40: one raster pixel per 16 x 16 pixels of a 640 x 480 camera; 80 x 60
-    measured no better and 4x slower, docs/method.md)."""
+    measured no better and 4x slower, docs/experiments/zbuffer.md)."""
     height: int = 30
     """Raster rows per candidate view."""
     depth_tolerance_voxels: float = 0.0
     """A pixel shows frontier when its nearest frontier ellipsoid is at most this many voxels behind the nearest
-    occupied one (0: strictly in front; 1 and 3 measured worse early, docs/method.md)."""
+    occupied one (0: strictly in front; 1 and 3 measured worse early, docs/experiments/zbuffer.md)."""
     measure: Literal["pixels", "voxels"] = "voxels"
     """What a frontier pixel is worth: its ellipsoid's voxel count over the pixels the ellipsoid covers in that view
     ("voxels": V = sum over frontier ellipsoids of n_points x visible fraction), or 1 ("pixels": V = visible frontier
-    pixels; measured slightly lower area under the coverage curve, docs/method.md)."""
+    pixels; measured slightly lower area under the coverage curve, docs/experiments/zbuffer.md)."""
     hidden_weight: float = 0.0
     """A frontier pixel hidden behind an occupied ellipsoid counts this much (0: only frontier in view counts)."""
     frontier_decay: float = 1.0
@@ -299,7 +299,7 @@ class TourConfig:
     """Raster columns of the visibility z-buffer per candidate (160 x 120: about two raster pixels per voxel at the
     working distance for a 640 x 480 camera, so the 3 x 3 minimum that closes the gaps between projected voxel
     centres widens an occluder by half a voxel, not a whole one, and a frontier seen through a narrow gap stays
-    seen; 80 x 60 measured 0.4 views more to 95 % of the ceiling, docs/method.md)."""
+    seen; 80 x 60 measured 0.4 views more to 95 % of the ceiling, docs/experiments/tour.md)."""
     height: int = 120
     """Raster rows of the visibility z-buffer."""
     depth_tolerance_voxels: float = 1.0
@@ -332,7 +332,7 @@ class TourConfig:
     plans after the first and second views each take a low view near one of the two azimuths ``ring_spread_deg``
     either side of the scan's first view (about the object) that no view taken since is near, the shortest move
     (timed as the cell would make it) among those that see the most frontier; then the tour. "none": the tour from
-    the first plan on (docs/method.md measures both). With ``score = "frontier"``
+    the first plan on (docs/experiments/tour.md measures both). With ``score = "frontier"``
     only: ``score = "projection"`` chooses by its own rule from the first plan."""
     ring_spread_deg: float = 120.0
     """With ``opening = "ring"``: the ring's two azimuths, degrees either side of the first view's."""
@@ -350,7 +350,7 @@ class TourConfig:
     them is shortest (``Cell.move_to(then=...)``), not the quickest move alone."""
     cover_max_elevation_deg: float = 25.0
     """The cover takes views at most this high (degrees, about the object's box centre) while any of them sees
-    frontier (then any eligible view); 90 = no limit. Measured with the ring opening, after it (docs/method.md)."""
+    frontier (then any eligible view); 90 = no limit. Measured with the ring opening, after it (docs/experiments/tour.md)."""
 
     def __post_init__(self) -> None:
         require(

@@ -18,7 +18,7 @@ for the next view (docs/method.md, "Tried, kept as opt-in").
 
 Also here: ``not_taken`` (candidates within an angle of a view already taken are
 not proposed; ``Planner`` uses ``PartitionConfig.revisit_deg``, 30 degrees, a
-departure measured in docs/method.md) and ``select_best`` (argmax of F over the
+departure measured in docs/experiments/departures.md) and ``select_best`` (argmax of F over the
 eligible candidates).
 """
 

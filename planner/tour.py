@@ -21,7 +21,7 @@ costs; in the simulated UR5 cell the robot's moves are about 97 % of a scan's ti
 
 With ``tour.opening = "ring"`` the scan's first plans come before the tour (:func:`ring_view`): a turntable
 scanner's ring of low views about ``tour.ring_spread_deg`` either side of the scan's first view, which the oracle's
-sequences share across objects (docs/method.md, the oracle's tours); each plan takes the shortest move among the
+sequences share across objects (docs/experiments/tour.md); each plan takes the shortest move among the
 ring views that see the most frontier, until both sides of the ring hold a view.
 
 With ``tour.lazy_reach`` (the default) the plan skips its reachability pass over every candidate
@@ -313,8 +313,8 @@ def low_views(
     """(C,) bool: the views the cover may take, ``eligible`` (C,) and at most ``max_elevation_deg`` high (about the
     box centre, ``Candidate.elevation``), unless none of those sees any frontier (``seen`` (C, F)): then every
     eligible view. 90 or more, or no ``candidates`` given (their elevations unknown): every eligible view. (After the
-    ring, views above 25 deg were predicted a few frontier voxels each and cleared almost none: docs/method.md, issue
-    25's tenth round.)"""
+    ring, views above 25 deg were predicted a few frontier voxels each and cleared almost none:
+    docs/experiments/tour.md.)"""
     allowed = np.asarray(eligible, dtype=bool).copy()
     if max_elevation_deg >= 90 or len(candidates) != len(allowed):
         return allowed

@@ -33,7 +33,7 @@ count; the tests of the camera, the surface and the sensors run at the default's
 
 SMALL_SCORE_POINTS = 20_000
 """The ``surface_score_points`` of the API and browser tests' servers: a fifth of the default's points on each
-view's surface when it is scored (0.03-0.05 s of CPU a view instead of 0.11-0.18, docs/method.md). Those tests
+view's surface when it is scored (0.03-0.05 s of CPU a view instead of 0.11-0.18, docs/experiments/surface.md). Those tests
 check that the scores are there, in range and the same after a resume or a discard, not their value; the tests
 of the surface and its scoring (tests/workbench/test_surface*.py) run at the default."""
 

@@ -1,5 +1,5 @@
 """Calibration of a cell: the hand-eye transform ``T_flange_camera`` and the turntable axis, from a depth camera's
-views of a sphere target on the plate (docs/method.md, "Calibrating a cell"; docs/hardware.md, "Commissioning a
+views of a sphere target on the plate (docs/experiments/calibration.md; docs/hardware.md, "Commissioning a
 cell").
 
 - ``target``   SphereTarget, DEFAULT_TARGET: the spheres, their mesh and box

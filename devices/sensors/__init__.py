@@ -1,4 +1,4 @@
-"""Depth-sensor models of the simulated camera (docs/method.md, "Sensor models").
+"""Depth-sensor models of the simulated camera (docs/experiments/sensors.md, "Sensor models").
 
 - ``presets``        SensorModel, SENSORS (ideal, realsense-d435, realsense-d405, structured-light), sensor_named
 - ``depth_effects``  grazing incidence, range, flying pixels, depth noise, holes, quantisation: apply_effects

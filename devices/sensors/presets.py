@@ -2,7 +2,7 @@
 
 A :class:`SensorModel` is a frozen set of numbers; :mod:`devices.sensors.depth_effects` applies them to a rendered
 depth image and :mod:`devices.sensors.occlusion` casts the second viewpoint's rays. Sources of every figure are in
-docs/method.md ("Sensor models"); the field docs say which figure is a vendor's and which is an assumption.
+docs/experiments/sensors.md ("Sensor models"); the field docs say which figure is a vendor's and which is an assumption.
 
 Names: ``ideal`` (today's perfect camera, the default), ``realsense-d435``, ``realsense-d405`` (Intel active stereo)
 and ``structured-light`` (a projector-camera rig like the paper's).
@@ -123,7 +123,7 @@ SENSORS: dict[str, SensorModel] = {
         hole_fraction=0.01,
     ),
     # A projector-camera rig like the paper's (a 2048 px wide camera, 70 deg HFOV, projector 120 mm to its side,
-    # phase precision 0.05 px): an assumption in the range of desktop structured-light scanners (docs/method.md).
+    # phase precision 0.05 px): an assumption in the range of desktop structured-light scanners (docs/experiments/sensors.md).
     "structured-light": SensorModel(
         "structured-light",
         baseline=0.12,

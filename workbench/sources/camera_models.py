@@ -1,7 +1,7 @@
 """The simulated camera's error models a session may ask for: the depth sensor and the calibration error.
 
 A create request's ``camera`` is ``{"sensor": NAME, "calibration": NAME}`` (either optional); the names are those
-of ``devices.sensors.SENSORS`` and ``devices.calibration_error.CALIBRATIONS`` (docs/method.md, "Sensor models").
+of ``devices.sensors.SENSORS`` and ``devices.calibration_error.CALIBRATIONS`` (docs/experiments/sensors.md, "Sensor models").
 They go into the session's ``devices.camera``; a hardware session refuses them (a real camera has its own noise).
 """
 

@@ -1,4 +1,4 @@
-"""``SurfaceConfig``: how the surface is fused, cut and closed. Every default is measured (docs/method.md, "surface")."""
+"""``SurfaceConfig``: how the surface is fused, cut and closed. Every default is measured (docs/experiments/surface.md)."""
 
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ class SurfaceConfig:
     surface where no view looked) and its update takes 3 s; TSDF: 0.15 s of CPU, precision 1.00."""
     voxel_size: float = 0.0025
     """TSDF voxel edge. 2.5 mm: F@5mm within 0.3 points of 2 mm on four objects at 60 % of the triangles and
-    time; 3 mm loses up to 10 points of F@2mm (docs/method.md, "surface")."""
+    time; 3 mm loses up to 10 points of F@2mm (docs/experiments/surface.md)."""
     truncation_voxels: float = 3.0
     """TSDF truncation distance in voxels (7.5 mm at 2.5 mm voxels): 4 loses up to 2.4 points of F@2mm on thin
     parts (the dragon), 6 up to 28 (the mug); 2 loses 0.3 points of F@5mm on average and 0.9 on the truck (its
@@ -86,7 +86,7 @@ REAL_SENSOR_TRUNCATION_VOXELS = 2.0
 """The truncation of a sensor with depth noise or flying pixels. The fins a TSDF grows behind silhouette edges are
 up to the truncation long, and such a sensor's scattered returns support them past the support filter: with the
 RealSense D435 and typical calibration, 3 voxels left precision@5mm at 0.88 on the lion and 0.91 / 0.96 on the
-lion / camel of seed 1; 2 voxels: 0.94, 0.97, 0.98 at 1 point of recall (docs/method.md, "surface")."""
+lion / camel of seed 1; 2 voxels: 0.94, 0.97, 0.98 at 1 point of recall (docs/experiments/surface.md)."""
 
 
 def surface_config_for(camera: CameraConfig, base: SurfaceConfig | None = None) -> SurfaceConfig:
