@@ -31,7 +31,6 @@ from pathlib import Path
 from typing import Any
 
 from nbv.options import CliError, add_scan_options, planner_config_from_args
-from workbench import shadowing_code
 from workbench.evaluation import MeshPayload, RunOutcome, RunTask, execute, one_line, run_dask, run_local
 
 DEFAULT_PLANNERS = "projection,raycast-apora,raycast-oa,random"
@@ -232,8 +231,6 @@ def run(args: argparse.Namespace) -> int:
     from nbv import bench_report as report
 
     planners, yaws = check_args(args)
-    if (shadowed := shadowing_code()) is not None:  # the run and ceiling workers would run other code
-        raise CliError(shadowed)
     models = resolve_models(args.models, args.up, args.size)
     tasks = make_tasks(args, models)
     out: Path = args.out

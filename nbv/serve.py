@@ -13,7 +13,7 @@ from pathlib import Path
 from app.settings import AppSettings, check_exposure, load_settings
 from devices.calibration_error import CALIBRATIONS
 from devices.sensors.presets import SENSORS
-from nbv.options import CliError, calibration_name, sensor_name
+from nbv.options import calibration_name, sensor_name
 
 TOKEN_ENV = "NBV_TOKEN"
 GRACE = 2
@@ -120,11 +120,8 @@ def run(args: argparse.Namespace) -> int:
     import uvicorn
 
     from app.main import create_app
-    from workbench import shadowing_code
 
     settings = settings_from_args(args)
-    if (shadowed := shadowing_code()) is not None:  # the sessions' workers would run other code
-        raise CliError(shadowed)
     app = create_app(settings)
     query = "?token=..." if settings.token else ""
     print(f"nbv workbench: http://{settings.host}:{settings.port}/{query}  (3D viewer near port {settings.viser_port})")

@@ -35,7 +35,6 @@ from workbench.settings import WorkbenchSettings
 from workbench.sources.camera_models import camera_models
 from workbench.sources.catalog import list_models, save_upload
 from workbench.sources.parts import list_recordings
-from workbench.workers.code_path import shadowing_code
 
 __all__ = [
     "BUSY",
@@ -71,6 +70,5 @@ __all__ = [
     "plan_summary",
     "resume_id",
     "save_upload",
-    "shadowing_code",
     "timeline_of",
 ]
