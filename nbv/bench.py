@@ -22,7 +22,6 @@ choices. A failed run does not stop the others: its one-line error is reported a
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import time
@@ -134,8 +133,9 @@ def parse_yaws(text: str | None, default: float) -> list[float]:
 
 def check_args(args: argparse.Namespace) -> tuple[list[str], list[float]]:
     """(planners, yaws) after validating every option; CliError on bad input (before any work)."""
-    if args.views is not None and args.views < 1:
-        raise CliError(f"--views: must be >= 1, got {args.views}")
+    views = getattr(args, "termination.max_views", None)
+    if views is not None and views < 1:
+        raise CliError(f"--views: must be >= 1, got {views}")
     if args.seeds < 1:
         raise CliError(f"--seeds: must be >= 1, got {args.seeds}")
     if args.jobs < 1:
@@ -311,8 +311,3 @@ def _describe(o: RunOutcome, ceilings: dict[tuple[str, float], float]) -> str:
         text += f" ({cov / ceiling:.1%} of the ceiling)"
     text += f", plan {sum(r['plan_seconds'] for r in o.rows):.2f} s, wall {o.seconds:.1f} s"
     return text
-
-
-def load_runs(out: Path) -> list[dict[str, Any]]:
-    """The runs.json entries of a finished bench (for tests and scripts)."""
-    return json.loads((out / "runs.json").read_text())
