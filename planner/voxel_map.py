@@ -259,10 +259,6 @@ class VoxelMap:
 
     # ------------------------------------------------------------------ integration
 
-    def observe(self, frame: DepthFrame) -> NDArray[np.uint8]:
-        """(X, Y, Z) uint8 EMPTY / UNKNOWN / 0 the frame says about the current grid (no state change)."""
-        return self._observe(frame, self.origin, self.shape)
-
     def _observe(self, frame: DepthFrame, lower: NDArray[np.float64], shape: tuple[int, ...]) -> NDArray[np.uint8]:
         if self._config.integration == "raycast":
             return observe_raycast(frame, lower, self.resolution, shape, self._ray_stride)
