@@ -29,7 +29,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from nbv.options import CliError, add_scan_options, planner_config_from_args
+from nbv.options import CliError, add_scan_options, planner_config_from_args, seed_of
 from workbench import shadowing_code
 from workbench.evaluation import MeshPayload, RunOutcome, RunTask, execute, one_line, run_dask, run_local
 
@@ -170,7 +170,7 @@ def make_tasks(args: argparse.Namespace, models: Sequence[tuple[str, str, Any]] 
     tasks: list[RunTask] = []
     for spec, label, _ in models:
         for yaw in yaws:
-            for seed in range(args.seed, args.seed + args.seeds):
+            for seed in range(seed_of(args), seed_of(args) + args.seeds):
                 config = base.replace(cluster={"seed": seed})
                 for name in planners:
                     tasks.append(
@@ -273,7 +273,7 @@ def run(args: argparse.Namespace) -> int:
         "models": [label for _, label, _ in models],
         "planners": planners,
         "reference": reference_of(args, planners),
-        "seeds": list(range(args.seed, args.seed + args.seeds)),
+        "seeds": list(range(seed_of(args), seed_of(args) + args.seeds)),
         "yaws": yaws,
         "views": views,
         "resolution": config.voxel.resolution,

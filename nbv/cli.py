@@ -50,7 +50,10 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser(
-        "scan", help="scan a mesh in the simulated cell (Algorithm 1, headless)", usage=SCAN_USAGE.format("scan")
+        "scan",
+        help="scan a mesh in the simulated cell (Algorithm 1, headless)",
+        usage=SCAN_USAGE.format("scan"),
+        allow_abbrev=False,
     )
     add_scan_options(p)
     p.add_argument("--planner", default="projection", help="view evaluator (default projection)")
@@ -61,7 +64,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_scan)
 
     p = sub.add_parser(
-        "profile", help="scan and print a stage-by-stage timing table", usage=SCAN_USAGE.format("profile")
+        "profile",
+        help="scan and print a stage-by-stage timing table",
+        usage=SCAN_USAGE.format("profile"),
+        allow_abbrev=False,
     )
     add_scan_options(p)
     p.add_argument("--planner", default="projection", help=argparse.SUPPRESS)
@@ -86,6 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
             "serve",
             help="serve the workbench (FastAPI + viser)",
             usage="nbv serve [--config FILE] [--SECTION.KEY VALUE ...]",
+            allow_abbrev=False,
         )
         serve.add_arguments(p)
         p.set_defaults(func=serve.run)
@@ -109,6 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
             usage=SCAN_USAGE.format("bench --models MODEL [MODEL ...]").replace(" --model MODEL", "")
             if name == "bench"
             else None,
+            allow_abbrev=name != "bench",
         )
         module.add_arguments(p)
         p.set_defaults(func=module.run)

@@ -173,16 +173,16 @@ def render_value(value: Any) -> str:
 
 
 def type_text(annotation: Any) -> str:
-    """A short human name of a field's type: ``float``, ``int``, ``"fast" | "exhaustive"``, ``[float, ...]``."""
+    """A short human name of a field's type: ``float``, ``int``, ``"fast" or "exhaustive"``, ``[float, ...]``."""
     origin, args = typing.get_origin(annotation), typing.get_args(annotation)
     if origin is Literal:
-        return " | ".join(render_value(a) for a in args)
+        return " or ".join(render_value(a) for a in args)
     if origin is tuple:
         if len(args) == 2 and args[1] is Ellipsis:
             return f"[{type_text(args[0])}, ...]"
         return "[" + ", ".join(type_text(a) for a in args) + "]"
     if origin in (typing.Union, types.UnionType):
-        return " | ".join("unset" if a is type(None) else type_text(a) for a in args)
+        return " or ".join("unset" if a is type(None) else type_text(a) for a in args)
     if annotation is Path:
         return "path"
     return getattr(annotation, "__name__", str(annotation))
@@ -252,11 +252,12 @@ def add_config_flags(
         if exclude is not None and exclude(f):
             continue
         try:
-            kwargs = _flag_kwargs(f)
+            kwargs: dict[str, Any] = _flag_kwargs(f)
         except UnflaggableError:
             continue
         if f.name in types_:
-            kwargs = {k: v for k, v in kwargs.items() if k != "choices"} | {"type": types_[f.name]}
+            kwargs = {k: v for k, v in kwargs.items() if k != "choices"}
+            kwargs["type"] = types_[f.name]
         section = f.path[:-1]
         if section not in groups:
             _, doc = section_doc(cls, section[len(prefix) :])

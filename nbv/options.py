@@ -45,7 +45,13 @@ def add_scan_options(p: argparse.ArgumentParser, *, model_required: bool = True)
     p.add_argument(
         "--yaw", type=float, default=0.0, help="turn the object about the turntable axis before scanning, degrees"
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=None,
+        help="seed of every random choice: the simulated noise and cluster.seed (default 0, or the --config file's "
+        "cluster.seed for the fits)",
+    )
     p.add_argument("--depth-noise", type=float, default=0.0, help="std of Gaussian depth noise, m (default 0)")
     p.add_argument("--pose-noise", type=float, default=0.0, help="std of reported-pose translation noise, m")
     p.add_argument(
@@ -89,6 +95,11 @@ def calibration_name(value: str) -> str:
         return calibration_named(value).name
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def seed_of(args: argparse.Namespace) -> int:
+    """``--seed``, 0 when not given."""
+    return 0 if getattr(args, "seed", None) is None else int(args.seed)
 
 
 def planner_config_from_args(args: argparse.Namespace) -> PlannerConfig:

@@ -12,7 +12,7 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
-from nbv.options import planner_config_from_args
+from nbv.options import planner_config_from_args, seed_of
 from workbench.evaluation import (
     STAGES,
     TIME_THRESHOLDS,
@@ -163,7 +163,7 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
         size=args.size,
         up=args.up,
         yaw_deg=args.yaw,
-        seed=args.seed,
+        seed=seed_of(args),
         depth_noise=args.depth_noise,
         pose_noise=args.pose_noise,
         reachable=not args.no_reachable,

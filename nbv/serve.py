@@ -36,17 +36,12 @@ SERVE_ALIASES: dict[str, list[str]] = {
 }
 """The flags ``nbv serve`` had before every setting had its own: aliases of the generated ones."""
 
-NOT_FLAGS = {
-    "server.cors_origins": "repeatable --cors-origin ORIGIN (a list: the generated flag would take every word after it)",
-}
-"""Settings without a generated flag of their own, and why (the test of one name reads this)."""
-
 
 def _server_fields(parser: argparse.ArgumentParser) -> list[ConfigField]:
     """Flags of the ``[server]`` table, ``[planner]`` and ``[devices]`` (``[faults]``: the TOML file only)."""
 
     def server_only(f: ConfigField) -> bool:
-        return f.path[0] in ("planner", "devices", "faults") or f.name in NOT_FLAGS
+        return f.path[1] in ("planner", "devices", "faults")
 
     fields = add_config_flags(
         parser, AppSettings, prefix=("server",), aliases=SERVE_ALIASES, exclude=server_only, title="server"
@@ -72,7 +67,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         dest="server.cors_origins",
         default=None,
         metavar="ORIGIN",
-        help="allow this origin (CORS, server.cors_origins); repeatable",
+        help="allow this origin (CORS): adds to --server.cors_origins; repeatable",
     )
     parser.add_argument("--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"])
     parser.set_defaults(config_fields=_server_fields(parser))
@@ -81,10 +76,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def settings_from_args(args: argparse.Namespace) -> AppSettings:
     """AppSettings from ``--config`` and the flags (flags win; the token also from $NBV_TOKEN).
     ValueError on bad values, and for a non-loopback host without a token."""
+    settings = settings_from_flags(args)
+    check_exposure(settings)
+    check_cell(settings)
+    return settings
+
+
+def settings_from_flags(args: argparse.Namespace) -> AppSettings:
+    """AppSettings from ``--config``, then the flags, then $NBV_TOKEN for a token not given (ValueError naming
+    the setting for a bad value); nothing checked about where it would listen or the cell file."""
     settings = load_settings(args.config)
-    fields: list[ConfigField] = list(getattr(args, "config_fields", []))
-    fields.append(ConfigField(("server", "cors_origins"), tuple[str, ...], (), "", AppSettings))
-    data = flag_overrides(args, fields)
+    data = flag_overrides(args, getattr(args, "config_fields", []))
     server = data.setdefault("server", {})
     if "token" not in server and os.environ.get(TOKEN_ENV):
         server["token"] = os.environ[TOKEN_ENV]
@@ -92,8 +94,6 @@ def settings_from_args(args: argparse.Namespace) -> AppSettings:
         del data["server"]
     if data:
         settings = settings_from_dict(data, settings)
-    check_exposure(settings)
-    check_cell(settings)
     return settings
 
 
