@@ -50,7 +50,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--models", nargs="+", required=True, metavar="MODEL", help="built-in object names and/or mesh files"
     )
     parser.add_argument(
-        "--planners", default=DEFAULT_PLANNERS, help=f"comma-separated view evaluators (default {DEFAULT_PLANNERS})"
+        "--planners", default=DEFAULT_PLANNERS, help="comma-separated view evaluators (default %(default)s)"
     )
     parser.add_argument("--seeds", type=int, default=1, help="runs per (model, planner): seeds --seed, --seed+1, ...")
     parser.add_argument(
@@ -64,16 +64,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="the planner every other is compared with (default projection, or the first planner without it)",
     )
     parser.add_argument("--executor", choices=["local", "dask"], default="local", help="where runs execute")
-    parser.add_argument("--jobs", type=int, default=2, help="local: worker processes (default 2; 1 runs inline)")
+    parser.add_argument(
+        "--jobs", type=int, default=2, help="local: worker processes (default %(default)s; 1 runs inline)"
+    )
     parser.add_argument("--address", default=None, help="dask: scheduler address (default: start a LocalCluster)")
-    parser.add_argument("--workers", type=int, default=2, help="dask: LocalCluster worker processes (default 2)")
-    parser.add_argument("--out", type=Path, default=Path("out/bench"), help="output directory (default out/bench)")
+    parser.add_argument(
+        "--workers", type=int, default=2, help="dask: LocalCluster worker processes (default %(default)s)"
+    )
+    parser.add_argument("--out", type=Path, default=Path("out/bench"), help="output directory (default %(default)s)")
     parser.add_argument("--no-reachable", action="store_true", help="skip the reachable-coverage ceiling")
     parser.add_argument(
         "--ceiling-cache",
         type=Path,
         default=DEFAULT_CEILING_CACHE,
-        help=f"directory of cached ceilings (default {DEFAULT_CEILING_CACHE})",
+        help="directory of cached ceilings (default %(default)s)",
     )
     add_scan_options(parser, model_required=False)
 

@@ -56,7 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
         allow_abbrev=False,
     )
     add_scan_options(p)
-    p.add_argument("--planner", default="projection", help="view evaluator (default projection)")
+    p.add_argument("--planner", default="projection", help="view evaluator (default %(default)s)")
     p.add_argument(
         "--out", type=Path, default=Path("out/scan"), help="output directory (metrics.json, cloud.ply, surface.ply)"
     )

@@ -40,8 +40,8 @@ def add_scan_options(p: argparse.ArgumentParser, *, model_required: bool = True)
     if model_required:
         p.add_argument("--model", required=True, help="a built-in object name or a mesh file (PLY/OBJ/STL/OFF/GLB)")
     add_config_flags(p, PlannerConfig, aliases=PLANNER_ALIASES, title="planner")
-    p.add_argument("--size", type=float, default=0.2, help="largest extent of the object, m (default 0.2)")
-    p.add_argument("--up", choices=["y", "z"], default="y", help="the mesh file's up axis (default y)")
+    p.add_argument("--size", type=float, default=0.2, help="largest extent of the object, m (default %(default)s)")
+    p.add_argument("--up", choices=["y", "z"], default="y", help="the mesh file's up axis (default %(default)s)")
     p.add_argument(
         "--yaw", type=float, default=0.0, help="turn the object about the turntable axis before scanning, degrees"
     )
@@ -52,19 +52,21 @@ def add_scan_options(p: argparse.ArgumentParser, *, model_required: bool = True)
         help="seed of every random choice: the simulated noise and cluster.seed (default 0, or the --config file's "
         "cluster.seed for the fits)",
     )
-    p.add_argument("--depth-noise", type=float, default=0.0, help="std of Gaussian depth noise, m (default 0)")
+    p.add_argument(
+        "--depth-noise", type=float, default=0.0, help="std of Gaussian depth noise, m (default %(default)s)"
+    )
     p.add_argument("--pose-noise", type=float, default=0.0, help="std of reported-pose translation noise, m")
     p.add_argument(
         "--sensor",
         type=sensor_name,
         default="ideal",
-        help=f"the depth sensor's error model: {', '.join(SENSORS)} (default ideal)",
+        help=f"the depth sensor's error model: {', '.join(SENSORS)} (default %(default)s)",
     )
     p.add_argument(
         "--calibration",
         type=calibration_name,
         default="none",
-        help=f"the cell's calibration and motion error: {', '.join(CALIBRATIONS)} (default none)",
+        help=f"the cell's calibration and motion error: {', '.join(CALIBRATIONS)} (default %(default)s)",
     )
     p.add_argument("--config", type=Path, default=None, help="a TOML file with planner settings")
     p.add_argument(
