@@ -295,18 +295,6 @@ class ApproveRequest(BaseModel):
         return self
 
 
-class IterationOut(BaseModel):
-    iteration: int
-    pose: PoseModel
-    decision: str | None
-    plan_id: str | None
-    points_frame: int
-    points: int
-    growth: float | None
-    coverage: float | None
-    plan_seconds: float | None
-
-
 class StepRequest(BaseModel):
     model_config = ConfigDict(extra="forbid")
     count: StrictInt = Field(default=1, ge=1, le=100)

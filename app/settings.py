@@ -144,6 +144,8 @@ def settings_from_dict(data: dict[str, Any], base: AppSettings | None = None) ->
     bad = set(server) - _SERVER_KEYS
     if bad:
         raise ValueError(f"server: unknown setting(s) {sorted(bad)} (known: {', '.join(sorted(_SERVER_KEYS))})")
+    if isinstance(server.get("mesh_limits"), dict):  # any subset of its fields, the others kept
+        server["mesh_limits"] = merge(base.mesh_limits, server["mesh_limits"], "server.mesh_limits.")
     if "host" in server and "viser_host" not in server:
         server["viser_host"] = server["host"]
     planner = base.planner.replace(**data["planner"]) if "planner" in data else base.planner

@@ -93,8 +93,7 @@ def planner_config_for(config: PlannerConfig, camera: CameraConfig) -> PlannerCo
     return is free space only up to it) and the sphere built about the object seen (``candidates.aim =
     "content"``: B grown along the first view put the aim 10 cm off the object and, through the range rule, the
     D405's cameras 5 cm nearer, the object partly outside its images). A non-ideal sensor also gets dropout-aware
-    carving (``DROPOUT_FILL_PX``) unless already set (``scoring.max_incidence_deg``, the incidence-aware score,
-    stays opt-in: it measured no better), and one with a grazing limit the low parallels (``LOW_ELEVATION_DEG``)
+    carving (``DROPOUT_FILL_PX``) unless already set, and one with a grazing limit the low parallels (``LOW_ELEVATION_DEG``)
     unless the lowest elevation was changed, and the plate fit on horizontal points (``PLATE_FIT_MAX_TILT_DEG``)
     unless already set."""
     out = dataclasses.replace(config, noise=noise_config(camera, config.noise))

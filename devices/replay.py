@@ -69,11 +69,6 @@ class ReplayCamera:
     def intrinsics(self) -> Intrinsics:
         return self.frames[0].intrinsics
 
-    @property
-    def remaining(self) -> int:
-        """Frames not yet played back (sequence mode)."""
-        return len(self.frames) - self.position
-
     def capture(self) -> DepthFrame:
         if self.fail_next is not None:
             exc, self.fail_next = self.fail_next, None

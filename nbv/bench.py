@@ -22,7 +22,6 @@ choices. A failed run does not stop the others: its one-line error is reported a
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import time
@@ -30,7 +29,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from nbv.options import CliError, add_scan_options, planner_config_from_args
+from nbv.options import CliError, add_scan_options, planner_config_from_args, seed_of
 from workbench.evaluation import MeshPayload, RunOutcome, RunTask, execute, one_line, run_dask, run_local
 
 DEFAULT_PLANNERS = "projection,raycast-apora,raycast-oa,random"
@@ -50,7 +49,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--models", nargs="+", required=True, metavar="MODEL", help="built-in object names and/or mesh files"
     )
     parser.add_argument(
-        "--planners", default=DEFAULT_PLANNERS, help=f"comma-separated view evaluators (default {DEFAULT_PLANNERS})"
+        "--planners", default=DEFAULT_PLANNERS, help="comma-separated view evaluators (default %(default)s)"
     )
     parser.add_argument("--seeds", type=int, default=1, help="runs per (model, planner): seeds --seed, --seed+1, ...")
     parser.add_argument(
@@ -64,16 +63,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="the planner every other is compared with (default projection, or the first planner without it)",
     )
     parser.add_argument("--executor", choices=["local", "dask"], default="local", help="where runs execute")
-    parser.add_argument("--jobs", type=int, default=2, help="local: worker processes (default 2; 1 runs inline)")
+    parser.add_argument(
+        "--jobs", type=int, default=2, help="local: worker processes (default %(default)s; 1 runs inline)"
+    )
     parser.add_argument("--address", default=None, help="dask: scheduler address (default: start a LocalCluster)")
-    parser.add_argument("--workers", type=int, default=2, help="dask: LocalCluster worker processes (default 2)")
-    parser.add_argument("--out", type=Path, default=Path("out/bench"), help="output directory (default out/bench)")
+    parser.add_argument(
+        "--workers", type=int, default=2, help="dask: LocalCluster worker processes (default %(default)s)"
+    )
+    parser.add_argument("--out", type=Path, default=Path("out/bench"), help="output directory (default %(default)s)")
     parser.add_argument("--no-reachable", action="store_true", help="skip the reachable-coverage ceiling")
     parser.add_argument(
         "--ceiling-cache",
         type=Path,
         default=DEFAULT_CEILING_CACHE,
-        help=f"directory of cached ceilings (default {DEFAULT_CEILING_CACHE})",
+        help="directory of cached ceilings (default %(default)s)",
     )
     add_scan_options(parser, model_required=False)
 
@@ -133,8 +136,9 @@ def parse_yaws(text: str | None, default: float) -> list[float]:
 
 def check_args(args: argparse.Namespace) -> tuple[list[str], list[float]]:
     """(planners, yaws) after validating every option; CliError on bad input (before any work)."""
-    if args.views is not None and args.views < 1:
-        raise CliError(f"--views: must be >= 1, got {args.views}")
+    views = getattr(args, "termination.max_views", None)
+    if views is not None and views < 1:
+        raise CliError(f"--views: must be >= 1, got {views}")
     if args.seeds < 1:
         raise CliError(f"--seeds: must be >= 1, got {args.seeds}")
     if args.jobs < 1:
@@ -169,7 +173,7 @@ def make_tasks(args: argparse.Namespace, models: Sequence[tuple[str, str, Any]] 
     tasks: list[RunTask] = []
     for spec, label, _ in models:
         for yaw in yaws:
-            for seed in range(args.seed, args.seed + args.seeds):
+            for seed in range(seed_of(args), seed_of(args) + args.seeds):
                 config = base.replace(cluster={"seed": seed})
                 for name in planners:
                     tasks.append(
@@ -270,7 +274,7 @@ def run(args: argparse.Namespace) -> int:
         "models": [label for _, label, _ in models],
         "planners": planners,
         "reference": reference_of(args, planners),
-        "seeds": list(range(args.seed, args.seed + args.seeds)),
+        "seeds": list(range(seed_of(args), seed_of(args) + args.seeds)),
         "yaws": yaws,
         "views": views,
         "resolution": config.voxel.resolution,
@@ -308,8 +312,3 @@ def _describe(o: RunOutcome, ceilings: dict[tuple[str, float], float]) -> str:
         text += f" ({cov / ceiling:.1%} of the ceiling)"
     text += f", plan {sum(r['plan_seconds'] for r in o.rows):.2f} s, wall {o.seconds:.1f} s"
     return text
-
-
-def load_runs(out: Path) -> list[dict[str, Any]]:
-    """The runs.json entries of a finished bench (for tests and scripts)."""
-    return json.loads((out / "runs.json").read_text())

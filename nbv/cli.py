@@ -12,6 +12,9 @@ from nbv import calibrate_cmd, devices_cmd
 from nbv.options import EXIT_BAD_INPUT, CliError, add_scan_options
 from planner.config import PlannerConfig
 
+SCAN_USAGE = "nbv {} --model MODEL [--config FILE] [--SECTION.KEY VALUE ...] [options]"
+"""The usage line of scan, profile and bench (their help lists every planner setting's flag)."""
+
 # ---------------------------------------------------------------- commands
 
 
@@ -46,16 +49,26 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="nbv", description="Projection-based next-best-view planning workbench")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    p = sub.add_parser("scan", help="scan a mesh in the simulated cell (Algorithm 1, headless)")
+    p = sub.add_parser(
+        "scan",
+        help="scan a mesh in the simulated cell (Algorithm 1, headless)",
+        usage=SCAN_USAGE.format("scan"),
+        allow_abbrev=False,
+    )
     add_scan_options(p)
-    p.add_argument("--planner", default="projection", help="view evaluator (default projection)")
+    p.add_argument("--planner", default="projection", help="view evaluator (default %(default)s)")
     p.add_argument(
         "--out", type=Path, default=Path("out/scan"), help="output directory (metrics.json, cloud.ply, surface.ply)"
     )
     p.add_argument("--no-reachable", action="store_true", help="skip the reachable-coverage ceiling")
     p.set_defaults(func=cmd_scan)
 
-    p = sub.add_parser("profile", help="scan and print a stage-by-stage timing table")
+    p = sub.add_parser(
+        "profile",
+        help="scan and print a stage-by-stage timing table",
+        usage=SCAN_USAGE.format("profile"),
+        allow_abbrev=False,
+    )
     add_scan_options(p)
     p.add_argument("--planner", default="projection", help=argparse.SUPPRESS)
     p.add_argument("--out", type=Path, default=Path("out/profile"), help="output directory (profile.json)")
@@ -75,7 +88,12 @@ def build_parser() -> argparse.ArgumentParser:
     except ImportError:  # pragma: no cover - the app is optional at import time
         serve = None  # type: ignore[assignment]
     if serve is not None and hasattr(serve, "add_arguments"):
-        p = sub.add_parser("serve", help="serve the workbench (FastAPI + viser)")
+        p = sub.add_parser(
+            "serve",
+            help="serve the workbench (FastAPI + viser)",
+            usage="nbv serve [--config FILE] [--SECTION.KEY VALUE ...]",
+            allow_abbrev=False,
+        )
         serve.add_arguments(p)
         p.set_defaults(func=serve.run)
 
@@ -92,7 +110,14 @@ def build_parser() -> argparse.ArgumentParser:
             module = __import__(f"nbv.{name}", fromlist=["add_arguments", "run"])
         except ImportError:
             continue
-        p = sub.add_parser(name, help=(module.__doc__ or "").strip().splitlines()[0] if module.__doc__ else None)
+        p = sub.add_parser(
+            name,
+            help=(module.__doc__ or "").strip().splitlines()[0] if module.__doc__ else None,
+            usage=SCAN_USAGE.format("bench --models MODEL [MODEL ...]").replace(" --model MODEL", "")
+            if name == "bench"
+            else None,
+            allow_abbrev=name != "bench",
+        )
         module.add_arguments(p)
         p.set_defaults(func=module.run)
     return parser

@@ -12,7 +12,7 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
-from nbv.options import planner_config_from_args
+from nbv.options import planner_config_from_args, seed_of
 from workbench.evaluation import (
     STAGES,
     TIME_THRESHOLDS,
@@ -81,7 +81,7 @@ def stage_table(records: list[IterationRecord]) -> dict[str, dict[str, float]]:
 
 def fidelity(scan: SimScan, iterations: list[int], console: Console | None) -> list[dict[str, Any]]:
     """BIC gap per voxel of the chosen model against the exhaustive sklearn sweep."""
-    from planner.clustering import bic_sweep, t_range
+    from planner.clustering import bic_gap, bic_sweep, t_range
 
     cfg = scan.config.cluster
     res = scan.config.voxel.resolution
@@ -101,7 +101,7 @@ def fidelity(scan: SimScan, iterations: list[int], console: Console | None) -> l
             t0 = time.perf_counter()
             sweep = bic_sweep(points, range(t_lo, t_hi + 1), cfg, res)
             best_t = min(sweep, key=lambda t: sweep[t])
-            gap = (chosen - sweep[best_t]) / n
+            gap = bic_gap(chosen, sweep, n)
             row = {
                 "iteration": it,
                 "kind": fit.kind,
@@ -163,7 +163,7 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
         size=args.size,
         up=args.up,
         yaw_deg=args.yaw,
-        seed=args.seed,
+        seed=seed_of(args),
         depth_noise=args.depth_noise,
         pose_noise=args.pose_noise,
         reachable=not args.no_reachable,

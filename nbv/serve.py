@@ -6,102 +6,94 @@ Used by ``nbv.cli`` as ``serve.add_arguments(parser)`` and ``serve.run(args) -> 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 from pathlib import Path
 
-from app.settings import AppSettings, check_exposure, load_settings
-from devices.calibration_error import CALIBRATIONS
-from devices.sensors.presets import SENSORS
+from app.settings import AppSettings, check_exposure, load_settings, settings_from_dict
+from devices.config import DeviceConfig
+from nbv.flags import ConfigField, add_config_flags, flag_overrides
 from nbv.options import calibration_name, sensor_name
+from planner.config import PlannerConfig
 
 TOKEN_ENV = "NBV_TOKEN"
 GRACE = 2
 """Seconds uvicorn lets running requests finish after SIGTERM before it cancels them."""
 
 
+SERVE_ALIASES: dict[str, list[str]] = {
+    "server.host": ["--host"],
+    "server.port": ["--port"],
+    "server.viser_port": ["--viser-port"],
+    "server.models_dir": ["--models-dir"],
+    "server.data_dir": ["--data-dir"],
+    "server.token": ["--token"],
+    "server.viser_public": ["--viser-public"],
+    "server.cell": ["--cell"],
+    "server.dry_run": ["--dry-run"],
+    "devices.model": ["--model"],
+    "devices.camera.sensor": ["--sensor"],
+    "devices.camera.calibration": ["--calibration"],
+}
+"""The flags ``nbv serve`` had before every setting had its own: aliases of the generated ones."""
+
+
+def _server_fields(parser: argparse.ArgumentParser) -> list[ConfigField]:
+    """Flags of the ``[server]`` table, ``[planner]`` and ``[devices]`` (``[faults]``: the TOML file only)."""
+
+    def server_only(f: ConfigField) -> bool:
+        return f.path[1] in ("planner", "devices", "faults")
+
+    fields = add_config_flags(
+        parser, AppSettings, prefix=("server",), aliases=SERVE_ALIASES, exclude=server_only, title="server"
+    )
+    fields += add_config_flags(parser, PlannerConfig, prefix=("planner",))
+    fields += add_config_flags(
+        parser,
+        DeviceConfig,
+        prefix=("devices",),
+        aliases=SERVE_ALIASES,
+        types_={"devices.camera.sensor": sensor_name, "devices.camera.calibration": calibration_name},
+    )
+    return fields
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The options of ``nbv serve`` (flags override the ``[server]`` table of ``--config``)."""
-    parser.add_argument("--host", default=None, help="interface to bind (default 127.0.0.1)")
-    parser.add_argument("--port", type=int, default=None, help="HTTP port of the page and the API (default 8000)")
-    parser.add_argument(
-        "--viser-port",
-        type=int,
-        default=None,
-        help="preferred port of the 3D viewer; the next free one is used if busy",
-    )
-    parser.add_argument("--model", default=None, help="default object of a new session (default l-block)")
-    parser.add_argument("--models-dir", type=Path, default=None, help="directory of mesh files offered as models")
-    parser.add_argument(
-        "--sensor",
-        type=sensor_name,
-        default=None,
-        help=f"default depth sensor of new simulated sessions: {', '.join(SENSORS)} (default ideal, or the config's)",
-    )
-    parser.add_argument(
-        "--calibration",
-        type=calibration_name,
-        default=None,
-        help=f"default calibration error of new simulated sessions: {', '.join(CALIBRATIONS)} (default none)",
-    )
-    parser.add_argument(
-        "--data-dir", type=Path, default=None, help="where uploads, session journals and recordings go (./nbv-data)"
-    )
-    parser.add_argument(
-        "--token",
-        default=None,
-        help=f"API token, required to bind a non-loopback host (default: ${TOKEN_ENV}); see docs/security.md",
-    )
-    parser.add_argument(
-        "--cors-origin", action="append", default=None, metavar="ORIGIN", help="allow this origin (CORS); repeatable"
-    )
-    parser.add_argument(
-        "--viser-public",
-        action="store_true",
-        default=None,
-        help="with a token on an exposed host, bind the 3D viewer there too (it has no authentication)",
-    )
+    """The options of ``nbv serve``: ``--config FILE`` and a flag per setting of its tables (``--server.port``,
+    ``--planner.voxel.resolution``, ``--devices.camera.sensor``); flags override the file."""
     parser.add_argument("--config", type=Path, default=None, help="a TOML file with [server], [planner], [devices]")
     parser.add_argument(
-        "--cell",
-        type=Path,
+        "--cors-origin",
+        action="append",
+        dest="server.cors_origins",
         default=None,
-        help="a cell file (docs/hardware.md): new sessions drive its camera, arm and turntable",
-    )
-    parser.add_argument(
-        "--dry-run",
-        action="store_true",
-        default=None,
-        help="with --cell: plan, preview and approve as usual, but capture from the simulator and move no device",
+        metavar="ORIGIN",
+        help="allow this origin (CORS): adds to --server.cors_origins; repeatable",
     )
     parser.add_argument("--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"])
+    parser.set_defaults(config_fields=_server_fields(parser))
 
 
 def settings_from_args(args: argparse.Namespace) -> AppSettings:
     """AppSettings from ``--config`` and the flags (flags win; the token also from $NBV_TOKEN).
     ValueError on bad values, and for a non-loopback host without a token."""
-    settings = load_settings(
-        args.config,
-        model=args.model,
-        host=args.host,
-        port=args.port,
-        viser_port=args.viser_port,
-        models_dir=args.models_dir,
-        data_dir=args.data_dir,
-        token=getattr(args, "token", None) or os.environ.get(TOKEN_ENV) or None,
-        cors_origins=tuple(args.cors_origin) if getattr(args, "cors_origin", None) else None,
-        viser_public=getattr(args, "viser_public", None),
-        cell=str(args.cell) if getattr(args, "cell", None) else None,
-        dry_run=getattr(args, "dry_run", None),
-    )
-    camera = {k: v for k in ("sensor", "calibration") if (v := getattr(args, k, None)) is not None}
-    if camera:  # the default of new simulated sessions (a hardware session never takes it)
-        devices = settings.devices
-        settings = settings.replace(
-            devices=dataclasses.replace(devices, camera=dataclasses.replace(devices.camera, **camera))
-        )
+    settings = settings_from_flags(args)
     check_exposure(settings)
     check_cell(settings)
+    return settings
+
+
+def settings_from_flags(args: argparse.Namespace) -> AppSettings:
+    """AppSettings from ``--config``, then the flags, then $NBV_TOKEN for a token not given (ValueError naming
+    the setting for a bad value); nothing checked about where it would listen or the cell file."""
+    settings = load_settings(args.config)
+    data = flag_overrides(args, getattr(args, "config_fields", []))
+    server = data.setdefault("server", {})
+    if "token" not in server and os.environ.get(TOKEN_ENV):
+        server["token"] = os.environ[TOKEN_ENV]
+    if not server:
+        del data["server"]
+    if data:
+        settings = settings_from_dict(data, settings)
     return settings
 
 

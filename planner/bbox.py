@@ -27,14 +27,6 @@ _SNAP_TOL = 1e-9
 """Voxel units: a box face within this of a lattice plane is taken to lie on it (float noise, e.g. 0.1 / 0.01)."""
 
 
-def box_of_points(points: ArrayLike) -> BoundingBox:
-    """Axis-aligned bounding box of ``points`` (N, 3), N >= 1."""
-    p = checked_array("points", points, (None, 3))
-    if p.shape[0] == 0:
-        raise ValueError("points: need at least one point for a bounding box")
-    return BoundingBox(p.min(axis=0), p.max(axis=0))
-
-
 def union(a: BoundingBox | None, b: BoundingBox | None) -> BoundingBox | None:
     """Smallest box containing both (``None`` is the empty box)."""
     if a is None:
@@ -42,16 +34,6 @@ def union(a: BoundingBox | None, b: BoundingBox | None) -> BoundingBox | None:
     if b is None:
         return a
     return BoundingBox(np.minimum(a.lower, b.lower), np.maximum(a.upper, b.upper))
-
-
-def sphere_cover(centers: ArrayLike, radius: float) -> BoundingBox | None:
-    """Bounding box of spheres of ``radius`` around ``centers`` (N, 3); ``None`` when N == 0."""
-    c = checked_array("centers", centers, (None, 3))
-    if not (math.isfinite(radius) and radius >= 0):
-        raise ValueError(f"radius: must be >= 0, got {radius!r}")
-    if c.shape[0] == 0:
-        return None
-    return BoundingBox(c.min(axis=0) - radius, c.max(axis=0) + radius)
 
 
 def view_growth_distance(extent: ArrayLike, direction: ArrayLike, factor: float) -> float:
@@ -108,11 +90,6 @@ def index_range(idx: NDArray[np.int64]) -> LatticeRange | None:
     lo = np.array([idx[:, a].min() for a in range(3)], dtype=np.int64)
     hi = np.array([idx[:, a].max() for a in range(3)], dtype=np.int64) + 1
     return lo, hi
-
-
-def point_range(points: NDArray[np.float64], resolution: float) -> LatticeRange | None:
-    """Lattice range of the voxels containing ``points`` (N, 3) (voxel of p is ``floor(p / resolution)``)."""
-    return index_range(np.floor(points / resolution).astype(np.int64))
 
 
 def range_union(a: LatticeRange | None, b: LatticeRange | None) -> LatticeRange | None:

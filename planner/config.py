@@ -37,10 +37,6 @@ class VoxelConfig:
     """The floor, metres (the plate top in the turntable frame)."""
     integration: Literal["projective", "raycast"] = "projective"
     """'projective' projects voxel centres into the depth image (fast); 'raycast' is the Amanatides-Woo reference."""
-    frontier_max_looks: int = 0
-    """Opt-in: a voxel the camera has looked into this many times (a frame's ray through its centre reached it)
-    and that is still unknown is no longer frontier (the surface crosses it below the voxel scale). 0, the
-    default, keeps the paper's definition; 2 measured neutral on the four models (docs/method.md)."""
 
     def __post_init__(self) -> None:
         require(
@@ -56,10 +52,6 @@ class VoxelConfig:
             f"voxel.max_extent: must be > resolution, got {self.max_extent!r}",
         )
         require(finite(self.floor_height), f"voxel.floor_height: must be a finite number, got {self.floor_height!r}")
-        require(
-            integer(self.frontier_max_looks) and 0 <= self.frontier_max_looks <= 255,
-            f"voxel.frontier_max_looks: must be an integer in [0, 255], got {self.frontier_max_looks!r}",
-        )
         require(
             self.integration in ("projective", "raycast"),
             f"voxel.integration: 'projective' or 'raycast', got {self.integration!r}",
@@ -179,19 +171,9 @@ class ScoringConfig:
     """W = rank_base ** r (paper: 0.5)."""
     area: Literal["analytic", "raster"] = "analytic"
     """How L is counted: exact clipped-ellipse area, or rasterising pixel centres (reference)."""
-    max_incidence_deg: float = 90.0
-    """The sensor returns no depth where the viewing ray is farther than this from the surface normal (90: any
-    angle, the paper). Below 90, a flat frontier ellipsoid (``planner.scoring.FLAT``) seen beyond it earns no L:
-    its smallest axis stands for the normal of the unseen surface. Opt-in: set to a sensor's grazing limit it
-    measured no better over the 17 development meshes (docs/method.md, "Where the D405 and structured light lose
-    recall")."""
 
     def __post_init__(self) -> None:
         require(finite(self.rank_base) and 0 < self.rank_base <= 1, "scoring.rank_base: must be in (0, 1]")
-        require(
-            finite(self.max_incidence_deg) and 0 < self.max_incidence_deg <= 90,
-            f"scoring.max_incidence_deg: must be in (0, 90], got {self.max_incidence_deg!r}",
-        )
         require(self.area in ("analytic", "raster"), f"scoring.area: 'analytic' or 'raster', got {self.area!r}")
 
 
@@ -249,16 +231,8 @@ class PartitionConfig:
     degrees; never less than half the candidate spacing (0: just that, the paper's rule). A departure: about
     half the camera's horizontal field of view, measured +0.3 points of final coverage over 24 scenes
     (docs/method.md). When it would leave no candidate, only the half spacing applies."""
-    stall_growth: float = 0.0
-    """Opt-in: once every sector is scanned, a view that added fewer new OCCUPIED voxels than this fraction of
-    the map's ends the greedy run in its sector: the next view comes from another sector. 0, the default, is
-    the paper's rule (any sector); 0.01 measured neutral on the four models (docs/method.md)."""
 
     def __post_init__(self) -> None:
-        require(
-            finite(self.stall_growth) and 0 <= self.stall_growth < 1,
-            f"partitions.stall_growth: must be in [0, 1), got {self.stall_growth!r}",
-        )
         require(
             integer(self.sectors) and self.sectors >= 1,
             f"partitions.sectors: must be an integer >= 1, got {self.sectors!r}",
@@ -594,6 +568,13 @@ class PlannerConfig:
         return from_dict(PlannerConfig, data)
 
     @staticmethod
+    def from_journal(data: dict[str, Any]) -> PlannerConfig:
+        """Build from the config a journal recorded: as :meth:`from_dict`, but the settings of :data:`REMOVED`
+        (which older builds wrote into every journal) are dropped, so a journal written before their removal
+        still resumes. Any other unknown name is still an error."""
+        return from_dict(PlannerConfig, without_removed(data))
+
+    @staticmethod
     def from_toml(path: str | Path) -> PlannerConfig:
         with open(path, "rb") as fh:
             try:
@@ -609,6 +590,26 @@ class PlannerConfig:
 
 C = TypeVar("C")
 
+REMOVED: dict[str, str] = {
+    "voxel.frontier_max_looks": "retiring frontier voxels looked into n times measured neutral (docs/experiments/departures.md)",
+    "scoring.max_incidence_deg": "the incidence-aware score measured no better (docs/experiments/sensors.md)",
+    "partitions.stall_growth": "leaving a stalled sector measured neutral (docs/experiments/departures.md)",
+}
+"""Settings earlier builds had, by dotted name, and why they went. A journal that carries one still loads
+(:meth:`PlannerConfig.from_journal`, :func:`without_removed`: ignored); a user who sets one (TOML, REST, a
+flag) is told that it was removed and why."""
+
+
+def without_removed(data: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """A copy of the nested config dict ``data`` without the settings of :data:`REMOVED` (for journals)."""
+    if not isinstance(data, dict):
+        return data
+    return {
+        key: without_removed(value, f"{prefix}{key}.") if isinstance(value, dict) else value
+        for key, value in data.items()
+        if f"{prefix}{key}" not in REMOVED
+    }
+
 
 def from_dict(cls: type[C], data: dict[str, Any], prefix: str = "") -> C:
     """Instantiate dataclass ``cls`` from ``data``, recursing into nested dataclasses."""
@@ -623,6 +624,8 @@ def merge(base: C, data: dict[str, Any], prefix: str = "") -> C:
     changes: dict[str, Any] = {}
     for key, value in data.items():
         if key not in fields:
+            if f"{prefix}{key}" in REMOVED:
+                raise ValueError(f"{prefix}{key}: removed setting ({REMOVED[prefix + key]})")
             known = ", ".join(sorted(fields))
             raise ValueError(f"{prefix}{key}: unknown setting (known: {known})")
         current = getattr(base, key)

@@ -1,10 +1,9 @@
 """How long each frontier voxel has stayed frontier, and per-ellipsoid weights from it (``zbuffer.frontier_decay``).
 
 A frontier voxel that is still FRONTIER after the camera has been pointed at the frontier again
-and again is often one no view can clear (a deep concavity, the base on the plate). The opt-in
-``voxel.frontier_max_looks`` retires such voxels; here they are weighed down instead: a voxel's
-weight is ``decay ** age``, ``age`` = new frames through which it stayed FRONTIER, and a frontier
-ellipsoid weighs the mean of the frontier voxels inside it.
+and again is often one no view can clear (a deep concavity, the base on the plate). Here such voxels
+are weighed down: a voxel's weight is ``decay ** age``, ``age`` = new frames through which it stayed
+FRONTIER, and a frontier ellipsoid weighs the mean of the frontier voxels inside it.
 
 The age advances once per new frame, not per ``plan`` call: a call on an unchanged voxel map
 (a re-plan of the same view) leaves every age as it was.

@@ -11,11 +11,6 @@ sweeps around the object without jumps that would break frame-to-frame ICP.
 Once every sector has been scanned, every sector is eligible again. Before the
 first view (nothing scanned) every sector is eligible.
 
-Opt-in (``stalled_sector``, ``PartitionConfig.stall_growth``, off by default): once
-every sector has been scanned, a view that added almost no surface (fewer new
-OCCUPIED voxels than ``stall_growth`` of the map) makes its own sector ineligible
-for the next view (docs/method.md, "Tried, kept as opt-in").
-
 Also here: ``not_taken`` (candidates within an angle of a view already taken are
 not proposed; ``Planner`` uses ``PartitionConfig.revisit_deg``, 30 degrees, a
 departure measured in docs/experiments/departures.md) and ``select_best`` (argmax of F over the
@@ -76,21 +71,6 @@ def eligible_sectors(scanned: set[int] | frozenset[int], n: int) -> set[int]:
     if not done or len(done) == n:
         return set(range(n))
     return {k for k in range(n) if k not in done and ((k - 1) % n in done or (k + 1) % n in done)}
-
-
-def stalled_sector(
-    scanned: set[int] | frozenset[int], n: int, last_sector: int | None, occupied_counts: Sequence[int], stall: float
-) -> int | None:
-    """The sector to leave after a stalled view, or None (the departure of ``PartitionConfig.stall_growth``).
-
-    Only once all ``n`` sectors are ``scanned`` and with ``stall > 0``: when the last view (in
-    ``last_sector``) raised the OCCUPIED count (``occupied_counts``, one per view) by less than
-    ``stall`` times the previous count, that sector is returned; the caller makes it ineligible.
-    """
-    if stall <= 0 or last_sector is None or len(occupied_counts) < 2 or len(set(scanned)) < n or n < 2:
-        return None
-    prev, cur = occupied_counts[-2], occupied_counts[-1]
-    return last_sector if prev > 0 and (cur - prev) < stall * prev else None
 
 
 def azimuth_of(position_world: ArrayLike, center: ArrayLike) -> float:

@@ -43,7 +43,6 @@ from planner.partitions import (
     sector_edges,
     sector_of,
     select_with_move_cost,
-    stalled_sector,
 )
 from planner.partitions import select_best as select_best_view
 from planner.preprocess import preprocess_frame, voxel_downsample
@@ -84,7 +83,6 @@ class Planner:
         self.views: list[Pose] = []
         self.cloud: NDArray[np.float64] = np.zeros((0, 3))
         self.point_counts: list[int] = []
-        self.occupied_counts: list[int] = []
         self.intrinsics: Intrinsics | None = None
         self.last_plan: PlanResult | None = None
         self._rng = np.random.default_rng(self.config.cluster.seed)
@@ -183,7 +181,6 @@ class Planner:
             prev = self.point_counts[-1]
             growth = (len(self.cloud) - prev) / prev if prev > 0 else None
         self.point_counts.append(len(self.cloud))
-        self.occupied_counts.append(self.voxel_map.count(VoxelClass.OCCUPIED))
         self.views.append(frame.T_world_camera)
         self.intrinsics = frame.intrinsics
         return IntegrationReport(
@@ -317,11 +314,6 @@ class Planner:
         view_sectors = [sector_of(azimuth_of(view.translation, center), cfg.partitions) for view in self.views]
         scanned = set(view_sectors)
         allowed = eligible_sectors(scanned, cfg.partitions.sectors)
-        leave = stalled_sector(
-            scanned, cfg.partitions.sectors, view_sectors[-1], self.occupied_counts, cfg.partitions.stall_growth
-        )
-        if leave is not None:
-            allowed = allowed - {leave}
         in_sector = np.array([c.sector in allowed for c in candidates], dtype=bool)
         reach = np.ones(len(candidates), dtype=bool)
         lazy = reachable is not None and move_times is not None and bool(getattr(self.evaluator, "lazy_reach", False))

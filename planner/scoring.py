@@ -77,32 +77,6 @@ def _check_inputs(
     return mask.astype(bool)
 
 
-FLAT = 0.5
-"""A frontier ellipsoid is a sheet, with its smallest axis as the unseen surface's normal, when that axis is at most
-this share of the middle one."""
-
-
-def beyond_incidence(
-    ellipsoids: Sequence[Ellipsoid], candidates: Sequence[Candidate], max_incidence_deg: float
-) -> NDArray[np.bool_]:
-    """(C, E) bool: candidate c sees flat frontier ellipsoid e (smallest semi-axis <= ``FLAT`` x the middle one)
-    farther than ``max_incidence_deg`` from its normal (the smallest axis), the ray from the camera to its centre.
-    A sensor returns nothing there. False for occupied and round ellipsoids (no normal to speak of)."""
-    out = np.zeros((len(candidates), len(ellipsoids)), dtype=bool)
-    flat = [
-        i for i, e in enumerate(ellipsoids) if e.kind == "frontier" and np.sort(e.axes)[0] <= FLAT * np.sort(e.axes)[1]
-    ]
-    if not flat or not candidates:
-        return out
-    normals = np.stack([ellipsoids[i].rotation[:, int(np.argmin(ellipsoids[i].axes))] for i in flat])  # (F, 3)
-    centers = np.stack([ellipsoids[i].center for i in flat])  # (F, 3)
-    eyes = np.stack([c.T_world_camera.translation for c in candidates])  # (C, 3)
-    rays = centers[None, :, :] - eyes[:, None, :]  # (C, F, 3)
-    cos = np.abs(np.einsum("cfk,fk->cf", rays, normals)) / np.maximum(np.linalg.norm(rays, axis=2), 1e-12)
-    out[:, flat] = cos < np.cos(np.radians(max_incidence_deg))
-    return out
-
-
 def score_views(
     ellipsoids: Sequence[Ellipsoid],
     candidates: Sequence[Candidate],
@@ -122,8 +96,6 @@ def score_views(
     ranks = depth_ranks(proj.centers_camera[..., 2])  # (C, E)
     weights = rank_weights(ranks, config.rank_base)
     pixels = proj.pixels
-    if config.max_incidence_deg < 90:
-        pixels = pixels * ~beyond_incidence(ellipsoids, candidates, config.max_incidence_deg)
     weighted = weights * pixels
     is_frontier = np.array([e.kind == "frontier" for e in ellipsoids], dtype=bool)
     frontier = weighted[:, is_frontier].sum(axis=1)

@@ -185,11 +185,17 @@ class Intrinsics:
     """Pinhole intrinsics of a ``width`` x ``height`` image (pixels)."""
 
     width: int = 640
+    """Image columns, pixels."""
     height: int = 480
+    """Image rows, pixels."""
     fx: float = 610.0
+    """Focal length along x, pixels (640 px wide at 610 px: about a 55 degree horizontal field of view)."""
     fy: float = 610.0
+    """Focal length along y, pixels."""
     cx: float = 319.5
+    """Principal point, x, pixels (pixel centres at integer coordinates: 319.5 is the middle of 640)."""
     cy: float = 239.5
+    """Principal point, y, pixels."""
 
     def __post_init__(self) -> None:
         if int(self.width) != self.width or self.width < 1:

@@ -18,9 +18,7 @@ One ``integrate(frame, points_world)``:
    before its hit becomes EMPTY, one a ray reaches at or after its hit UNKNOWN (final voxels
    are left alone); voxels containing a point become OCCUPIED (occupied wins over empty
    within a frame);
-3. recompute FRONTIER; opt-in (``frontier_max_looks`` > 0): count the looks into every UNKNOWN /
-   FRONTIER voxel (``looked_into``: the ray through its centre reached it); a voxel looked into
-   ``frontier_max_looks`` times is not FRONTIER but UNKNOWN (docs/method.md, "Tried, kept as opt-in");
+3. recompute FRONTIER;
 4. grow B to cover V_o and spheres of radius gamma around the frontier voxels (new voxels NONE).
 
 Every edge of B is capped at ``max_extent`` (see ``bbox.cap_range``: the window is centred
@@ -146,35 +144,6 @@ def observe_projective(frame: DepthFrame, lower: ArrayLike, resolution: float, s
     return out
 
 
-def looked_into(frame: DepthFrame, centers_world: NDArray[np.float64], resolution: float) -> NDArray[np.bool_]:
-    """(N,) bool: the frame's ray through each voxel centre (N, 3) reached the voxel.
-
-    The centre projects into the image (rounded pixel, as in ``observe_projective``) at camera depth
-    ``z``, the pixel has a return ``d > 0``, and ``d >= z - h - EMPTY_EPS`` with ``h`` the voxel's
-    half-chord along that ray: the surface is inside or behind the voxel, not in front of it. A voxel
-    that is still unknown after such a look holds the surface at a scale below the voxel (the hit lies
-    inside it but no point landed in it) or sits at a depth edge.
-    """
-    c = checked_array("centers_world", centers_world, (None, 3))
-    out = np.zeros(len(c), dtype=bool)
-    if len(c) == 0:
-        return out
-    T, k = frame.T_world_camera, frame.intrinsics
-    rel = c - T.translation
-    cam = rel @ T.rotation  # (N, 3) camera coordinates
-    z = cam[:, 2]
-    front = z > 1e-9
-    zs = np.where(front, z, 1.0)
-    u = np.floor(cam[:, 0] / zs * k.fx + k.cx + 0.5)
-    v = np.floor(cam[:, 1] / zs * k.fy + k.cy + 0.5)
-    ok = front & (u >= 0) & (u < k.width) & (v >= 0) & (v < k.height)
-    d = np.zeros(len(c))
-    d[ok] = frame.depth[v[ok].astype(np.intp), u[ok].astype(np.intp)]
-    h = 0.5 * resolution * zs / np.maximum(np.abs(rel).max(axis=1), 1e-12)
-    out[ok] = (d[ok] > 0) & (d[ok] >= z[ok] - h[ok] - EMPTY_EPS)
-    return out
-
-
 def _index_range(mask: NDArray[np.bool_]) -> tuple[NDArray[np.int64], NDArray[np.int64]] | None:
     """Grid index range [lo, hi) of the True voxels of ``mask`` (X, Y, Z), or None."""
     lo, hi = np.zeros(3, np.int64), np.zeros(3, np.int64)
@@ -213,7 +182,6 @@ class VoxelMap:
         self._ray_stride = int(ray_stride)
         self._lo: NDArray[np.int64] | None = None
         self._classes: NDArray[np.uint8] = np.zeros((0, 0, 0), dtype=np.uint8)
-        self._looks: NDArray[np.uint8] = np.zeros((0, 0, 0), dtype=np.uint8)  # see ``looks``
         self._frames = 0  # see ``frames``
 
     # ------------------------------------------------------------------ properties
@@ -260,13 +228,6 @@ class VoxelMap:
         view.setflags(write=False)
         return view
 
-    @property
-    def looks(self) -> NDArray[np.uint8]:
-        """(X, Y, Z) uint8: how many frames looked into each voxel while it was UNKNOWN / FRONTIER (read-only)."""
-        view = self._looks.view()
-        view.setflags(write=False)
-        return view
-
     def centers(self, cls: VoxelClass) -> NDArray[np.float64]:
         """(N, 3) float64 world centres of the voxels of class ``cls``."""
         idx = np.argwhere(self._classes == cls)
@@ -297,10 +258,6 @@ class VoxelMap:
         return copy.deepcopy(self)
 
     # ------------------------------------------------------------------ integration
-
-    def observe(self, frame: DepthFrame) -> NDArray[np.uint8]:
-        """(X, Y, Z) uint8 EMPTY / UNKNOWN / 0 the frame says about the current grid (no state change)."""
-        return self._observe(frame, self.origin, self.shape)
 
     def _observe(self, frame: DepthFrame, lower: NDArray[np.float64], shape: tuple[int, ...]) -> NDArray[np.uint8]:
         if self._config.integration == "raycast":
@@ -338,7 +295,6 @@ class VoxelMap:
             rng = bb.cap_range(want, old_rng, center, n_max)
         rng = bb.floor_range(rng, cfg.floor_height if cfg.floor else None, res)
         before = _regrid(self._classes, self._lo, rng)
-        looks = _regrid(self._looks, self._lo, rng)
         lo = rng[0]
 
         # (2) classify what the frame observed; final voxels never change
@@ -353,15 +309,8 @@ class VoxelMap:
         flat = ((gx * Y + gy) * Z + gz)[inside]
         np.put(new, flat[mutable.reshape(-1)[flat]], np.uint8(VoxelClass.OCCUPIED))
 
-        # (3) frontier, without the voxels looked into frontier_max_looks times
+        # (3) frontier
         new = relabel_frontier(new)
-        if cfg.frontier_max_looks > 0:
-            idx = np.argwhere((new == VoxelClass.UNKNOWN) | (new == VoxelClass.FRONTIER))
-            seen = idx[looked_into(frame, ((idx + lo + 0.5) * res).astype(np.float64), res)]
-            looks = looks.copy()
-            cell = (seen[:, 0], seen[:, 1], seen[:, 2])
-            looks[cell] = np.minimum(looks[cell].astype(np.int64) + 1, 255).astype(np.uint8)
-            new[(new == VoxelClass.FRONTIER) & (looks >= cfg.frontier_max_looks)] = VoxelClass.UNKNOWN
 
         # (4) grow B to cover gamma-spheres around frontier voxels (V_o is inside B by construction)
         f_rng = _index_range(new == VoxelClass.FRONTIER)
@@ -375,7 +324,7 @@ class VoxelMap:
             assert want is not None
             rng2 = bb.cap_range(want, cur, 0.5 * (content[0] + content[1]), n_max)
             rng2 = bb.floor_range(rng2, cfg.floor_height if cfg.floor else None, res)
-            new, before, looks = _regrid(new, lo, rng2), _regrid(before, lo, rng2), _regrid(looks, lo, rng2)
+            new, before = _regrid(new, lo, rng2), _regrid(before, lo, rng2)
             lo = rng2[0]
 
         new_occ = int(np.count_nonzero((new == VoxelClass.OCCUPIED) & (before != VoxelClass.OCCUPIED)))
@@ -393,7 +342,7 @@ class VoxelMap:
             bbox_grew=bool(grew),
             seconds=time.perf_counter() - t0,
         )
-        self._classes, self._looks, self._lo = new, looks, lo.copy()  # commit
+        self._classes, self._lo = new, lo.copy()  # commit
         self._frames += 1
         return stats
 

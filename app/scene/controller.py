@@ -1,6 +1,6 @@
 """The 3D scene: every browser tab's viewer shows exactly one session, in that viewer's own viser scene.
 
-A tab asks for a *viewer* of its session (``POST /api/viewer`` -> :meth:`SceneController.open_viewer`): a
+A tab asks for a *viewer* of its session (``POST /api/viewer`` -> :meth:`SceneController.open_viewer_of`): a
 ticket (app/scene/tickets.py) whose secret goes into the viewer iframe's websocket URL, and a viewer id the
 page quotes in its REST calls. When the viewer connects, app/scene/guard.py checks its Origin and redeems the
 ticket; the controller then draws the session into ``client.scene`` (app/scene/drawing.py) and keeps it in
@@ -118,10 +118,6 @@ class SceneController:
 
     # ------------------------------------------------------------------ viewers
 
-    def open_viewer(self, session: Session) -> Ticket:
-        """A ticket for a new viewer of ``session`` (the viewer exists from now on, drawn once it connects)."""
-        return self.open_viewer_of(session.id)
-
     def open_viewer_of(self, key: str) -> Ticket:
         """A ticket for a new viewer of ``key``: a session's id, or what one of ``other_viewers`` draws."""
         ticket = self.tickets.issue(key)
@@ -138,10 +134,6 @@ class SceneController:
         if v is None:
             raise NotFound(f"viewer {viewer_id}: unknown (reload the page for a new one)")
         return v
-
-    def viewers_of(self, session_id: str) -> list[Viewer]:
-        with self._lock:
-            return [v for v in self._viewers.values() if v.session_id == session_id]
 
     def _on_ticket(self, client_id: int, ticket: Ticket) -> None:
         with self._lock:

@@ -86,12 +86,11 @@ def test_dropouts_follow_the_sensor(sensor: str, fill: int) -> None:
     exactly; a value set explicitly is kept."""
     config = planner_config_for(PlannerConfig(), CameraConfig(sensor=sensor))
     assert config.noise.dropout_fill_px == fill
-    assert config.scoring.max_incidence_deg == 90.0  # opt-in only (measured no better)
     if sensor == "ideal":
         assert config == PlannerConfig()
-    own = PlannerConfig().replace(noise={"dropout_fill_px": 2}, scoring={"max_incidence_deg": 60.0})
+    own = PlannerConfig().replace(noise={"dropout_fill_px": 2})
     kept = planner_config_for(own, CameraConfig(sensor=sensor))
-    assert (kept.noise.dropout_fill_px, kept.scoring.max_incidence_deg) == (2, 60.0)
+    assert kept.noise.dropout_fill_px == 2
 
 
 @pytest.mark.parametrize(

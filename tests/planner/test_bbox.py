@@ -58,16 +58,10 @@ def test_degenerate_box_and_bad_input() -> None:
         bb.view_growth_distance([1.0, 1.0, 1.0], [0.0, 0.0, 0.0], 2.0)
     with pytest.raises(ValueError, match="factor"):
         bb.view_growth_distance([1.0, 1.0, 1.0], [0.0, 0.0, 1.0], 0.5)
-    with pytest.raises(ValueError, match="points"):
-        bb.box_of_points(np.zeros((0, 3)))
 
 
-def test_sphere_cover_and_union() -> None:
-    box = bb.sphere_cover([[0.0, 0.0, 0.0], [0.1, -0.2, 0.05]], 0.02)
-    assert box is not None
-    np.testing.assert_allclose(box.lower, [-0.02, -0.22, -0.02])
-    np.testing.assert_allclose(box.upper, [0.12, 0.02, 0.07])
-    assert bb.sphere_cover(np.zeros((0, 3)), 0.02) is None
+def test_union() -> None:
+    box = BoundingBox(np.array([-0.02, -0.22, -0.02]), np.array([0.12, 0.02, 0.07]))
     u = bb.union(box, BoundingBox(np.array([0.0, 0.0, 0.0]), np.array([0.5, 0.0, 0.0])))
     assert u is not None
     np.testing.assert_allclose(u.upper, [0.5, 0.02, 0.07])
@@ -79,9 +73,6 @@ def test_lattice_snapping_is_outward_and_tolerates_float_noise() -> None:
     # 0.1 / 0.01 = 10.000000000000002 and 0.3 / 0.01 = 29.999999999999996 stay on their planes
     np.testing.assert_array_equal(lo, [10, -2, 0])
     np.testing.assert_array_equal(hi, [30, 3, 1])  # a flat box still gets one voxel
-    p_lo, p_hi = bb.point_range(np.array([[0.0149, -0.001, 0.02], [0.0, 0.0, 0.0]]), 0.01)  # type: ignore[misc]
-    np.testing.assert_array_equal(p_lo, [0, -1, 0])
-    np.testing.assert_array_equal(p_hi, [2, 1, 3])
     assert bb.max_voxels(1.0, 0.01) == 100
     assert bb.max_voxels(0.105, 0.01) == 10
 

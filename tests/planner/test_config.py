@@ -72,3 +72,23 @@ def test_a_bool_is_not_a_count_even_when_built_directly(section: str, field: str
 def test_whole_floats_still_set_integer_fields() -> None:
     cfg = PlannerConfig.from_dict({"cluster": {"max_iter": 50.0, "seed": 3.0}})
     assert cfg.cluster.max_iter == 50 and isinstance(cfg.cluster.max_iter, int) and cfg.cluster.seed == 3
+
+
+@pytest.mark.parametrize(
+    ("section", "key", "value"),
+    [("voxel", "frontier_max_looks", 0), ("scoring", "max_incidence_deg", 90.0), ("partitions", "stall_growth", 0.0)],
+)
+def test_a_removed_setting_loads_from_a_journal_and_is_refused_from_a_user(section: str, key: str, value: float) -> None:
+    """Journals written before the removal carry the key in every config: they still load (the key ignored);
+    a person who sets it is told it was removed, and a misspelt key is still unknown."""
+    recorded = PlannerConfig().to_dict()
+    recorded[section][key] = value
+    recorded["voxel"]["resolution"] = 0.02
+    loaded = PlannerConfig.from_journal(recorded)
+    assert loaded.voxel.resolution == 0.02 and not hasattr(getattr(loaded, section), key)
+    with pytest.raises(ValueError, match=rf"{section}\.{key}: removed setting \(.*measured"):
+        PlannerConfig.from_dict({section: {key: value}})
+    with pytest.raises(ValueError, match=rf"{section}\.{key}: removed setting"):
+        PlannerConfig().replace(**{section: {key: value}})
+    with pytest.raises(ValueError, match=rf"{section}\.{key}x: unknown setting"):
+        PlannerConfig.from_journal({section: {f"{key}x": value}})

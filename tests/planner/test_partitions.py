@@ -17,7 +17,6 @@ from planner.partitions import (
     sector_edges,
     sector_of,
     select_best,
-    stalled_sector,
 )
 from planner.types import BoundingBox, Candidate, Pose, ViewScore
 
@@ -139,13 +138,3 @@ def test_select_best() -> None:
     assert select_best([]) is None
     with pytest.raises(ValueError, match="scores\\[0\\]"):
         select_best([score(0, float("nan"))])
-
-
-def test_stalled_sector_only_after_every_sector_is_scanned() -> None:
-    all4 = {0, 1, 2, 3}
-    assert stalled_sector(all4, 4, 2, [1000, 1005], 0.01) == 2  # +0.5 %: stalled
-    assert stalled_sector(all4, 4, 2, [1000, 1010], 0.01) is None  # +1 %: not below the threshold
-    assert stalled_sector({0, 1, 2}, 4, 2, [1000, 1000], 0.01) is None  # the sweep is not finished
-    assert stalled_sector(all4, 4, 2, [1000, 1000], 0.0) is None  # disabled
-    assert stalled_sector(all4, 4, 2, [1000], 0.01) is None  # one view: nothing to compare
-    assert stalled_sector({0}, 1, 0, [1000, 1000], 0.01) is None  # one sector: nowhere else to go

@@ -100,8 +100,7 @@ def test_rays_ending_on_the_plate_carve_free_space(monkeypatch: pytest.MonkeyPat
         )
         mug_cell.move_to(Pose.look_at(eye, [0.0, 0.0, 0.08]))
         frames.append(mug_cell.capture())
-    # frontier_max_looks would also retire that ring after two looks: pin the plate rule on its own
-    cfg = PlannerConfig().replace(registration={"enabled": False}, voxel={"frontier_max_looks": 0})
+    cfg = PlannerConfig().replace(registration={"enabled": False})
 
     planner = Planner(cfg)
     carved = planner._plate_as_free_space(frames[0])
@@ -164,35 +163,6 @@ def test_revisit_radius_that_would_leave_nothing_falls_back_to_the_view_itself(c
     # 179 degrees from the first view covers the whole hemisphere: only the half spacing applies
     assert any(eligible[0.0])
     assert eligible[179.0] == eligible[0.0]
-
-
-def test_a_stalled_view_makes_its_sector_ineligible(cell) -> None:
-    """The departure of ``PartitionConfig.stall_growth``: once every sector is scanned, a view that adds
-    (almost) no OCCUPIED voxels sends the next view to another sector; with 0 every sector stays eligible."""
-    frames = []
-    for azimuth in (0.25, 0.75, 1.25, 1.75):  # one view in the middle of each sector, 30 degrees up
-        eye = 0.45 * np.array(
-            [np.cos(0.5) * np.cos(azimuth * np.pi), np.cos(0.5) * np.sin(azimuth * np.pi), np.sin(0.5)]
-        )
-        cell.move_to(Pose.look_at(eye + np.array([0.0, 0.0, 0.04]), [0.0, 0.0, 0.04]))
-        frames.append(cell.capture())
-    results = {}
-    for stall in (0.001, 0.0):
-        planner = Planner(SMALL.replace(termination={"max_views": 10}, partitions={"stall_growth": stall}))
-        for frame in frames:
-            planner.integrate(frame)
-        assert planner.occupied_counts[-1] > 1.001 * planner.occupied_counts[-2]  # the 4th view added surface
-        growing = planner.plan()
-        planner.integrate(frames[-1])  # the same view again: no new surface
-        assert planner.occupied_counts[-1] == planner.occupied_counts[-2]
-        results[stall] = (growing, planner.plan())
-    growing, stalled = results[0.001]
-    assert growing.scanned_sectors == frozenset(range(4))
-    assert growing.eligible_sectors == frozenset(range(4))  # the 4th view added surface: every sector
-    assert stalled.eligible_sectors == frozenset({0, 1, 2})  # sector 3 (the stalled view's) is left
-    assert stalled.best_index is not None and stalled.candidates[stalled.best_index].sector != 3
-    assert all(not s.eligible for s, c in zip(stalled.scores, stalled.candidates, strict=True) if c.sector == 3)
-    assert results[0.0][1].eligible_sectors == frozenset(range(4))
 
 
 def test_content_aim_builds_the_sphere_about_the_object_seen_not_all_of_b(cell) -> None:

@@ -158,27 +158,3 @@ def test_bad_input_raises() -> None:
         score_views(e, [AT_ORIGIN], K, None, np.array([True]))  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="z"):
         depth_ranks(np.zeros(3))
-
-
-def test_no_credit_for_frontier_seen_beyond_the_grazing_limit() -> None:
-    """A flat frontier sheet in the plane z = 0 (normal +z), seen from above (incidence 0) and from 15 degrees of
-    elevation (incidence 75): a sensor with a 70 degree limit earns nothing from the low view; the paper (90) and
-    an occupied or round ellipsoid of the same place are not affected."""
-    from planner.scoring import beyond_incidence
-
-    sheet = Ellipsoid(np.zeros(3), np.array([0.05, 0.05, 0.004]), np.eye(3), "frontier", n_points=50)
-    ball = sphere(np.zeros(3), 0.03, "frontier")
-    solid = Ellipsoid(np.zeros(3), np.array([0.05, 0.05, 0.004]), np.eye(3), "occupied", n_points=50)
-    low = math.radians(15.0)
-    eyes = [np.array([0.0, 0.0, 0.5]), 0.5 * np.array([math.cos(low), 0.0, math.sin(low)])]
-    views = [candidate(Pose.look_at(eye, np.zeros(3)), i) for i, eye in enumerate(eyes)]
-    hidden = beyond_incidence([sheet, ball, solid], views, 70.0)
-    assert hidden.tolist() == [[False, False, False], [True, False, False]]
-    assert not beyond_incidence([sheet], views, 80.0).any()  # 75 degrees is within an 80 degree limit
-    k = Intrinsics()
-    paper = score_views([sheet], views, k, ScoringConfig(), np.ones(2, dtype=bool))
-    sensor = score_views([sheet], views, k, ScoringConfig(max_incidence_deg=70.0), np.ones(2, dtype=bool))
-    assert paper[1].frontier > 0 and sensor[1].frontier == 0
-    assert sensor[0].frontier == pytest.approx(paper[0].frontier)
-    with pytest.raises(ValueError, match=r"scoring\.max_incidence_deg"):
-        ScoringConfig(max_incidence_deg=0.0)

@@ -17,7 +17,7 @@ import planner.voxel_map as vm
 from planner.config import VoxelConfig
 from planner.raycast import pixel_rays, ray_observations
 from planner.types import DepthFrame, Intrinsics, Pose, VoxelClass
-from planner.voxel_map import VoxelMap, looked_into, observe_projective
+from planner.voxel_map import VoxelMap, observe_projective
 
 E, O, U, F, N = VoxelClass.EMPTY, VoxelClass.OCCUPIED, VoxelClass.UNKNOWN, VoxelClass.FRONTIER, VoxelClass.NONE
 K_SMALL = Intrinsics(160, 120, 150.0, 150.0, 79.5, 59.5)
@@ -177,7 +177,7 @@ def test_empty_and_occupied_are_final() -> None:
 
 
 def test_growth_keeps_classes_at_their_world_positions() -> None:
-    m, _ = wall_map(frontier_max_looks=0)  # the same view twice would retire frontier (tested below)
+    m, _ = wall_map()
     old, old_origin = m.classes.copy(), m.origin
     box3 = ((-0.1483, 0.0513, -0.0217), (-0.1217, 0.08, 0.0183))  # outside B on the -x side
     frame2 = render(T_FRONT, K_SMALL, (BOX, WALL, box3))
@@ -193,36 +193,6 @@ def test_growth_keeps_classes_at_their_world_positions() -> None:
     assert np.all(np.isin(old[changed], [U, F])) and np.all(np.isin(sub[changed], [U, F]))
     assert changed.sum() > 0 and np.all(np.argwhere(changed)[:, 0] == 0)
     assert np.all(at(m, range(-14, -12), 5, range(-2, 1)) == O)  # the new box's front face
-
-
-def test_frontier_looked_into_twice_is_retired_to_unknown() -> None:
-    """The departure of ``VoxelConfig.frontier_max_looks``: frontier that two frames have looked into and
-    left unknown is no longer frontier; frontier that no frame reached stays, and 0 keeps the paper's rule."""
-    paper, frame = wall_map(frontier_max_looks=0)
-    paper.integrate(frame, frame.points_world)
-    ours, _ = wall_map(frontier_max_looks=2)
-    after_one = ours.classes.copy()
-    ours.integrate(frame, frame.points_world)
-    f_paper = paper.classes == F
-    assert np.count_nonzero(after_one == F) == np.count_nonzero(f_paper) > 0  # one look: nothing retired yet
-    reached = looked_into(frame, paper.centers(F), 0.01)
-    assert 0 < reached.sum() < len(reached)  # some frontier voxels were looked into, some are hidden
-    # exactly the reached ones (looked into by both frames) became UNKNOWN, the rest are still FRONTIER
-    retired = f_paper & (ours.classes == U)
-    assert retired.sum() == reached.sum()
-    np.testing.assert_array_equal(ours.classes[f_paper & ~retired], F)
-    assert np.all(ours.looks[retired] == 2)
-    np.testing.assert_array_equal(ours.classes[~f_paper], paper.classes[~f_paper])
-
-
-def test_looked_into_compares_the_hit_with_the_voxel_entry() -> None:
-    """A voxel straight ahead at 0.3 m: reached when the surface is inside or behind it, not when in front."""
-    res, z = 0.01, 0.3
-    centre = np.array([[0.0, 0.0, z]])
-    for depth, expected in ((z + 0.2, True), (z, True), (z - 0.004, True), (z - 0.006, False), (0.0, False)):
-        frame = DepthFrame(np.full((K_SMALL.height, K_SMALL.width), depth, np.float32), Pose.identity(), K_SMALL)
-        # the camera looks along +z from the origin; the centre projects to the principal point
-        assert looked_into(frame, centre, res)[0] == expected, depth
 
 
 # ---------------------------------------------------------------------------- bad input, rollback

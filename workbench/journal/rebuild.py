@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from devices.config import DeviceConfig
 from devices.replay import ReplayCell
 from planner import Planner, PlannerConfig, PlanResult, Pose
-from planner.config import from_dict
+from planner.config import from_dict, without_removed
 from planner.planner import IntegrationReport
 from workbench.journal.discard import without_discarded
 from workbench.journal.store import Journal
@@ -118,7 +118,7 @@ def rebuild(
     keep_scene: each replayed capture keeps the views and the cloud after it (workbench/journal/timeline.py).
     """
     header = journal.header
-    config = PlannerConfig.from_dict(header["config"])
+    config = PlannerConfig.from_journal(header["config"])
     planner = Planner(config, evaluator=str(header.get("planner", "projection")))
     record = SessionRecord.from_header(header)
     captures: list[ReplayedCapture] = []
@@ -209,7 +209,7 @@ def _replay_one(
 
     kind = ev["kind"]
     if kind == "config":
-        config = config.replace(**ev["changes"])
+        config = config.replace(**without_removed(ev["changes"]))
         planner.config = config
         record.apply(ev)
     elif kind == "capture":

@@ -350,7 +350,7 @@ class SessionRegistry:
             journal = read_journal(dormant.directory)
             header = journal.header
             devices = from_dict(DeviceConfig, header["devices"])
-            config = PlannerConfig.from_dict(header["config"])
+            config = PlannerConfig.from_journal(header["config"])
             seed = int(header["seed"])
         except (ValueError, KeyError, TypeError) as exc:
             raise Invalid(f"session {dormant.id}: cannot resume: {exc}") from None

@@ -71,10 +71,6 @@ class SurfaceMesh:
         """Pickled as its two arrays: not the trimesh (and its caches) :attr:`area` builds, five times the bytes."""
         return (SurfaceMesh, (self.vertices, self.faces))
 
-    @staticmethod
-    def from_trimesh(mesh: trimesh.Trimesh) -> SurfaceMesh:
-        return SurfaceMesh.canonical(mesh.vertices, mesh.faces)
-
     @property
     def triangles(self) -> int:
         return len(self.faces)
