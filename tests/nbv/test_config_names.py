@@ -304,13 +304,19 @@ def test_the_help_shows_the_docstring_and_the_default(capsys: pytest.CaptureFixt
     assert "--cluster.search {fast,exhaustive}, --search {fast,exhaustive}" in text
 
 
-def test_the_configuration_page_is_the_generated_one() -> None:
-    """docs/configuration.md is ``python -m nbv.config_doc``'s output (run it after changing a field)."""
-    page = (REPO / "docs" / "configuration.md").read_text()
-    assert page == config_doc.render()
-    for f in [*PLANNER, *SERVER, *DEVICES, *FAULTS]:
-        assert f"| `{f.path[-1]}` |" in page
-    assert "| `--voxel.resolution`, `--resolution`, `--planner.voxel.resolution` |" in page
+def test_the_configuration_pages_are_the_generated_ones() -> None:
+    """docs/configuration.md and configuration-server.md are ``python -m nbv.config_doc docs``'s output (run it
+    after changing a field)."""
+    pages = config_doc.render_pages()
+    assert set(pages) == {"configuration.md", "configuration-server.md"}
+    for name, text in pages.items():
+        assert (REPO / "docs" / name).read_text() == text, f"docs/{name} is stale: python -m nbv.config_doc docs"
+    for f in PLANNER:
+        assert f"| `{f.path[-1]}` |" in pages["configuration.md"]
+    for f in [*SERVER, *DEVICES, *FAULTS]:
+        assert f"| `{f.path[-1]}` |" in pages["configuration-server.md"]
+    assert "| `--voxel.resolution`, `--resolution` |" in pages["configuration.md"]
+    assert "`--planner.voxel.resolution` for serve" in pages["configuration.md"]
 
 
 def test_every_field_is_documented() -> None:
