@@ -1,6 +1,6 @@
 """The tour's ring names the views its next plan chooses among (``TourPlan.then``), and the move to the ring's first
 view is planned for them, in a headless scan and in a session alike: the cell is asked with ``then`` = those views'
-poses, only for that move, and the arm's move is the look-ahead's (issue 25's tenth round)."""
+poses, only for that move, and the arm's move is the look-ahead's."""
 
 from __future__ import annotations
 
@@ -26,9 +26,9 @@ def spy_on_moves(monkeypatch: pytest.MonkeyPatch, cell: Any) -> list[list[Pose]]
     calls: list[list[Pose]] = []
     move_to = cell.move_to
 
-    def spy(T_table_camera: Pose, plate_angle: float | None = None, then: Any = ()) -> Any:
+    def spy(T_table_camera: Pose, plate_angle: float | None = None, then: Any = (), motion: Any = None) -> Any:
         calls.append(list(then))
-        return move_to(T_table_camera, plate_angle, then)
+        return move_to(T_table_camera, plate_angle, then, motion)
 
     monkeypatch.setattr(cell, "move_to", spy)
     return calls
