@@ -375,9 +375,7 @@ class Cell:
     def stop_moving(self) -> None:
         """Stop the arm and the turntable (those whose driver has a ``stop()``), e.g. after a move timed out."""
         for device in (self.arm, self.turntable):
-            stop = getattr(device, "stop", None)
-            if callable(stop):
-                stop()
+            _stop(device)
 
     def _turn_during(self, angle: float, trajectory: JointTrajectory) -> None:
         """Turn the plate to ``angle`` (a thread of its own) while the arm runs ``trajectory`` (this thread); both
@@ -396,9 +394,7 @@ class Cell:
         try:
             self.arm.execute(trajectory)
         except BaseException:
-            stop = getattr(self.turntable, "stop", None)
-            if callable(stop):
-                stop()
+            _stop(self.turntable)
             turning.join()
             if failed:
                 raise failed[0] from None
@@ -455,3 +451,10 @@ class Cell:
         rotvec = self._rng.normal(0.0, self.pose_noise_rotation, 3) if self.pose_noise_rotation else np.zeros(3)
         dR = Rotation.from_rotvec(rotvec).as_matrix()
         return Pose(pose.rotation @ dR, pose.translation + dt)
+
+
+def _stop(device: object) -> None:
+    """``device.stop()`` for a driver that has one (a ``JointArm`` has; an ``Arm`` or a ``Turntable`` may)."""
+    stop = getattr(device, "stop", None)
+    if callable(stop):
+        stop()

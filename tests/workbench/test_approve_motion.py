@@ -69,11 +69,11 @@ def test_an_override_plans_the_move_once_and_a_refused_one_moves_nothing(
     other = next(c.index for c in entry.plan.scores if c.eligible and c.index != entry.plan.best_index)
     target = entry.plan.candidates[other].T_world_camera
     planned = count_plans(monkeypatch, session.cell.kinematics)
-    q_before = session.cell.joint_positions()
+    q_before = session.cell.arm.joint_positions()
     with pytest.raises(Unreachable):
         session.approve(entry.plan_id, pose=Pose.look_at(np.array([0.0, 0.0, 3.0]), np.zeros(3)))
     assert len(planned) == 1  # the check planned it and refused it; nothing moved
-    assert np.array_equal(session.cell.joint_positions(), q_before) and session.status()["moves"] == 1
+    assert np.array_equal(session.cell.arm.joint_positions(), q_before) and session.status()["moves"] == 1
     planned.clear()
     session.approve(entry.plan_id, index=other)
     assert len(planned) == 1

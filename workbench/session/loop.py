@@ -159,14 +159,6 @@ class ScanLoop(SessionCore):
             self.set_selection(self.candidate_of(self.pending, index))
         self.notify(SessionEvent.SELECTION)
 
-    def reachability(self, pose: Pose) -> tuple[bool, str]:
-        """Whether the cell can take a view at ``pose``: its arm's reach, and not inside or against the object."""
-        try:
-            self._motion_to(pose)
-        except UnreachableError as exc:
-            return False, str(exc)
-        return True, "reachable"
-
     def _motion_to(self, pose: Pose, then: list[Pose] | None = None) -> Motion:
         """The motion the cell plans to ``pose`` (``then``: the views the plan expects next), after the first view
         also checked against the seen object. UnreachableError when the arm cannot reach it or it is inside or
@@ -179,9 +171,14 @@ class ScanLoop(SessionCore):
         return motion
 
     def set_custom(self, pose: Pose) -> CustomPose:
-        """Propose a custom pose (the gizmo); reachability is checked now and again on approval."""
-        ok, reason = self.reachability(pose)
-        custom = CustomPose(pose, ok, reason)
+        """Propose a custom pose (the gizmo); reachability (the arm's reach, and not inside or against the object) is
+        checked now and again on approval."""
+        try:
+            self._motion_to(pose)
+        except UnreachableError as exc:
+            custom = CustomPose(pose, False, str(exc))
+        else:
+            custom = CustomPose(pose, True, "reachable")
         with self.lock:
             if self.pending is None:
                 raise Conflict(f"session {self.id}: no pending plan to override (state {self.state})")
