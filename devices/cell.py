@@ -58,7 +58,10 @@ class ScanCell(Protocol):
     for a cell that cannot halt, ``auto_refusal`` None where auto mode may run, ``knows_pose`` False for a
     device-less planning cell (no move times from it)."""
 
-    config: CellConfig
+    @property
+    def config(self) -> CellConfig:
+        """The cell geometry (a worker's planning cell is built from it)."""
+        ...
 
     @property
     def intrinsics(self) -> Intrinsics: ...
@@ -181,13 +184,13 @@ class Cell:
         self.arm: Any = arm
         self.kinematics = kinematics
         self.turntable = turntable
-        self.config = config if config is not None else CellConfig()
+        self._config = config if config is not None else CellConfig()
         self.pose_noise_translation = float(pose_noise_translation)
         self.pose_noise_rotation = math.radians(pose_noise_rotation_deg)
         self._rng = np.random.default_rng(seed)
         if reach is None:
             if kinematics is None:
-                reach = SphereReach(self.config, cast("Arm | None", arm), turntable)
+                reach = SphereReach(self._config, cast("Arm | None", arm), turntable)
             else:
                 reach = UrdfArm(kinematics, cast(JointArm, arm), turntable)  # a JointArm: checked above
         self.reach: Reach = reach
@@ -198,6 +201,16 @@ class Cell:
         transforms beside the nominal ones the cell reports; None for a real cell."""
 
     # ------------------------------------------------------------------ geometry
+
+    @property
+    def config(self) -> CellConfig:
+        """The cell geometry (arm base, reach, plate, initial view); set, the reach answers from the new one."""
+        return self._config
+
+    @config.setter
+    def config(self, config: CellConfig) -> None:
+        self._config = config
+        self.reach.set_config(config)
 
     @property
     def intrinsics(self) -> Intrinsics:

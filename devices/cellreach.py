@@ -53,6 +53,10 @@ class Reach(Protocol):
         collision model."""
         ...
 
+    def set_config(self, config: CellConfig) -> None:
+        """The cell's geometry changed (``Cell.config`` set): answer from ``config`` from now on."""
+        ...
+
     def plan(self, T_table_camera: Pose, plate_angle: float | None, then: Sequence[Pose]) -> Motion:
         """The motion that puts the camera at ``T_table_camera`` (see :meth:`devices.cell.Cell.plan_motion`)."""
         ...
@@ -98,9 +102,13 @@ class SphereReach:
     only: it knows no camera pose to move from)."""
 
     def __init__(self, config: CellConfig, arm: Arm | None, turntable: Turntable | None) -> None:
-        self.config = config
         self.arm = arm
         self.turntable = turntable
+        self.set_config(config)
+
+    def set_config(self, config: CellConfig) -> None:
+        """The reach, the heights and the arm base of ``config`` from now on."""
+        self.config = config
         self._arm_base = np.asarray(config.arm_base, dtype=np.float64)
 
     def _angle(self) -> float:
@@ -218,6 +226,9 @@ class UrdfArm:
         self.kinematics = kinematics
         self.arm = arm
         self.turntable = turntable
+
+    def set_config(self, config: CellConfig) -> None:
+        """Nothing to change: the arm model keeps the geometry it was built with (``ArmKinematics``)."""
 
     def _state(self) -> tuple[NDArray[np.float64], float]:
         return np.asarray(self.arm.joint_positions(), dtype=np.float64), self.turntable.angle

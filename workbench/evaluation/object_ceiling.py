@@ -69,8 +69,10 @@ class ReachCell(Protocol):
     """What the ceiling asks of a cell (a :class:`devices.cell.Cell` is one): its geometry, its arm (its type is
     part of the cache key), the reach predicate and the object box that predicate keeps clear of."""
 
-    config: CellConfig
     arm: Any
+
+    @property
+    def config(self) -> CellConfig: ...
 
     def is_reachable(self, T_table_camera: Pose) -> bool: ...
 
