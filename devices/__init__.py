@@ -4,7 +4,9 @@
 - ``config``     CameraConfig, CellConfig, DeviceConfig
 - ``mesh``       load_mesh, place_on_plate, sample_surface, MeshError
 - ``builtins``   BUILTIN_OBJECTS, make_builtin, resolve_model
-- ``cell``       Cell: frames (base / table / camera), reachability, move_to, capture
+- ``cell``       Cell: frames (base / table / camera), reachability, move_to, capture; ScanCell, what a scan asks
+- ``cellreach``  Reach: how the cell's arm reaches a view, SphereReach or UrdfArm (IK, collisions, trajectories)
+- ``motion``     Motion: a planned move (plate angle, arm target, trajectory, duration); rz
 - ``sim``        SimulatedCamera / Arm / Turntable, make_sim_cell
 - ``drivers``    real hardware: RealSense, UR (RTDE), GRBL and Modbus turntables (vendor packages lazily)
 - ``cellfile``   the cell file: which driver per device, hand-eye, arm base, allow_auto
@@ -15,7 +17,8 @@ Importing ``devices`` does not import open3d (the simulated camera does, when bu
 """
 
 from devices.builtins import BUILTIN_OBJECTS, make_builtin, resolve_model
-from devices.cell import Cell, Motion
+from devices.cell import Cell, Motion, ScanCell
+from devices.cellreach import Reach, SphereReach, UrdfArm
 from devices.config import CameraConfig, CellConfig, DeviceConfig
 from devices.mesh import MeshError, load_mesh, place_on_plate, sample_surface
 from devices.protocols import Arm, Camera, CaptureError, DeviceError, Turntable, UnreachableError
@@ -33,11 +36,15 @@ __all__ = [
     "DeviceError",
     "MeshError",
     "Motion",
+    "Reach",
+    "ScanCell",
     "SimulatedArm",
     "SimulatedCamera",
     "SimulatedTurntable",
+    "SphereReach",
     "Turntable",
     "UnreachableError",
+    "UrdfArm",
     "load_mesh",
     "make_builtin",
     "make_sim_cell",

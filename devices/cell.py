@@ -20,7 +20,10 @@ Two kinds of arm (``CellConfig.kinematics``):
 - ``reach_sphere``: an :class:`devices.protocols.Arm` that goes to a camera pose; the plate turns the camera's
   azimuth onto the arm base's azimuth and the camera must be within the reach sphere. Kept for comparison.
 
-In both, the arm moves the camera to ``T_base_camera = Rz(theta) @ T_table_camera``.
+The two are the two implementations of :class:`devices.cellreach.Reach` (``UrdfArm``, ``SphereReach``) the cell
+holds as ``Cell.reach``. In both, the arm moves the camera to ``T_base_camera = Rz(theta) @ T_table_camera``.
+:class:`ScanCell` is what a scan asks of a cell (the session, ``workbench.planning.plan_in``, the headless scan):
+every capability is a method every cell has, answering "none" where it is absent.
 ``devices.sim.make_sim_cell`` builds a Cell of simulated devices.
 """
 
@@ -29,75 +32,117 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol, cast
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from devices.angles import wrap_angle
+from devices.cellreach import Reach, SphereReach, UrdfArm
 from devices.config import CellConfig
-from devices.protocols import Arm, Camera, JointArm, Turntable, UnreachableError
+from devices.motion import Motion, rz
+from devices.protocols import Arm, Camera, JointArm, Turntable
 from devices.trajectory import JointTrajectory
 from planner.types import BoundingBox, DepthFrame, Intrinsics, Pose
 
 if TYPE_CHECKING:
     from devices.arm.kinematics import ArmKinematics
 
-
-SPHERE_CAMERA_SPEED = 0.25
-"""Reach sphere: the camera's straight-line speed assumed for a move's duration estimate, m/s."""
+__all__ = ["Cell", "Motion", "ScanCell", "rz"]
 
 
-def rz(theta: float) -> Pose:
-    """``Rz(theta)``: rotation by ``theta`` radians about +z (counter-clockwise seen from above)."""
-    c, s = math.cos(theta), math.sin(theta)
-    return Pose(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), np.zeros(3))
-
-
-@dataclass(frozen=True, eq=False)
-class Motion:
-    """How the cell reaches a view: turntable ``angle`` (rad, in (-pi, pi]) and the arm's ``T_base_camera``.
-
-    With a URDF arm also: ``q`` (n,) the joint target, ``trajectory`` the timed joint trajectory from the
-    current configuration, ``duration`` seconds of the whole move (plate turn + trajectory; for the reach
-    sphere: the plate turn plus the camera's straight travel at ``SPHERE_CAMERA_SPEED``), ``path_method``
-    ('straight' or 'rrt_connect') and ``planning_seconds``.
-    """
-
-    angle: float
-    T_base_camera: Pose
-    q: np.ndarray | None = None
-    trajectory: JointTrajectory | None = None
-    duration: float = 0.0
-    path_method: str = ""
-    planning_seconds: float = 0.0
-    retract: JointTrajectory | None = None
-    """URDF arm: the trajectory to the retracted configuration that runs before the plate turns, when the turn
-    would sweep the object's box into the standing arm (None: the arm stands still while the plate turns)."""
-    overlapped: bool = False
-    """URDF arm: the plate turns while the arm runs ``trajectory`` (``ArmConfig.turn_while_moving``, the whole path
-    clear of the turning object); ``duration`` then counts the longer of the two, not their sum."""
+class ScanCell(Protocol):
+    """What a scan asks of a cell: planning (reachability, the object box, move costs and times), the moves, the
+    captures, the device state a resume restores, and the safety of a cell on real devices. Optional capabilities
+    are methods every cell has: ``set_object_box`` does nothing without a collision model, ``halt`` returns None
+    for a cell that cannot halt, ``auto_refusal`` None where auto mode may run, ``knows_pose`` False for a
+    device-less planning cell (no move times from it)."""
 
     @property
-    def path_length(self) -> float:
-        """Length of the joint path, radians (0 without a trajectory)."""
-        return self.trajectory.path_length() if self.trajectory is not None else 0.0
+    def config(self) -> CellConfig:
+        """The cell geometry (a worker's planning cell is built from it)."""
+        ...
 
-    def to_json(self) -> dict[str, Any]:
-        """The metrics of a move: plate angle, joints, ``T_base_camera``, joint path length and duration."""
-        return {
-            "plate_angle": float(self.angle),
-            "joints": None if self.q is None else [float(v) for v in self.q],
-            "T_base_camera": self.T_base_camera.to_dict(),
-            "path_length": self.path_length,
-            "move_duration": float(self.duration),
-            "path_method": self.path_method or None,
-            "motion_planning_seconds": float(self.planning_seconds),
-            "retracted": self.retract is not None,
-            "turn_overlapped": self.overlapped,
-        }
+    @property
+    def intrinsics(self) -> Intrinsics: ...
+
+    @property
+    def angle(self) -> float:
+        """The turntable angle, radians."""
+        ...
+
+    @property
+    def knows_pose(self) -> bool:
+        """Whether the cell knows where its camera is (move times start from there)."""
+        ...
+
+    @property
+    def reach_of_config(self) -> bool:
+        """Whether a worker's planning cell of the same config and arm state judges reachability the same."""
+        ...
+
+    @property
+    def halting(self) -> bool:
+        """A halt was asked and the move it stopped has not ended yet."""
+        ...
+
+    def initial_pose(self) -> Pose:
+        """``T_table_camera`` of the first view."""
+        ...
+
+    def joint_positions(self) -> NDArray[np.float64] | None:
+        """(n,) the arm's joints, None for an arm without joints."""
+        ...
+
+    def is_reachable(self, T_table_camera: Pose) -> bool: ...
+
+    def set_object_box(self, bbox: BoundingBox | None) -> None:
+        """The object's box the arm keeps clear of (nothing to do without a collision model)."""
+        ...
+
+    def move_costs(self, candidates: Sequence[Any], eligible: NDArray[np.bool_]) -> NDArray[np.float64]:
+        """(C,) seconds of the move to each eligible candidate, inf for the others."""
+        ...
+
+    def move_times(
+        self, candidates: Sequence[Any], indices: Sequence[int], *, exact: bool = False
+    ) -> NDArray[np.float64]:
+        """(K + 1, K + 1) seconds of the moves between the current state and the views ``indices``."""
+        ...
+
+    def plan_motion(self, T_table_camera: Pose, plate_angle: float | None = None, then: Sequence[Pose] = ()) -> Motion:
+        """The motion to a view; UnreachableError when there is none."""
+        ...
+
+    def move_to(
+        self,
+        T_table_camera: Pose,
+        plate_angle: float | None = None,
+        then: Sequence[Pose] = (),
+        motion: Motion | None = None,
+    ) -> Motion:
+        """Move to a view (by ``motion`` when it was planned already); returns the motion run."""
+        ...
+
+    def stop_moving(self) -> None:
+        """Stop the arm and the turntable (those whose driver can stop) after a move timed out."""
+        ...
+
+    def capture(self) -> DepthFrame: ...
+
+    def device_state(self) -> dict[str, Any]: ...
+
+    def restore_device_state(self, state: dict[str, Any]) -> None: ...
+
+    def auto_refusal(self) -> str | None:
+        """Why moves without an approval per view may not run on this cell; None: they may."""
+        ...
+
+    def halt(self) -> list[str] | None:
+        """Stop a running move at once; None when this cell cannot."""
+        ...
+
+    def close(self) -> None: ...
 
 
 class Cell:
@@ -107,6 +152,8 @@ class Cell:
     ``JointArm`` when ``kinematics`` is given, else an ``Arm``).
     config: the cell geometry (arm base, reach, plate).
     kinematics: the arm model that plans the moves of a ``JointArm`` (None = the reach sphere of ``config``).
+    reach: how the arm reaches a view (:class:`devices.cellreach.Reach`; None: :class:`UrdfArm` of ``kinematics``,
+    else :class:`SphereReach` of ``config``).
     pose_noise_translation: std of the error of the reported camera position, per axis, metres.
     pose_noise_rotation_deg: std of the error of the reported orientation, per rotation-vector component, degrees.
     seed: seeds the pose noise.
@@ -120,6 +167,7 @@ class Cell:
         config: CellConfig | None = None,
         *,
         kinematics: ArmKinematics | None = None,
+        reach: Reach | None = None,
         pose_noise_translation: float = 0.0,
         pose_noise_rotation_deg: float = 0.0,
         seed: int = 0,
@@ -136,11 +184,16 @@ class Cell:
         self.arm: Any = arm
         self.kinematics = kinematics
         self.turntable = turntable
-        self.config = config if config is not None else CellConfig()
+        self._config = config if config is not None else CellConfig()
         self.pose_noise_translation = float(pose_noise_translation)
         self.pose_noise_rotation = math.radians(pose_noise_rotation_deg)
         self._rng = np.random.default_rng(seed)
-        self._arm_base = np.asarray(self.config.arm_base, dtype=np.float64)
+        if reach is None:
+            if kinematics is None:
+                reach = SphereReach(self._config, cast("Arm | None", arm), turntable)
+            else:
+                reach = UrdfArm(kinematics, cast(JointArm, arm), turntable)  # a JointArm: checked above
+        self.reach: Reach = reach
         self.last_motion: Motion | None = None
         """The motion of the last :meth:`move_to` that started (the 3D view animates its trajectory)."""
         self.errors: Any = None
@@ -148,6 +201,16 @@ class Cell:
         transforms beside the nominal ones the cell reports; None for a real cell."""
 
     # ------------------------------------------------------------------ geometry
+
+    @property
+    def config(self) -> CellConfig:
+        """The cell geometry (arm base, reach, plate, initial view); set, the reach answers from the new one."""
+        return self._config
+
+    @config.setter
+    def config(self, config: CellConfig) -> None:
+        self._config = config
+        self.reach.set_config(config)
 
     @property
     def intrinsics(self) -> Intrinsics:
@@ -161,30 +224,36 @@ class Cell:
     @property
     def T_base_camera(self) -> Pose:
         """The true camera pose in the base frame: forward kinematics of the arm's joints, or the arm's pose."""
-        if self.kinematics is not None:
-            return self.kinematics.camera_pose(self.arm.joint_positions())
-        return self.arm.pose
+        return self.reach.camera_pose()
 
     @property
     def pose(self) -> Pose:
         """The true (noise-free) ``T_table_camera`` from the arm and the turntable angle."""
         return rz(-self.turntable.angle) @ self.T_base_camera
 
-    def joint_positions(self) -> np.ndarray | None:
+    @property
+    def knows_pose(self) -> bool:
+        """Whether the cell knows where its camera is (a device-less planning cell of the reach sphere does not):
+        move times between views start from there."""
+        return self.arm is not None
+
+    @property
+    def reach_of_config(self) -> bool:
+        """Whether reachability is that of ``config`` and the arm's state alone, so a worker's planning cell of the
+        same config and state answers the same (a replay cell judges it its own way)."""
+        return True
+
+    def joint_positions(self) -> NDArray[np.float64] | None:
         """(n,) the arm's joints, radians (None for the reach-sphere arm)."""
-        return self.arm.joint_positions() if self.kinematics is not None else None
+        return self.reach.joint_positions()
 
     def set_object_box(self, bbox: BoundingBox | None) -> None:
         """The object's box B (table frame) the arm keeps clear of (padded by ``arm.object_padding``); None = none.
         The session calls it with the map's box before planning. No effect on the reach-sphere cell."""
-        if self.kinematics is not None:
-            if bbox is None:
-                self.kinematics.set_object_box(None, None)
-            else:
-                self.kinematics.set_object_box(bbox.lower, bbox.upper)
+        self.reach.set_object_box(bbox)
 
     def plan_motion(self, T_table_camera: Pose, plate_angle: float | None = None, then: Sequence[Pose] = ()) -> Motion:
-        """The turntable angle and arm motion that put the camera at ``T_table_camera``.
+        """The turntable angle and arm motion that put the camera at ``T_table_camera`` (:meth:`Reach.plan`).
 
         URDF arm: the reachable, collision-free plate angle and IK solution with the shortest move, and its
         timed trajectory (:meth:`ArmKinematics.plan`); UnreachableError with ``reason`` otherwise.
@@ -200,80 +269,24 @@ class Cell:
         """
         if not isinstance(T_table_camera, Pose):
             raise ValueError(f"T_table_camera: expected a Pose, got {type(T_table_camera).__name__}")
-        if self.kinematics is not None:
-            move = self.kinematics.plan(
-                T_table_camera, self.arm.joint_positions(), self.turntable.angle, plate_angle, then
-            )
-            t = move.target
-            return Motion(
-                t.angle,
-                t.T_base_camera,
-                t.q,
-                move.trajectory,
-                move.duration,
-                move.path_method,
-                move.planning_seconds,
-                move.retract,
-                move.overlapped,
-            )
-        x, y, z = T_table_camera.translation
-        cfg = self.config
-        if z < cfg.min_height:
-            raise UnreachableError(
-                f"unreachable: camera at height {z:.3f} m is below the plate top + clearance ({cfg.min_height:.3f} m)"
-            )
-        if plate_angle is not None:
-            theta = wrap_angle(plate_angle)
-        elif math.hypot(x, y) < 1e-9:
-            theta = wrap_angle(self.turntable.angle)
-        else:
-            arm_azimuth = math.atan2(self._arm_base[1], self._arm_base[0])
-            theta = wrap_angle(arm_azimuth - math.atan2(y, x))
-        T_base_camera = rz(theta) @ T_table_camera
-        distance = float(np.linalg.norm(T_base_camera.translation - self._arm_base))
-        if distance > cfg.arm_reach:
-            raise UnreachableError(
-                f"unreachable: camera {distance:.3f} m from the arm base, beyond arm_reach {cfg.arm_reach:.3f} m"
-            )
-        if distance < cfg.arm_min_reach:
-            raise UnreachableError(
-                f"unreachable: camera {distance:.3f} m from the arm base, "
-                f"nearer than arm_min_reach {cfg.arm_min_reach:.3f} m"
-            )
-        turn = abs(wrap_angle(theta - self.turntable.angle)) / math.radians(cfg.arm.turntable_speed_deg)
-        travel = float(np.linalg.norm(T_base_camera.translation - self.arm.pose.translation))
-        return Motion(theta, T_base_camera, duration=turn + travel / SPHERE_CAMERA_SPEED)
+        return self.reach.plan(T_table_camera, plate_angle, then)
 
     def reachability(self, T_table_camera: Pose) -> tuple[bool, str | None]:
         """(reachable, reason): IK + joint limits + collisions at some plate angle for a URDF arm (reason
         ``no_ik``, ``joint_limit`` or ``collision:<link>:<obstacle>``); the reach test for the sphere (``reach``).
         The path itself is planned only on a move (``no_path`` then)."""
-        if self.kinematics is not None:
-            return self.kinematics.reachability(T_table_camera, self.arm.joint_positions(), self.turntable.angle)
-        ok = self.is_reachable(T_table_camera)
-        return ok, None if ok else "reach"
+        return self.reach.reachability(T_table_camera)
 
     def reachability_many(self, poses: list[Pose]) -> list[tuple[bool, str | None]]:
         """:meth:`reachability` of many views (e.g. all candidates of a plan, in their order: neighbours warm-start
         each other's IK)."""
-        if self.kinematics is None:
-            return [self.reachability(T) for T in poses]
-        q, angle = self.arm.joint_positions(), self.turntable.angle
-        return [self.kinematics.reachability(T, q, angle) for T in poses]
+        return self.reach.reachability_many(poses)
 
     def move_estimate(self, T_table_camera: Pose) -> float:
         """Seconds the move to a view would take from the current state (inf if unreachable): plate turn plus
-        the slowest joint to the nearest target (every plate angle and IK branch; no path planned) for a URDF arm, plate turn plus the camera's straight travel at
-        ``SPHERE_CAMERA_SPEED`` for the reach sphere."""
-        if self.kinematics is not None:
-            target, _ = self.kinematics.reach.best_target(
-                T_table_camera, self.arm.joint_positions(), self.turntable.angle
-            )
-            return math.inf if target is None else target.move_estimate
-        try:
-            return self.plan_motion(T_table_camera).duration
-        except UnreachableError:
-            return math.inf
+        the slowest joint to the nearest target (every plate angle and IK branch; no path planned) for a URDF arm,
+        plate turn plus the camera's straight travel at ``SPHERE_CAMERA_SPEED`` for the reach sphere."""
+        return self.reach.move_estimate(T_table_camera)
 
     def move_costs(self, candidates: Sequence[Any], eligible: NDArray[np.bool_]) -> NDArray[np.float64]:
         """(C,) :meth:`move_estimate` of each eligible candidate (``.T_world_camera``), inf for the others: the
@@ -290,107 +303,21 @@ class Cell:
         ``candidates[indices]`` (``.T_world_camera``; inf to and from an unreachable one): the ``move_times`` of
         ``Planner.plan``. URDF arm: plate turn and the slowest joint's trapezoid (:meth:`ArmReach.move_seconds`:
         one after the other, or together when the arm stands clear of the turning object and the arm's config
-        says so) between the views' cached reachability targets at every plate angle (:meth:`_cached_move_times`).
+        says so) between the views' cached reachability targets at every plate angle (:meth:`UrdfArm.move_times`).
         exact: each view's target is instead the one a move from the current state would take (every plate angle
         the turn allows and every IK branch from the current joints, :meth:`ArmReach.best_target`; about 2.5 ms
         a view with the UR5's branches in closed form, 9.6 ms with seeded IK), so row 0 is the move's own estimate; a
         few views only (the tour's cover).
         Reach sphere: plate turn + the camera's straight travel at ``SPHERE_CAMERA_SPEED``."""
-        poses = [candidates[int(i)].T_world_camera for i in indices]
-        n = len(poses) + 1
-        ok = np.ones(n, dtype=bool)
-        if self.kinematics is not None:
-            kinematics = self.kinematics
-            reach = kinematics.reach
-            q0, a0 = np.asarray(self.arm.joint_positions(), dtype=np.float64), self.turntable.angle
-            if exact:
-
-                def turn_check(a: float) -> str | None:
-                    return kinematics.turn_blocked(q0, a0, a)
-
-                qs, angles = [q0], [a0]
-                for k, T in enumerate(poses, start=1):
-                    best, _ = reach.best_target(T, q0, a0, turn_check)
-                    ok[k] = best is not None
-                    qs.append(q0 if best is None else best.q)
-                    angles.append(a0 if best is None else best.angle)
-                times = reach.seconds_between(np.stack(qs), np.array(angles), np.stack(qs), np.array(angles))
-            else:
-                times = self._cached_move_times(poses, q0, a0, ok)
-        else:
-            xyz, angles = [self.arm.pose.translation], [self.turntable.angle]
-            for k, T in enumerate(poses, start=1):
-                try:
-                    motion = self.plan_motion(T)
-                except UnreachableError:
-                    ok[k] = False
-                    xyz.append(xyz[0])
-                    angles.append(angles[0])
-                    continue
-                xyz.append(motion.T_base_camera.translation)
-                angles.append(motion.angle)
-            from devices.arm.reach import turn_matrix
-
-            turn = turn_matrix(np.array(angles))
-            p = np.stack(xyz)
-            travel = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=2)
-            times = turn / math.radians(self.config.arm.turntable_speed_deg) + travel / SPHERE_CAMERA_SPEED
+        times, ok = self.reach.move_times([candidates[int(i)].T_world_camera for i in indices], exact)
         times[~ok, :] = math.inf
         times[:, ~ok] = math.inf
         np.fill_diagonal(times, 0.0)
         return times
 
-    def _cached_move_times(
-        self, poses: Sequence[Pose], q0: NDArray[np.float64], a0: float, ok: NDArray[np.bool_]
-    ) -> NDArray[np.float64]:
-        """:meth:`move_times` from the cached reachability targets (``ok`` (K + 1,) is set False for the views none
-        of whose plate angles has a free target). Each view's entry target: of its free targets at every plate
-        angle (:meth:`ArmReach.free_targets`), the one with the shortest move from the current state (q0 (n,),
-        plate angle a0); the move from view i to view j: from i's entry target to the nearest of j's targets."""
-        assert self.kinematics is not None
-        reach = self.kinematics.reach
-        options = [reach.free_targets(T, q0, a0) for T in poses]
-        owner = np.array([k for k, opts in enumerate(options, start=1) for _ in opts], dtype=np.int64)
-        n = len(poses) + 1
-        times = np.full((n, n), math.inf)
-        if len(owner) == 0:
-            ok[1:] = False
-            return times
-        q_all = np.stack([q for opts in options for q, _ in opts])  # (M, n) every view's free targets
-        a_all = np.array([a for opts in options for _, a in opts])
-        from_here = reach.seconds_between(q0[None, :], np.array([a0]), q_all, a_all)[0]  # (M,)
-        entry_q, entry_a = [q0], [a0]
-        for k in range(1, n):
-            mine = np.flatnonzero(owner == k)
-            ok[k] = len(mine) > 0
-            best = int(mine[np.argmin(from_here[mine])]) if len(mine) else -1
-            entry_q.append(q0 if best < 0 else q_all[best])
-            entry_a.append(a0 if best < 0 else float(a_all[best]))
-        legs = reach.seconds_between(np.stack(entry_q), np.array(entry_a), q_all, a_all)  # (K + 1, M)
-        for k in range(1, n):
-            mine = owner == k
-            if np.any(mine):
-                times[:, k] = legs[:, mine].min(axis=1)
-        times[1:, 0] = reach.seconds_between(np.stack(entry_q[1:]), np.array(entry_a[1:]), q0[None, :], np.array([a0]))[
-            :, 0
-        ]
-        return times
-
     def is_reachable(self, T_table_camera: Pose) -> bool:
-        """Whether the view is reachable (:meth:`reachability`; for the sphere in closed form, no Pose built).
-
-        The reach sphere turns the camera onto the arm base's azimuth, so its distance to
-        the base is that of two points in one vertical half-plane.
-        """
-        if self.kinematics is not None:
-            return self.reachability(T_table_camera)[0]
-        x, y, z = T_table_camera.translation
-        cfg = self.config
-        if z < cfg.min_height:
-            return False
-        base_radial = math.hypot(self._arm_base[0], self._arm_base[1])
-        distance = math.hypot(math.hypot(x, y) - base_radial, z - self._arm_base[2])
-        return cfg.arm_min_reach <= distance <= cfg.arm_reach
+        """Whether the view is reachable (:meth:`reachability`; for the sphere in closed form, no Pose built)."""
+        return self.reach.is_reachable(T_table_camera)
 
     def initial_pose(self) -> Pose:
         """``T_table_camera`` of the first view: at ``initial_elevation_deg`` / ``initial_azimuth_deg`` /
@@ -425,17 +352,26 @@ class Cell:
 
     # ------------------------------------------------------------------ actions
 
-    def move_to(self, T_table_camera: Pose, plate_angle: float | None = None, then: Sequence[Pose] = ()) -> Motion:
+    def move_to(
+        self,
+        T_table_camera: Pose,
+        plate_angle: float | None = None,
+        then: Sequence[Pose] = (),
+        motion: Motion | None = None,
+    ) -> Motion:
         """Turn the plate, then move the arm, so the camera is at ``T_table_camera`` (a URDF arm retracts first
         when the turn would sweep the object's box into it: ``Motion.retract``; with ``Motion.overlapped`` the plate
-        turns while the arm moves).
+        turns while the arm moves). Returns the motion it ran.
 
-        Plans first (``plate_angle``, ``then``: as in :meth:`plan_motion`): an unreachable view raises
-        UnreachableError and moves nothing.
+        motion: the motion to run, planned already by :meth:`plan_motion` for this view from the current state
+        (an approval checks the view by planning it, and that plan is the one executed); None, or one the arm has
+        moved away from since (:meth:`Reach.is_current`): planned here (``plate_angle``, ``then``: as in
+        :meth:`plan_motion`), an unreachable view raising UnreachableError with nothing moved.
         A device fault (DeviceError) after the turntable moved leaves the plate at its
         new angle; a fault during the trajectory leaves the arm where it stopped.
         """
-        motion = self.plan_motion(T_table_camera, plate_angle, then)
+        if motion is None or not self.reach.is_current(motion):
+            motion = self.plan_motion(T_table_camera, plate_angle, then)
         self.last_motion = motion
         if motion.retract is not None:
             self.arm.execute(motion.retract)
@@ -448,6 +384,11 @@ class Cell:
         else:
             self.arm.move_to(motion.T_base_camera)
         return motion
+
+    def stop_moving(self) -> None:
+        """Stop the arm and the turntable (those whose driver has a ``stop()``), e.g. after a move timed out."""
+        for device in (self.arm, self.turntable):
+            _stop(device)
 
     def _turn_during(self, angle: float, trajectory: JointTrajectory) -> None:
         """Turn the plate to ``angle`` (a thread of its own) while the arm runs ``trajectory`` (this thread); both
@@ -466,9 +407,7 @@ class Cell:
         try:
             self.arm.execute(trajectory)
         except BaseException:
-            stop = getattr(self.turntable, "stop", None)
-            if callable(stop):
-                stop()
+            _stop(self.turntable)
             turning.join()
             if failed:
                 raise failed[0] from None
@@ -495,8 +434,9 @@ class Cell:
         camera_state = getattr(self.camera, "device_state", None)
         if callable(camera_state):
             state["camera"] = camera_state()
-        if self.kinematics is not None:
-            state["arm"] = {"q": [float(v) for v in self.arm.joint_positions()], "angle": float(self.turntable.angle)}
+        arm_state = self.reach.arm_state()
+        if arm_state is not None:
+            state["arm"] = arm_state
         return state
 
     def restore_device_state(self, state: dict[str, Any]) -> None:
@@ -510,13 +450,8 @@ class Cell:
             if "camera" in state and callable(restore):
                 restore(state["camera"])
             arm_state = state.get("arm")
-            reset_arm, reset_table = getattr(self.arm, "reset", None), getattr(self.turntable, "reset", None)
-            if self.kinematics is not None and arm_state is not None and callable(reset_arm) and callable(reset_table):
-                q = np.array(arm_state["q"], dtype=np.float64)
-                if q.shape != (len(self.arm.joint_names),) or not np.all(np.isfinite(q)):
-                    raise ValueError(f"arm joints {arm_state['q']!r}")
-                reset_arm(q)
-                reset_table(float(arm_state["angle"]))
+            if arm_state is not None:
+                self.reach.restore_arm(arm_state)
         except (TypeError, KeyError, ValueError) as exc:
             raise ValueError(f"device state: cannot restore ({exc})") from None
 
@@ -529,3 +464,10 @@ class Cell:
         rotvec = self._rng.normal(0.0, self.pose_noise_rotation, 3) if self.pose_noise_rotation else np.zeros(3)
         dR = Rotation.from_rotvec(rotvec).as_matrix()
         return Pose(pose.rotation @ dR, pose.translation + dt)
+
+
+def _stop(device: object) -> None:
+    """``device.stop()`` for a driver that has one (a ``JointArm`` has; an ``Arm`` or a ``Turntable`` may)."""
+    stop = getattr(device, "stop", None)
+    if callable(stop):
+        stop()

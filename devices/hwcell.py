@@ -187,13 +187,19 @@ class HardwareCell(Cell):
             q = last
         return "arm at joints [" + ", ".join(f"{math.degrees(float(v)):.2f}" for v in q) + "] deg"
 
-    def move_to(self, T_table_camera: Pose, plate_angle: float | None = None, then: Sequence[Pose] = ()) -> Motion:
-        """:meth:`Cell.move_to` (``plate_angle``, ``then`` as there); a DeviceError (a fault, a refused trajectory, a
-        stop) names the arm's last joints."""
+    def move_to(
+        self,
+        T_table_camera: Pose,
+        plate_angle: float | None = None,
+        then: Sequence[Pose] = (),
+        motion: Motion | None = None,
+    ) -> Motion:
+        """:meth:`Cell.move_to` (``plate_angle``, ``then``, ``motion`` as there); a DeviceError (a fault, a refused
+        trajectory, a stop) names the arm's last joints."""
         self.stop_requested.clear()
         self.moving.set()
         try:
-            motion = super().move_to(T_table_camera, plate_angle, then)
+            motion = super().move_to(T_table_camera, plate_angle, then, motion)
             if self.stop_requested.is_set():
                 raise DeviceError("stopped on request")
             return motion
@@ -213,10 +219,7 @@ class HardwareCell(Cell):
         self.stop_requested.set()
         if self.rig is not None:
             return self.rig.stop()
-        for device in (self.arm, self.turntable):
-            stop = getattr(device, "stop", None)
-            if callable(stop):
-                stop()
+        self.stop_moving()
         return []
 
     @property

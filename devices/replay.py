@@ -21,16 +21,20 @@ import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
 from devices.cell import Cell, Motion, rz
+from devices.cellreach import SphereReach
 from devices.config import CellConfig
 from devices.ply import read_ply
 from devices.protocols import CaptureError
 from devices.sim import SimulatedArm, SimulatedTurntable
 from planner.types import BoundingBox, DepthFrame, Intrinsics, Pose
+
+if TYPE_CHECKING:
+    from devices.arm.kinematics import ArmKinematics
 
 ReplayMode = Literal["sequence", "nearest"]
 MAX_VIEWS = 200
@@ -96,50 +100,72 @@ class ReplayCamera:
         self.position = position
 
 
+class ReplayReach(SphereReach):
+    """A replay's reach: the moves of the reach sphere (the views were taken already), the reachability for planning
+    that of ``config``: the URDF arm's IK and collision checks at the arm's home configuration (state-independent,
+    so a replay sees the session's answers), or the reach sphere."""
+
+    def __init__(self, config: CellConfig, arm: SimulatedArm, turntable: SimulatedTurntable) -> None:
+        super().__init__(config, arm, turntable)
+        self.model: ArmKinematics | None = None
+        if config.kinematics == "urdf":
+            from devices.arm.kinematics import ArmKinematics
+
+            self.model = ArmKinematics(config.arm, config.plate_radius, config.plate_thickness)
+
+    def reachability(self, T_table_camera: Pose) -> tuple[bool, str | None]:
+        if self.model is not None:
+            return self.model.reachability(T_table_camera, self.model.home, self._angle())
+        return super().reachability(T_table_camera)
+
+    def is_reachable(self, T_table_camera: Pose) -> bool:
+        if self.model is not None:
+            return self.reachability(T_table_camera)[0]
+        return super().is_reachable(T_table_camera)
+
+    def set_object_box(self, bbox: BoundingBox | None) -> None:
+        if self.model is not None:
+            self.model.set_object_box(*((bbox.lower, bbox.upper) if bbox is not None else (None, None)))
+
+
 class ReplayCell(Cell):
     """A cell whose camera plays back recorded frames.
 
-    The arm and turntable are simulated and never refuse a move (the views were
-    already taken); reachability for planning (``is_reachable``, ``reachability``)
-    is that of ``config``, as for the simulated cell: the URDF arm's IK and
-    collision checks (state-independent, so a replay sees the session's answers)
-    or the reach sphere. ``capture`` keeps each frame's recorded pose. The first
-    view is the first recorded frame's pose.
+    The arm and turntable are simulated and never refuse a move (the views were already taken); reachability for
+    planning is that of ``config`` (:class:`ReplayReach`). ``capture`` keeps each frame's recorded pose. The
+    first view is the first recorded frame's pose.
     """
 
     def __init__(self, frames: Sequence[DepthFrame], config: CellConfig | None = None, mode: ReplayMode = "sequence"):
         arm = SimulatedArm()
         turntable = SimulatedTurntable()
         camera = ReplayCamera(frames, mode, pose_source=lambda: self.pose)
-        super().__init__(camera, arm, turntable, config)
+        config = config if config is not None else CellConfig()
+        super().__init__(camera, arm, turntable, config, reach=ReplayReach(config, arm, turntable))
         self.frames = camera.frames
-        self._arm_model = None
-        if self.config.kinematics == "urdf":
-            from devices.arm.kinematics import ArmKinematics
 
-            self._arm_model = ArmKinematics(self.config.arm, self.config.plate_radius, self.config.plate_thickness)
-
-    def reachability(self, T_table_camera: Pose) -> tuple[bool, str | None]:
-        if self._arm_model is not None:
-            return self._arm_model.reachability(T_table_camera, self._arm_model.home, self.turntable.angle)
-        return super().reachability(T_table_camera)
-
-    def is_reachable(self, T_table_camera: Pose) -> bool:
-        return self.reachability(T_table_camera)[0]
-
-    def set_object_box(self, bbox: BoundingBox | None) -> None:
-        if self._arm_model is not None:
-            self._arm_model.set_object_box(*((bbox.lower, bbox.upper) if bbox is not None else (None, None)))
+    @property
+    def reach_of_config(self) -> bool:
+        """A replay judges reachability at the arm's home, not from the arm's state: a worker's planning cell
+        would answer differently."""
+        return False
 
     def initial_pose(self) -> Pose:
         return self.frames[0].T_world_camera
 
-    def move_to(self, T_table_camera: Pose, plate_angle: float | None = None, then: Sequence[Pose] = ()) -> Motion:
-        """Put the (virtual) camera at ``T_table_camera`` without turning the plate; no reach check. ``plate_angle``
-        and ``then`` (:meth:`Cell.move_to`'s) are accepted and ignored: the views were taken already."""
-        motion = Motion(self.turntable.angle, rz(self.turntable.angle) @ T_table_camera)
-        self.arm.move_to(motion.T_base_camera)
-        return motion
+    def move_to(
+        self,
+        T_table_camera: Pose,
+        plate_angle: float | None = None,
+        then: Sequence[Pose] = (),
+        motion: Motion | None = None,
+    ) -> Motion:
+        """Put the (virtual) camera at ``T_table_camera`` without turning the plate; no reach check. ``plate_angle``,
+        ``then`` and ``motion`` (:meth:`Cell.move_to`'s) are accepted and ignored: the views were taken already. The
+        motion is not timed (``Motion.timed`` False)."""
+        done = Motion(self.turntable.angle, rz(self.turntable.angle) @ T_table_camera, timed=False)
+        self.arm.move_to(done.T_base_camera)
+        return done
 
     def capture(self) -> DepthFrame:
         return self.camera.capture()

@@ -587,13 +587,6 @@ class ArmReach:
             view = (T_table_camera.translation.tobytes(), T_table_camera.rotation.tobytes())
         return view[0], view[1], float(angle), self._box_key()
 
-    def cached_target(self, T_table_camera: Pose, angle: float) -> tuple[NDArray[np.float64], Pose] | None:
-        """(q (n,), T_base_camera) of the reachability attempt at plate ``angle`` with the current object box, if
-        one was cached and found a free target (the tour's move times come from here: no IK of their own)."""
-        key = self._attempt_key(T_table_camera, angle)
-        hit = self._attempts.get(key)
-        return None if hit is None or isinstance(hit, str) else hit
-
     def free_targets(
         self, T_table_camera: Pose, q_current: NDArray[np.float64], angle_current: float
     ) -> list[tuple[NDArray[np.float64], float]]:

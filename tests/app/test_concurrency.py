@@ -110,10 +110,12 @@ def test_a_busy_session_blocks_neither_reads_nor_other_sessions(
     entered = threading.Event()
     real_move = wb_a.cell.move_to
 
-    def slow_move(pose, plate_angle=None, then=()):  # the robot of session A takes its time (Cell.move_to's args)
+    def slow_move(
+        pose, plate_angle=None, then=(), motion=None
+    ):  # session A's robot takes its time (Cell.move_to's args)
         entered.set()
         assert release.wait(30)
-        return real_move(pose, plate_angle, then)
+        return real_move(pose, plate_angle, then, motion)
 
     wb_a.cell.move_to = slow_move
     body = {"plan_id": plan_a["plan_id"], "index": plan_a["best"]["index"]}

@@ -187,3 +187,24 @@ def test_a_new_cell_starts_where_its_own_config_says_and_the_kept_move_is_the_on
     assert np.linalg.norm(kept[0].pose.translation - kept[1].pose.translation) > 0.1
     kept[0].move_to(view(40, 100))  # a cell's own moves leave the kept answer alone
     np.testing.assert_array_equal(make_sim_cell(l_block).joint_positions(), fresh[0].joint_positions())
+
+
+def test_move_to_runs_a_prepared_motion_and_plans_again_one_the_arm_moved_away_from(cell, monkeypatch) -> None:
+    """The motion handed to ``move_to`` is run as it was planned (no second plan); one planned before the arm moved
+    elsewhere starts where the arm no longer is, so the cell plans the move again."""
+    a, b = view(35, 60), view(40, -30)
+    prepared_a, prepared_b = cell.plan_motion(a), cell.plan_motion(b)  # both from the initial configuration
+    plans: list[Pose] = []
+    plan = cell.kinematics.plan
+
+    def counted(T_table_camera: Pose, *args, **kwargs):
+        plans.append(T_table_camera)
+        return plan(T_table_camera, *args, **kwargs)
+
+    monkeypatch.setattr(cell.kinematics, "plan", counted)
+    assert cell.move_to(a, motion=prepared_a) is prepared_a and plans == []
+    assert np.allclose(cell.joint_positions(), prepared_a.q) and cell.last_motion is prepared_a
+    ran = cell.move_to(b, motion=prepared_b)  # stale: it starts at the initial configuration, the arm is at a
+    assert ran is not prepared_b and len(plans) == 1 and np.allclose(plans[0].matrix, b.matrix)
+    assert np.allclose(cell.joint_positions(), ran.q)
+    assert np.linalg.norm(cell.pose.translation - b.translation) < 1e-4

@@ -31,13 +31,18 @@ SAMPLES = CeilingConfig(samples=3000)
 
 
 class NoReach:
-    """A cell that reaches nothing."""
+    """A cell that reaches nothing (no arm, no collision model)."""
+
+    arm = None
 
     def __init__(self, config: CellConfig) -> None:
         self.config = config
 
     def is_reachable(self, T_world_camera: Pose) -> bool:
         return False
+
+    def set_object_box(self, bbox: BoundingBox | None) -> None:
+        """No collision model: nothing to do."""
 
 
 @pytest.mark.parametrize("model", ["l-block", "mug"])

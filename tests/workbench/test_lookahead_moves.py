@@ -26,9 +26,9 @@ def spy_on_moves(monkeypatch: pytest.MonkeyPatch, cell: Any) -> list[list[Pose]]
     calls: list[list[Pose]] = []
     move_to = cell.move_to
 
-    def spy(T_table_camera: Pose, plate_angle: float | None = None, then: Any = ()) -> Any:
+    def spy(T_table_camera: Pose, plate_angle: float | None = None, then: Any = (), motion: Any = None) -> Any:
         calls.append(list(then))
-        return move_to(T_table_camera, plate_angle, then)
+        return move_to(T_table_camera, plate_angle, then, motion)
 
     monkeypatch.setattr(cell, "move_to", spy)
     return calls

@@ -17,14 +17,15 @@ import os
 import time
 from dataclasses import asdict, dataclass, is_dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from devices.config import CameraConfig
+from devices.config import CameraConfig, CellConfig
 from planner.config import PlannerConfig
+from planner.types import BoundingBox, Pose
 from workbench.evaluation.ceiling import (
     DEFAULT_CEILING,
     CeilingConfig,
@@ -64,6 +65,20 @@ class Ceiling:
             raise ValueError(f"views, samples: must be >= 0, got {self.views}, {self.samples}")
 
 
+class ReachCell(Protocol):
+    """What the ceiling asks of a cell (a :class:`devices.cell.Cell` is one): its geometry, its arm (its type is
+    part of the cache key), the reach predicate and the object box that predicate keeps clear of."""
+
+    arm: Any
+
+    @property
+    def config(self) -> CellConfig: ...
+
+    def is_reachable(self, T_table_camera: Pose) -> bool: ...
+
+    def set_object_box(self, bbox: BoundingBox | None) -> None: ...
+
+
 def _plain(value: Any) -> Any:
     """A JSON-ready form of a config value (dataclasses as dicts, tuples as lists)."""
     if is_dataclass(value) and not isinstance(value, type):
@@ -74,7 +89,7 @@ def _plain(value: Any) -> Any:
 
 
 def ceiling_key(
-    mesh: trimesh.Trimesh, cell: Any, camera: CameraConfig, planner: PlannerConfig, config: CeilingConfig
+    mesh: trimesh.Trimesh, cell: ReachCell, camera: CameraConfig, planner: PlannerConfig, config: CeilingConfig
 ) -> str:
     """sha256 hex of everything the ceiling depends on (the placed mesh's bytes and every setting)."""
     h = hashlib.sha256()
@@ -84,7 +99,7 @@ def ceiling_key(
         "version": CEILING_VERSION,
         # the reach predicate's inputs: the cell geometry and the arm model (an arm with joint limits and
         # collision geometry instead of the reach sphere must put its parameters in one of these)
-        "cell": [type(cell).__name__, type(getattr(cell, "arm", None)).__name__, _plain(getattr(cell, "config", None))],
+        "cell": [type(cell).__name__, type(cell.arm).__name__, _plain(cell.config)],
         "camera": _plain(camera),
         "candidates": _plain(planner.candidates),
         "partitions": _plain(planner.partitions),
@@ -96,12 +111,10 @@ def ceiling_key(
 
 
 def _inputs(
-    mesh: trimesh.Trimesh, cell: Any, planner: PlannerConfig, config: CeilingConfig
+    mesh: trimesh.Trimesh, cell: ReachCell, planner: PlannerConfig, config: CeilingConfig
 ) -> tuple[list[Any], NDArray[np.float64], NDArray[np.float64]]:
     bbox = true_bbox(mesh)
-    set_box = getattr(cell, "set_object_box", None)
-    if callable(set_box):
-        set_box(bbox)  # an arm keeps clear of the object's (padded) box, as during a scan
+    cell.set_object_box(bbox)  # an arm keeps clear of the object's (padded) box, as during a scan
     views = reachable_views(bbox, planner, cell.is_reachable)
     samples, normals = samples_with_normals(mesh, config.samples, config.sample_seed)
     return views, samples, normals

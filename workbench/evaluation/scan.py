@@ -9,11 +9,12 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from devices.cell import Motion, ScanCell
 from planner import DepthFrame, Planner, PlanResult, Pose
 from planner.planner import IntegrationReport
 from workbench.evaluation.accuracy import ACCURACY_COLUMNS, GroundTruth, coverage_and_accuracy
@@ -150,8 +151,8 @@ class ScanResult:
 
 
 def _move(
-    cell: Any, pose: Pose, plan: PlanResult | None, skip: set[int]
-) -> tuple[int | None, Pose | None, Any, list[dict[str, Any]]]:
+    cell: ScanCell, pose: Pose, plan: PlanResult | None, skip: set[int]
+) -> tuple[int | None, Pose | None, Motion | None, list[dict[str, Any]]]:
     """Move to ``pose`` (``plan``'s best view, or the first view without a plan); while the cell refuses
     (UnreachableError: e.g. no collision-free path), try the next best eligible candidate of ``plan``, every one
     in turn, leaving out the candidates in ``skip`` (tried already). Returns (the candidate index reached or
@@ -176,13 +177,13 @@ def _move(
         except UnreachableError as exc:
             if plan is None:
                 raise
-            refused.append({"candidate": index, "reason": getattr(exc, "reason", None), "message": str(exc)})
+            refused.append({"candidate": index, "reason": exc.reason, "message": str(exc)})
     return None, None, None, refused
 
 
 def run_scan(
     planner: Planner,
-    cell: Any,
+    cell: ScanCell,
     surface_samples: NDArray[np.float64] | None = None,
     on_iteration: Callable[[IterationRecord, PlanResult], None] | None = None,
     keep_plans: bool = False,
@@ -247,8 +248,7 @@ def run_scan(
         record.refused_moves = refused
         if measured is not None:
             record.accuracy = measured.to_json()
-        to_json = getattr(motion, "to_json", None)
-        record.move = cast(dict[str, Any], to_json()) if callable(to_json) else None
+        record.move = None if motion is None else motion.to_json()
         records.append(record)
         if keep_plans:
             plans.append(plan)

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from devices.cell import ScanCell
 from devices.config import DeviceConfig
 from devices.replay import ReplayCell
 from planner import Planner, PlannerConfig, PlanResult, Pose
@@ -104,7 +105,7 @@ def replay_cell(journal: Journal) -> ReplayCell:
 
 def rebuild(
     journal: Journal,
-    cell: Any,
+    cell: ScanCell,
     coverage: Callable[[NDArray[np.float64]], float] | None = None,
     progress: Callable[[str, int, int], None] | None = None,
     keep_scene: bool = False,
@@ -195,7 +196,7 @@ def _replay_one(
     record: SessionRecord,
     captures: list[ReplayedCapture],
     mismatches: list[str],
-    cell: Any,
+    cell: ScanCell,
     coverage: Callable[[NDArray[np.float64]], float] | None,
     state: _State,
     used: set[str],
@@ -232,10 +233,9 @@ def _replay_one(
             used.add(in_flight.plan_id)
             in_flight = None
         device_state = ev.get("device_state")
-        restore = getattr(cell, "restore_device_state", None)
-        if device_state is not None and callable(restore):  # the next plan sees the arm where the session had it
+        if device_state is not None:  # the next plan sees the arm where the session had it
             with contextlib.suppress(ValueError):
-                restore(device_state)
+                cell.restore_device_state(device_state)
     elif kind == "plan":
         plan = plan_in(cell, planner)
         best, recorded = best_of(plan), ev.get("best")

@@ -42,9 +42,7 @@ log = logging.getLogger(__name__)
 
 def _release(parts: SessionParts) -> None:
     """Close the devices of parts no session took (a hardware cell holds its devices until closed)."""
-    close = getattr(parts.cell, "close", None)
-    if callable(close):
-        close()
+    parts.cell.close()
 
 
 class SessionRegistry:

@@ -3,8 +3,9 @@
 :class:`AutoRunner` belongs to one session. ``step(count)`` runs in the caller's thread; ``start(count)``
 runs in a background thread that :meth:`stop` ends after the current action. The first fault ends either
 (the session is then in state error). It drives the same steps as a person's approval
-(:func:`workbench.session.loop.make_plan`, :func:`~workbench.session.loop.take_view`) inside one claim of the
-session (state ``auto``), so every decision is journaled and published exactly as a person's would be.
+(:meth:`ScanLoop.make_plan <workbench.session.loop.ScanLoop.make_plan>`, :meth:`ScanLoop.take_view
+<workbench.session.loop.ScanLoop.take_view>`) inside one claim of the session (state ``auto``), so every decision
+is journaled and published exactly as a person's would be.
 """
 
 from __future__ import annotations
@@ -15,8 +16,7 @@ from collections.abc import Callable
 from typing import Any
 
 from workbench.errors import Conflict
-from workbench.session.core import SessionCore
-from workbench.session.loop import make_plan, no_frame_yet, take_view
+from workbench.session.loop import ScanLoop
 from workbench.session.states import TRANSITIONS, Action, State
 from workbench.session.values import Decision, DecisionKind, SessionEvent
 from workbench.workers.client import JobKilled
@@ -25,7 +25,7 @@ from workbench.workers.client import JobKilled
 class AutoRunner:
     """Runs a session's planner-chosen steps; the session's ``auto_remaining`` counts the steps still to go."""
 
-    def __init__(self, session: SessionCore) -> None:
+    def __init__(self, session: ScanLoop) -> None:
         self.session = session
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -37,7 +37,7 @@ class AutoRunner:
     def _check(self, action: Action) -> Callable[[], None]:
         def check() -> None:
             s = self.session
-            no_frame_yet(s)
+            s.no_frame_yet()
             refusal = s.cell.auto_refusal()
             if refusal is not None:
                 raise Conflict(f"session {s.id}: {TRANSITIONS[action].label} refused: {refusal}")
@@ -117,7 +117,7 @@ class AutoRunner:
                 if self._stop.is_set() or s.planner.terminated is not None:
                     break
                 try:
-                    entry = make_plan(s, stopping=self._stop.is_set)
+                    entry = s.make_plan(stopping=self._stop.is_set)
                 except JobKilled:
                     if self._stop.is_set():
                         break  # Stop killed the plan at once
@@ -129,7 +129,7 @@ class AutoRunner:
                 decision = Decision(kind, entry.plan.candidates[best].T_world_camera, entry.plan_id, best, best)
                 with s.lock:
                     s.take_decision(decision, entry)
-                records.append(take_view(s, decision, entry))
+                records.append(s.take_view(decision, entry))
                 s.set_auto_remaining(s.auto_remaining - 1)
         finally:
             s.set_auto_remaining(0)

@@ -1,6 +1,6 @@
 """The core of a session: its fields, its lock, the one writer of its state, the journal and the listeners.
 
-:class:`SessionCore` alone writes a session's fields. Actions (workbench/session/loop.py, auto.py, discard.py)
+:class:`SessionCore` alone writes a session's fields. Actions (workbench/session/loop.py, session.py, auto.py)
 read them and change them through its methods, and every change of state goes through :meth:`SessionCore.enter`,
 which checks the transition table (workbench/session/states.py), claims the busy state, and when the action
 ends settles the session (or, on failure, puts back the state it started from).
@@ -126,7 +126,7 @@ class SessionCore:
         self._surface: SurfaceUpdate | None = None
         self._auto_remaining = 0
         self.stop_plan_asked = False
-        """Stop was asked for the running plan (loop.stop_plan); the plan's failure then restores the state."""
+        """Stop was asked for the running plan (``ScanLoop.stop_plan``); the plan's failure then restores the state."""
         self.moves = 0
         self.ceiling: float | None = None
         """The reachable-coverage ceiling of a simulated session, once computed (workbench/evaluation/)."""

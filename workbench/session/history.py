@@ -12,23 +12,19 @@ from __future__ import annotations
 
 import os
 import threading
-from typing import TYPE_CHECKING
 
 from workbench.errors import Conflict, Invalid, NotFound
 from workbench.journal.rebuild import replay_cell
 from workbench.journal.store import JOURNAL_FILE, Journal, read_journal
 from workbench.journal.timeline import TimelineStep, timeline_of
-from workbench.session.loop import planning_worker
+from workbench.session.loop import ScanLoop
 from workbench.workers.client import JobKilled
-
-if TYPE_CHECKING:
-    from workbench.session.core import SessionCore
 
 
 class History:
     """The timeline of one session (thread-safe; one build at a time)."""
 
-    def __init__(self, session: SessionCore) -> None:
+    def __init__(self, session: ScanLoop) -> None:
         self.session = session
         self._lock = threading.Lock()
         self._key: int | None = None
@@ -71,7 +67,7 @@ class History:
 
     def _build(self, journal: Journal) -> list[TimelineStep]:
         s = self.session
-        worker = planning_worker(s)
+        worker = s.planning_worker()
         if worker is None:
             return timeline_of(journal, replay_cell(journal))
         # coverage comes from the journal's capture events: the replay need not score it again

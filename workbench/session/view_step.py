@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from devices.cell import Cell
+from devices.cell import Motion, ScanCell
 from devices.protocols import DeviceError, UnreachableError
 from devices.timeout import DeviceTimeoutError, call_with_timeout
 from planner import DepthFrame, Planner, Pose, VoxelClass
@@ -35,7 +35,7 @@ from workbench.workers.client import JobKilled, SessionWorker
 
 class UnusableFrame(ValueError):  # noqa: N818 - it says what the frame is
     """The planner could not use the frame (``Planner.integrate``'s ValueError: no return, nothing on the object);
-    the map is unchanged. The planner's choice then falls back to the next candidate (loop.take_view)."""
+    the map is unchanged. The planner's choice then falls back to the next candidate (``ScanLoop.take_view``)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -68,7 +68,7 @@ class ViewOutcome:
 class ViewStep:
     """Moves the cell, captures, stores and integrates one view of one session."""
 
-    cell: Cell
+    cell: ScanCell
     journal: JournalWriter | None
     surface_samples: NDArray[np.float64] | None
     capture_timeout: float
@@ -85,9 +85,17 @@ class ViewStep:
     _surface: LiveSurface | None = field(default=None, repr=False)
     """The surface when integration runs in this process (a worker keeps its own)."""
 
-    def run(self, planner: Planner, pose: Pose, moved: Callable[[], None], then: Sequence[Pose] = ()) -> ViewOutcome:
+    def run(
+        self,
+        planner: Planner,
+        pose: Pose,
+        moved: Callable[[], None],
+        then: Sequence[Pose] = (),
+        motion: Motion | None = None,
+    ) -> ViewOutcome:
         """Take the view at ``T_table_camera = pose`` into ``planner``; ``moved()`` is called once the cell moved.
         ``then``: the views the plan expects next (``PlanResult.then_poses``), for the cell's choice of the move.
+        ``motion``: the move to run, planned already (an approval's check); None: the cell plans it.
 
         A move that timed out was stopped (the devices' ``stop()``); the next run waits until it has really
         ended before it moves again (DeviceTimeoutError if it does not within ``move_timeout``): never two moves.
@@ -100,15 +108,17 @@ class ViewStep:
                 self.worker.start()  # a worker that is (re)starting does not count against the device deadlines
             self._wait_for_the_last_move()
             try:
-                call_with_timeout(
-                    lambda: self.cell.move_to(pose, then=then), self.move_timeout, "cell move", self._stop
+                ran = call_with_timeout(
+                    lambda: self.cell.move_to(pose, then=then, motion=motion),
+                    self.move_timeout,
+                    "cell move",
+                    self.cell.stop_moving,
                 )
             except DeviceTimeoutError as exc:
                 self._moving = exc.pending
                 raise
             moved()
-            motion = getattr(self.cell, "last_motion", None)
-            move_seconds = None if motion is None else float(motion.duration)
+            move_seconds = float(ran.duration) if ran.timed else None
             t_capture = time.perf_counter()
             try:
                 frame = call_with_timeout(self.cell.capture, self.capture_timeout, "camera capture")
@@ -167,13 +177,6 @@ class ViewStep:
                 moving,
             )
         self._moving = None
-
-    def _stop(self) -> None:
-        """Stop the arm and the turntable (drivers with a ``stop()``) after a move timed out."""
-        for device in (self.cell.arm, self.cell.turntable):
-            stop = getattr(device, "stop", None)
-            if callable(stop):
-                stop()
 
 
 def failure_of(exc: Exception, session_id: str, restored_plan: bool) -> tuple[str, WorkbenchError | None]:
