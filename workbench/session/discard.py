@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from workbench.errors import Conflict, Invalid, StorageFault
+from workbench.errors import Conflict, Interrupted, Invalid, StorageFault
 from workbench.journal.discard import last_capture
 from workbench.journal.rebuild import REPLAY_STAGE
 from workbench.journal.store import JournalWriter, read_journal
@@ -47,9 +47,11 @@ def discard_last_view(s: SessionCore) -> dict[str, Any]:
         s.progress.begin("discard", [REPLAY_STAGE])
         try:
             rebuilt = replay(s, read_journal(journal.directory), s.progress.stage)
-        except (ValueError, KeyError, TypeError, JobKilled) as exc:
+        except JobKilled as exc:  # cut off (deleted, Stop, shutdown): the request was valid
             if s.deleted:
                 raise s.gone() from None
+            raise Interrupted(f"session {s.id}: the rebuild without the last view was cut off ({exc})") from None
+        except (ValueError, KeyError, TypeError) as exc:
             raise Invalid(f"session {s.id}: cannot rebuild without the last view: {exc}") from None
         finally:
             s.progress.end()

@@ -129,7 +129,7 @@ def stop_plan(s: SessionCore) -> bool:
         if s.state != State.PLANNING or s.worker is None or current is None or not current.stoppable:
             return False
         s.stop_plan_asked = True
-    return s.worker.cancel("stopped by the operator")
+    return s.worker.cancel("stopped by the operator", kinds=("plan",))  # a timeline read or refit goes on
 
 
 # ---------------------------------------------------------------------- inspect and override
