@@ -153,3 +153,21 @@ def test_creates_released_together_never_pass_the_live_session_limit(settings) -
         assert codes == [201] * 8
         assert len(seen) == 8 and max(seen) <= 2, seen
         assert len(registry.list()) <= 2 and len(registry.list_status()) == 8  # the rest sleep, listed
+
+
+def test_identical_uploads_at_the_same_moment_all_succeed(client: TestClient, settings, cube_obj) -> None:
+    """8 uploads of the same name and bytes released together: each is stored (one content-addressed file, no
+    temporary file left), each answers 201 with the same name."""
+    barrier = threading.Barrier(8)
+
+    def upload() -> tuple[int, str]:
+        barrier.wait()
+        r = client.post("/api/models", files={"file": ("same.obj", cube_obj.encode(), "text/plain")})
+        return r.status_code, r.json().get("name", r.text)
+
+    with ThreadPoolExecutor(8) as pool:
+        answers = list(pool.map(lambda _: upload(), range(8)))
+    assert [code for code, _ in answers] == [201] * 8, answers
+    assert len({name for _, name in answers}) == 1
+    stored = sorted(p.name for p in (settings.data_dir / "uploads").iterdir())
+    assert stored == [answers[0][1].removeprefix("uploads/")]
