@@ -96,9 +96,9 @@ class SceneController:
         self._lock = threading.RLock()
         self._viewers: dict[str, Viewer] = {}
         self._bound: dict[int, Ticket] = {}  # client id -> ticket, between the handshake and viser's client
-        self._watched: dict[str, Session] = {}
-        """Session id -> the session object whose events this controller hears (a woken session is a new object:
-        it is listened to again, :meth:`_on_session_live`)."""
+        self._watched: set[str] = set()
+        """Sessions this controller follows (``SessionRegistry.follow``: their events, whichever object each is;
+        one woken from sleep is a new object)."""
         self._arms: dict[str, SessionArm] = {}
         self.fit = FitViews(self)
         """The Fit panel's actions (app/scene/fit_view.py)."""
@@ -191,19 +191,18 @@ class SceneController:
                 robot.stop()
 
     def _watch(self, session: Session) -> None:
-        """Hear ``session``'s events (caller holds the lock); a woken session is a new object, heard anew."""
-        if self._watched.get(session.id) is not session:
-            self._watched[session.id] = session
-            session.listeners.append(self._on_event)
+        """Hear ``session``'s events from now on, across its sleeps and wakes (caller holds the lock)."""
+        if session.id not in self._watched:
+            self._watched.add(session.id)
+            self.registry.follow(session.id, self._on_event)
 
     def _on_session_live(self, session: Session) -> None:
         """A session became live (created, resumed, or woken from sleep as a new object): the viewers that show
-        it follow the new object's events from now on, and are brought up to date with it."""
+        it are brought up to date with it (its events reach them through ``follow``)."""
         with self._lock:
             viewers = [v for v in self._viewers.values() if v.session_id == session.id and v.drawing is not None]
-            if not viewers:
-                return
-            self._watch(session)
+        if not viewers:
+            return
         data = session.scene_data()
         with self._lock:
             for v in viewers:
@@ -233,7 +232,7 @@ class SceneController:
 
     def _on_session_deleted(self, session: Session) -> None:
         with self._lock:
-            self._watched.pop(session.id, None)
+            self._watched.discard(session.id)
             self._arms.pop(session.id, None)
             for v in [v for v in self._viewers.values() if v.session_id == session.id]:
                 if v.drawing is not None:

@@ -84,6 +84,8 @@ class SessionRegistry:
         """Live session id -> requests and jobs holding it now (:meth:`hold`): it does not sleep meanwhile."""
         self._closing: set[str] = set()
         """Live sessions being put to sleep now: a hold waits for the sleep to end, then wakes them."""
+        self._followers: dict[str, list[Callable[[Session, SessionEvent], None]]] = {}
+        """Session id -> listeners that follow it across sleep and wake (:meth:`follow`)."""
         self.on_create: list[Callable[[Session], None]] = []
         self.on_delete: list[Callable[[Session], None]] = []
         self.ceilings = CeilingService(settings.data_dir / "ceilings")
@@ -130,7 +132,7 @@ class SessionRegistry:
             config = self.settings.planner.replace(**overrides)
         except (ValueError, TypeError) as exc:
             raise Invalid(f"config: {exc}") from None
-        check_config(config)
+        check_config(config, self.settings.max_session_voxels, self.settings.max_live_sessions)
         return config
 
     def _new_id(self) -> str:
@@ -242,9 +244,7 @@ class SessionRegistry:
                     raise StorageFault(f"cannot journal the session in the data directory ({exc.strerror})") from None
             session = self._session(session_id, parts, planner_config, devices, seed, journal, planner)
             with self._lock:
-                self._sessions[session_id] = session
-                self._used[session_id] = time.monotonic()
-                self._hand_over(slot)
+                self._register(session_id, session, slot)
         except BaseException:
             if session is None:
                 _release(parts)
@@ -425,9 +425,7 @@ class SessionRegistry:
                 del self._rebuilding[session_id]
             raise
         with self._lock:  # live and no longer rebuilding in one step: never unknown in between
-            self._sessions[session_id] = session
-            self._used[session_id] = time.monotonic()
-            self._hand_over(slot)
+            self._register(session_id, session, slot)
             self._resuming.discard(session_id)
             del self._rebuilding[session_id]
         for hook in list(self.on_create):
@@ -581,6 +579,43 @@ class SessionRegistry:
                 "enough to sleep; retry when one has finished, or delete one"
             )
 
+    def _register(self, session_id: str, session: Session, slot: _Slot | None) -> None:
+        """``session`` is live from now on (caller holds the lock): its followers hear it before anyone else can
+        change it, and ``slot`` is its place."""
+        for listener in self._followers.get(session_id, []):
+            session.listeners.append(listener)
+        self._sessions[session_id] = session
+        self._used[session_id] = time.monotonic()
+        self._hand_over(slot)
+
+    # ------------------------------------------------------------------ following
+
+    def follow(self, session_id: str, listener: Callable[[Session, SessionEvent], None]) -> None:
+        """Call ``listener(session, event)`` on every event of ``session_id`` from now on, whichever object the
+        session is: one woken from sleep (or resumed) is a new Session, and it is heard from its first event.
+        Following a session twice with the same listener changes nothing."""
+        with self._lock:
+            followers = self._followers.setdefault(session_id, [])
+            if listener in followers:
+                return
+            followers.append(listener)
+            session = self._sessions.get(session_id)
+            if session is not None:
+                session.listeners.append(listener)
+
+    def unfollow(self, session_id: str, listener: Callable[[Session, SessionEvent], None]) -> None:
+        """Stop following (the live object too); unknown listeners are ignored."""
+        with self._lock:
+            followers = self._followers.get(session_id, [])
+            if listener in followers:
+                followers.remove(listener)
+            if not followers:
+                self._followers.pop(session_id, None)
+            session = self._sessions.get(session_id)
+        if session is not None and listener in session.listeners:
+            with contextlib.suppress(ValueError):
+                session.listeners.remove(listener)
+
     def _hand_over(self, slot: _Slot | None) -> None:
         """``slot``'s session is registered now (caller holds the lock): the slot is its place from now on."""
         if slot is not None and not slot.used:
@@ -603,6 +638,7 @@ class SessionRegistry:
         with self._lock:
             session = self._sessions.pop(session_id, None)
             self._used.pop(session_id, None)
+            self._followers.pop(session_id, None)
             dormant = self._dormant.pop(session_id, None) if session is None else None
         if session is None and dormant is None:
             raise NotFound(f"session {session_id!r}: unknown")
