@@ -173,7 +173,7 @@ def test_a_grid_over_the_voxel_budget_is_refused_with_the_numbers(client: TestCl
     assert "27.0 M voxels" in detail and f"{budget / 1e6:.1f} M voxels per session" in detail, detail
     assert "server.max_session_voxels" in detail and "16 live sessions (server.max_live_sessions)" in detail
     assert client.get("/api/sessions").json() == []
-    n = int(round(budget ** (1 / 3))) - 1  # voxels per axis just under the budget
+    n = round(budget ** (1 / 3)) - 1  # voxels per axis just under the budget
     under = {"voxel": {"resolution": 0.3 / n, "max_extent": 0.3}}
     assert client.post("/api/sessions", json={"config": under}).status_code == 201
     assert client.post("/api/sessions", json={"config": {"voxel": {"resolution": 0.01}}}).status_code == 201
