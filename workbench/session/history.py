@@ -74,6 +74,8 @@ class History:
 
     def _build(self, journal: Journal) -> list[TimelineStep]:
         s = self.session
+        if not any(e.get("frame") for e in journal.of_kind("capture")):
+            return []  # no view yet: an empty timeline (a replay cell has no frame to play back)
         worker = planning_worker(s)
         if worker is None:
             return timeline_of(journal, replay_cell(journal))
