@@ -18,8 +18,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from devices.config import CameraConfig, DeviceConfig
-from workbench.registry.registry import SessionRegistry
-from workbench.settings import WorkbenchSettings
+from workbench import SessionRegistry, WorkbenchSettings
 
 
 def rss_mb(pid: int | str = "self") -> float:
