@@ -38,7 +38,7 @@ def hwm_mb(pid: int) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description="what one live session costs the server process")
     parser.add_argument("--resolution", type=float, default=0.002)
     parser.add_argument("--max-extent", type=float, default=0.3)
     parser.add_argument("--views", type=int, default=2, help="views after the first capture (plan + approve each)")
