@@ -310,7 +310,8 @@ class SessionRegistry:
             session = self._sessions.get(session_id)
             if session is not None:
                 self._used[session_id] = time.monotonic()
-            asleep = session is None and session_id in self._dormant and self._dormant[session_id].asleep
+            waking = self._dormant.get(session_id) or self._rebuilding.get(session_id)
+            asleep = session is None and waking is not None and waking.asleep  # (being woken: wait for the waker)
             dormant = session_id in self._dormant
             rebuilding = session_id in self._rebuilding
         if asleep:
