@@ -7,6 +7,7 @@ from workbench import (
     Conflict,
     DeviceFault,
     Gone,
+    Interrupted,
     Invalid,
     NotFound,
     StorageFault,
@@ -24,6 +25,7 @@ STATUS: dict[type[WorkbenchError], int] = {
     StorageFault: 503,
     DeviceFault: 503,
     AtCapacity: 503,
+    Interrupted: 503,
     Gone: 410,
 }
 """The status of each error type (the most derived type listed wins)."""

@@ -13,6 +13,7 @@ from fastapi.openapi.models import Schema
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StrictFloat, StrictInt, create_model, model_validator
 
 from planner import Pose
+from planner.types import QUATERNION_ZERO
 from workbench import SessionStatus
 
 
@@ -23,7 +24,10 @@ def _finite(values: list[float | int]) -> list[float]:
 
 
 def _unit(values: list[float]) -> list[float]:
-    if math.sqrt(sum(v * v for v in values)) < 1e-9:
+    """The quaternion as given, when it has a direction: its largest component is compared (a sum of squares
+    overflows for ``[1e200] * 4`` and underflows for tiny ones); ``Pose.from_wxyz`` normalises it robustly
+    (``planner.unit_quaternion``), so the pose used is the one asked for."""
+    if max(abs(v) for v in values) < QUATERNION_ZERO:
         raise ValueError("quaternion must not be zero")
     return values
 

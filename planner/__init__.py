@@ -36,6 +36,7 @@ from planner.types import (
     ViewScore,
     VoxelClass,
     VoxelSnapshot,
+    unit_quaternion,
 )
 
 defer()  # before any module of ours imports open3d (neither module above does)
@@ -69,4 +70,5 @@ __all__ = [
     "ViewScore",
     "VoxelClass",
     "VoxelSnapshot",
+    "unit_quaternion",
 ]

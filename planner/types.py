@@ -38,6 +38,23 @@ class VoxelClass(IntEnum):
 # --------------------------------------------------------------------------- Pose
 
 
+QUATERNION_ZERO = 1e-9
+"""A quaternion whose largest component is below this has no direction (refused as zero)."""
+
+
+def unit_quaternion(q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(4,) ``q`` (finite) scaled to unit length, in the same direction. Scaled by its largest absolute component
+    first, so no square overflows or underflows: ``[1e200] * 4`` is (0.5, 0.5, 0.5, 0.5) and ``[1e308, 1e308, 0, 0]``
+    is (0.7071, 0.7071, 0, 0), never identity. ValueError for a zero (or non-finite) quaternion."""
+    if not np.all(np.isfinite(q)):
+        raise ValueError("wxyz: must be finite numbers")
+    largest = float(np.max(np.abs(q)))
+    if largest < QUATERNION_ZERO:
+        raise ValueError("wxyz: zero quaternion")
+    scaled = q / largest  # components in [-1, 1], one of them +-1: its norm is in [1, 2]
+    return scaled / np.linalg.norm(scaled)
+
+
 @dataclass(frozen=True, eq=False)
 class Pose:
     """A rigid transform ``T_a_b``: ``x_a = rotation @ x_b + translation``.
@@ -77,12 +94,8 @@ class Pose:
 
     @staticmethod
     def from_wxyz(wxyz: ArrayLike, position: ArrayLike) -> Pose:
-        """From a unit quaternion (w, x, y, z) and a position (3,)."""
-        q = checked_array("wxyz", wxyz, (4,))
-        n = np.linalg.norm(q)
-        if n < 1e-9:
-            raise ValueError("wxyz: zero quaternion")
-        w, x, y, z = q / n
+        """From a quaternion (w, x, y, z), normalised here (:func:`unit_quaternion`), and a position (3,)."""
+        w, x, y, z = unit_quaternion(checked_array("wxyz", wxyz, (4,)))
         R = np.array(
             [
                 [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],

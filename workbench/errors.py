@@ -50,3 +50,8 @@ class Gone(WorkbenchError):  # noqa: N818 - named for the domain, as the transpo
 
 class AtCapacity(WorkbenchError):  # noqa: N818 - named for the domain, as the transport never sees them
     """As many sessions are live as the server allows (``max_live_sessions``) and none of them is idle."""
+
+
+class Interrupted(WorkbenchError):  # noqa: N818 - named for the domain, as the transport never sees them
+    """A read or job was cut off by something else than the request itself (a Stop, the session put to sleep or
+    closed, shutdown): the request was valid and changed nothing; asking again answers it."""

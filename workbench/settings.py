@@ -66,6 +66,13 @@ class WorkbenchSettings:
     """Sessions live in memory at once (each holds its map, its cell and a worker). A create or a wake past it
     first puts the least recently used idle session to sleep (to its journal; the next request for it wakes
     it); when every live session is busy it is refused (503). 0: no limit."""
+    max_session_voxels: int = 4_000_000
+    """Voxels a session's map may grow to at most (``(voxel.max_extent / voxel.resolution)^3``), checked when a
+    session is created (422 beyond it, with the numbers). What a live session costs the server grows with its grid:
+    about 0.15 GB (mesh, cell, surface) plus 50 to 90 B a voxel (benchmarks/bench_session_memory.py: 1 mm over
+    0.3 m, an 11 M-voxel grid, took 0.70 GB; 2 mm, 1.4 M voxels, 0.27 GB), so the default keeps the default
+    ``max_live_sessions`` (16) within about 6 GB of a 24 GB machine (16 x (0.15 GB + 4 M x 60 B)), its workers
+    beside them; the paper's default grid (1 m at 1 cm) is 1 M voxels. 0: no limit (the operator's own risk)."""
     idle_sleep: float = 1800.0
     """A live session nobody asked anything for this many seconds is put to sleep (its memory freed, its
     journal kept); the next request for it or a tab opening it resumes it transparently. 0: never."""
@@ -126,6 +133,7 @@ class WorkbenchSettings:
             "trash_max_bytes",
             "mesh_load_memory",
             "max_live_sessions",
+            "max_session_voxels",
         ):
             value = getattr(self, name)
             if not integer(value) or value < 0:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from typing import Annotated
 
 from fastapi import Depends, Request
@@ -26,8 +27,11 @@ def scene_of(request: Request) -> SceneController:
     return scene
 
 
-def session_of(session_id: str, registry: Annotated[SessionRegistry, Depends(registry_of)]) -> Session:
-    return registry.get(session_id)
+def session_of(session_id: str, registry: Annotated[SessionRegistry, Depends(registry_of)]) -> Iterator[Session]:
+    """The live session of the path, held live for the whole request (``SessionRegistry.hold``): a sleep never
+    cuts off a request in flight (a timeline rebuild, a recording, a step)."""
+    with registry.hold(session_id) as session:
+        yield session
 
 
 Registry = Annotated[SessionRegistry, Depends(registry_of)]

@@ -97,6 +97,8 @@ class SceneController:
         self._viewers: dict[str, Viewer] = {}
         self._bound: dict[int, Ticket] = {}  # client id -> ticket, between the handshake and viser's client
         self._watched: set[str] = set()
+        """Sessions this controller follows (``SessionRegistry.follow``: their events, whichever object each is;
+        one woken from sleep is a new object)."""
         self._arms: dict[str, SessionArm] = {}
         self.fit = FitViews(self)
         """The Fit panel's actions (app/scene/fit_view.py)."""
@@ -115,6 +117,7 @@ class SceneController:
         server.on_client_connect(self._on_client)
         server.on_client_disconnect(self._on_client_gone)
         registry.on_delete.append(self._on_session_deleted)
+        registry.on_create.append(self._on_session_live)
 
     # ------------------------------------------------------------------ viewers
 
@@ -155,11 +158,9 @@ class SceneController:
             return
         with self._lock:
             v.client = client
-            v.drawing = SessionDrawing(client, v.layers, self._selector(session, v), self._custom_setter(session, v))
+            v.drawing = SessionDrawing(client, v.layers, self._selector(v), self._custom_setter(v))
             v.drawing.on_focus = lambda label, viewer_id=v.id: self.fit.clicked(viewer_id, label)
-            if session.id not in self._watched:
-                self._watched.add(session.id)
-                session.listeners.append(self._on_event)
+            self._watch(session)
             data = session.scene_data()
             v.drawing.update(data)
         arm = self.arm_of(session)
@@ -180,6 +181,25 @@ class SceneController:
         for robot in robots:
             if robot is not None:
                 robot.stop()
+
+    def _watch(self, session: Session) -> None:
+        """Hear ``session``'s events from now on, across its sleeps and wakes (caller holds the lock)."""
+        if session.id not in self._watched:
+            self._watched.add(session.id)
+            self.registry.follow(session.id, self._on_event)
+
+    def _on_session_live(self, session: Session) -> None:
+        """A session became live (created, resumed, or woken from sleep as a new object): the viewers that show
+        it are brought up to date with it (its events reach them through ``follow``)."""
+        with self._lock:
+            viewers = [v for v in self._viewers.values() if v.session_id == session.id and v.drawing is not None]
+        if not viewers:
+            return
+        data = session.scene_data()
+        with self._lock:
+            for v in viewers:
+                if v.drawing is not None and v.step is None:
+                    v.drawing.update(data)
 
     def _on_event(self, session: Session, event: SessionEvent) -> None:
         if event not in REDRAW_EVENTS:
@@ -251,27 +271,25 @@ class SceneController:
             robot.animate(target.motion.trajectory, target.motion.angle, ghost=True, speed=speed)
         return target, len(robots)
 
-    @staticmethod
-    def _selector(session: Session, v: Viewer) -> Any:
+    def _selector(self, v: Viewer) -> Any:
         def select(index: int) -> None:
             if v.step is not None:  # the past is looked at, not changed
                 log.info("click on candidate %s ignored: the viewer shows view %d of the timeline", index, v.step.view)
                 return
-            try:
-                session.select(index)
+            try:  # the session live now (a session woken from sleep is a new object)
+                self.registry.get(v.session_id).select(index)
             except WorkbenchError as exc:
                 log.info("click on candidate %s ignored: %s", index, exc.detail)
 
         return select
 
-    @staticmethod
-    def _custom_setter(session: Session, v: Viewer) -> Any:
+    def _custom_setter(self, v: Viewer) -> Any:
         def set_custom(pose: Pose) -> None:
             if v.step is not None:
                 log.info("gizmo pose ignored: the viewer shows view %d of the timeline", v.step.view)
                 return
             try:
-                session.set_custom(pose)
+                self.registry.get(v.session_id).set_custom(pose)
             except (WorkbenchError, ValueError) as exc:
                 log.info("gizmo pose ignored: %s", exc)
 
@@ -286,12 +304,12 @@ class SceneController:
         session itself is not changed, and its events redraw this viewer only once it shows now again. NotFound
         for a view the session has not taken, Conflict without a journal."""
         v = self.viewer(viewer_id)
-        session = self.registry.get(v.session_id)
-        step = nxt = None
-        if view is not None:
-            steps = session.history.steps()  # outside the lock: the first look replays the journal
-            step = session.history.step(view)
-            nxt = steps[view] if view < len(steps) else None
+        with self.registry.hold(v.session_id) as session:  # no sleep cuts the rebuild off
+            step = nxt = None
+            if view is not None:
+                steps = session.history.steps()  # outside the lock: the first look replays the journal
+                step = session.history.step(view)
+                nxt = steps[view] if view < len(steps) else None
         now = session.scene_data()
         with self._lock:
             v.step = step

@@ -160,3 +160,20 @@ def test_numeric_fuzz_of_every_config_field_is_2xx_or_4xx_json(settings: AppSett
                 else:
                     assert isinstance(r.json()["detail"], str | list), r.text
     assert seen.get(422, 0) > 300 and accepted > 60, seen
+
+
+def test_a_grid_over_the_voxel_budget_is_refused_with_the_numbers(client: TestClient, settings: AppSettings) -> None:
+    """1 mm voxels over 0.3 m (300 per axis: 27 M voxels, about 0.7 GB of the server per live session, measured
+    by benchmarks/bench_session_memory.py) are over the per-session budget: 422 saying the numbers; the paper's
+    default grid (1 M voxels) and a grid just under the budget are admitted."""
+    r = client.post("/api/sessions", json={"config": {"voxel": {"resolution": 0.001, "max_extent": 0.3}}})
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"]
+    budget = settings.max_session_voxels
+    assert "27.0 M voxels" in detail and f"{budget / 1e6:.1f} M voxels per session" in detail, detail
+    assert "server.max_session_voxels" in detail and "16 live sessions (server.max_live_sessions)" in detail
+    assert client.get("/api/sessions").json() == []
+    n = round(budget ** (1 / 3)) - 1  # voxels per axis just under the budget
+    under = {"voxel": {"resolution": 0.3 / n, "max_extent": 0.3}}
+    assert client.post("/api/sessions", json={"config": under}).status_code == 201
+    assert client.post("/api/sessions", json={"config": {"voxel": {"resolution": 0.01}}}).status_code == 201

@@ -267,3 +267,25 @@ def test_nothing_before_the_first_frame(client: TestClient, new_session) -> None
         assert r.status_code == 409 and "no plan yet" in detail(r)
     assert client.post(f"/api/sessions/{sid}/retry").status_code == 409
     assert state(client, sid)["state"] == "new" and state(client, sid)["moves"] == 0
+
+
+def test_an_overflowing_quaternion_keeps_its_direction(client: TestClient, planned_session) -> None:
+    """A quaternion whose squares overflow (``[1e200] * 4``, the best view's scaled by 1e300) is the same rotation
+    as its unit quaternion: the custom pose and the approved view are that rotation, never identity."""
+    sid, plan = planned_session(client)
+    best = Pose.from_dict(plan["best"]["pose"])
+    position = best.translation.tolist()
+    r = client.put(f"/api/sessions/{sid}/custom_pose", json={"pose": {"position": position, "wxyz": [1e200] * 4}})
+    assert r.status_code == 200, r.text
+    assert np.allclose(r.json()["pose"]["wxyz"], [0.5, 0.5, 0.5, 0.5])
+    huge = [float(c) * 1e300 for c in best.wxyz]  # the best view's rotation, every square overflows
+    r = client.post(
+        f"/api/sessions/{sid}/approve", json={"plan_id": plan["plan_id"], "pose": {"position": position, "wxyz": huge}}
+    )
+    assert r.status_code == 200, r.text
+    decision = client.get(f"/api/sessions/{sid}/export").json()["decisions"][-1]
+    assert np.allclose(decision["pose"]["wxyz"], best.wxyz, atol=1e-9)  # journaled as approved
+    wb = registry_of(client).get(sid)
+    assert np.allclose(wb.record.iterations[-1]["pose"]["wxyz"], best.wxyz, atol=1e-6)  # the view taken there
+    r = client.put(f"/api/sessions/{sid}/custom_pose", json={"pose": {"position": position, "wxyz": [0.0] * 4}})
+    assert r.status_code == 422

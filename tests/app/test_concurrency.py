@@ -7,8 +7,10 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 
 import httpx
+from apphelpers import BASE_URL, SMALL
 from fastapi.testclient import TestClient
 
+from app.main import create_app
 from workbench.errors import Conflict
 
 
@@ -133,3 +135,41 @@ def test_a_busy_session_blocks_neither_reads_nor_other_sessions(
         assert pending.result(30).status_code == 200
     assert client.get(f"/api/sessions/{sid_a}").json()["iteration"] == 2
     assert client.get(f"/api/sessions/{sid_b}").json()["state"] == "planned"
+
+
+def test_creates_released_together_never_pass_the_live_session_limit(settings) -> None:
+    """8 creates at one instant with ``max_live_sessions = 2``: each is created (the older ones sleep to make room:
+    a create reserves its place before its session exists), and never more than 2 are live at once."""
+    with TestClient(create_app(settings.replace(max_live_sessions=2, idle_sleep=0.0)), base_url=BASE_URL) as client:
+        registry = client.app.state.registry  # type: ignore[attr-defined]
+        seen: list[int] = []
+        registry.on_create.append(lambda _session: seen.append(len(registry.list())))
+        barrier = threading.Barrier(8)
+
+        def create() -> int:
+            barrier.wait()
+            return client.post("/api/sessions", json={"model": "l-block", "config": SMALL}).status_code
+
+        with ThreadPoolExecutor(8) as pool:
+            codes = list(pool.map(lambda _: create(), range(8)))
+        assert codes == [201] * 8
+        assert len(seen) == 8 and max(seen) <= 2, seen
+        assert len(registry.list()) <= 2 and len(registry.list_status()) == 8  # the rest sleep, listed
+
+
+def test_identical_uploads_at_the_same_moment_all_succeed(client: TestClient, settings, cube_obj) -> None:
+    """8 uploads of the same name and bytes released together: each is stored (one content-addressed file, no
+    temporary file left), each answers 201 with the same name."""
+    barrier = threading.Barrier(8)
+
+    def upload() -> tuple[int, str]:
+        barrier.wait()
+        r = client.post("/api/models", files={"file": ("same.obj", cube_obj.encode(), "text/plain")})
+        return r.status_code, r.json().get("name", r.text)
+
+    with ThreadPoolExecutor(8) as pool:
+        answers = list(pool.map(lambda _: upload(), range(8)))
+    assert [code for code, _ in answers] == [201] * 8, answers
+    assert len({name for _, name in answers}) == 1
+    stored = sorted(p.name for p in (settings.data_dir / "uploads").iterdir())
+    assert stored == [answers[0][1].removeprefix("uploads/")]

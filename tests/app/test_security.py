@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import os
+import socket
 from pathlib import Path
 
 import pytest
@@ -263,3 +264,28 @@ def test_upload_names_cannot_choose_where_they_are_stored(client: TestClient, se
         assert (settings.data_dir / "uploads" / stored).is_file()
     assert sorted(p.parent for p in settings.data_dir.rglob("*.obj")) == [settings.data_dir / "uploads"] * 4
     assert not (settings.data_dir.parent / "evil.obj").exists()
+
+
+def test_a_viewer_handshake_with_two_host_headers_is_refused_with_400(
+    settings: AppSettings, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Which Host (or Origin) counts would be a guess: 400 before any websocket opens, no traceback logged."""
+    with TestClient(create_app(settings.replace(scene=True)), base_url=BASE_URL) as c:
+        port = c.get("/api/viewer").json()["port"]
+
+        def handshake(*extra: str) -> bytes:
+            lines = [
+                "GET / HTTP/1.1", f"Host: 127.0.0.1:{port}", *extra, f"Origin: http://127.0.0.1:{port}",
+                "Upgrade: websocket", "Connection: Upgrade", "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==",
+                "Sec-WebSocket-Version: 13", "Sec-WebSocket-Protocol: viser-v1",
+            ]  # fmt: skip
+            with socket.create_connection(("127.0.0.1", port), timeout=10) as sock:
+                sock.sendall(("\r\n".join(lines) + "\r\n\r\n").encode())
+                return sock.recv(4096)
+
+        assert handshake().startswith(b"HTTP/1.1 101")  # the same handshake with one Host opens
+        for extra in ("Host: evil.example", f"Origin: http://127.0.0.1:{port}"):
+            answer = handshake(extra)
+            assert answer.startswith(b"HTTP/1.1 400"), answer[:200]
+            assert b"header is repeated" in answer
+    assert not [r for r in caplog.records if r.exc_info or "MultipleValuesError" in r.getMessage()]

@@ -25,11 +25,12 @@ from tests.servers import serve_process
 from workbench.planning import plan_in
 
 HEAVIEST: dict[str, Any] = {
-    "voxel": {"resolution": 0.0034, "max_extent": 1.0},
+    "voxel": {"resolution": 0.0064, "max_extent": 1.0},
     "cluster": {"search": "exhaustive", "t_min": 1, "t_max": 60, "max_iter": 1000, "tol": 1e-8},
     "candidates": {"count": 833, "parallels": 30},
 }
-"""About the heaviest config the API accepts (300 voxels per axis, 60 exhaustive fits, 100 k projections)."""
+"""About the heaviest config the API accepts (156 voxels per axis: 3.8 M voxels, just under the server's default
+``max_session_voxels``; 60 exhaustive fits, 100 k projections)."""
 PLAN_HEAVY: dict[str, Any] = {**HEAVIEST, "voxel": {"resolution": 0.01}}
 """As heavy a plan, a capture 30 times cheaper (100 voxels per axis)."""
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from planner.types import BoundingBox, DepthFrame, Ellipsoid, Intrinsics, Pose
+from planner.types import BoundingBox, DepthFrame, Ellipsoid, Intrinsics, Pose, unit_quaternion
 
 
 def rot_z(a: float) -> np.ndarray:
@@ -100,3 +100,24 @@ def test_bounding_box() -> None:
     assert box.contains([[0.1, 0.1, 0.0], [0.1, 0.5, 0.0]]).tolist() == [True, False]
     with pytest.raises(ValueError, match="upper"):
         BoundingBox([0, 0, 0], [-1, 0, 0])
+
+
+@pytest.mark.parametrize(
+    ("wxyz", "unit"),
+    [
+        ([1e200] * 4, [0.5] * 4),
+        ([1e308, 1e308, 0.0, 0.0], [2**-0.5, 2**-0.5, 0.0, 0.0]),
+        ([0.0, 0.0, 0.0, -3.0], [0.0, 0.0, 0.0, -1.0]),
+    ],
+)
+def test_a_quaternion_is_normalised_without_overflow(wxyz: list[float], unit: list[float]) -> None:
+    assert np.allclose(unit_quaternion(np.array(wxyz)), unit)
+    pose = Pose.from_wxyz(wxyz, [0.0, 0.0, 0.0])
+    assert np.allclose(pose.rotation, Pose.from_wxyz(unit, [0.0, 0.0, 0.0]).rotation)
+    assert not np.allclose(pose.rotation, np.eye(3))
+
+
+def test_a_zero_or_non_finite_quaternion_is_refused() -> None:
+    for bad in ([0.0] * 4, [1e-12, 0.0, 0.0, 0.0], [np.inf, 0.0, 0.0, 0.0], [np.nan, 1.0, 0.0, 0.0]):
+        with pytest.raises(ValueError, match="wxyz"):
+            Pose.from_wxyz(bad, [0.0, 0.0, 0.0])

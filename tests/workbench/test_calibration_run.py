@@ -145,3 +145,28 @@ def _intrinsics() -> Intrinsics:
     from devices.config import CameraConfig
 
     return CameraConfig(width=160, height=120, fx=140.0, fy=140.0, cx=79.5, cy=59.5).intrinsics
+
+
+def test_a_restart_keeps_the_captures_of_an_open_calibration(tmp_path: Path) -> None:
+    """A calibration is journaled like a session: after a restart (before any write) it is open again under its
+    id with the same pose outcomes, captures and estimate; closing it forgets it for good."""
+    settings = WorkbenchSettings(data_dir=tmp_path / "data")
+    book = Calibrations(settings)
+    run = book.create({"kind": "sim", "calibration": "poor", "seed": 1, "plate_angles_deg": ANGLES, "views": 3})
+    for index in range(7):
+        run.approve(index)
+    run.skip(7)
+    before = run.status()
+    assert before["counts"]["captured"] >= 3 and before["estimate"] is not None
+    book.close_all()  # the server stops (a kill -9 writes nothing more either: every outcome was fsynced)
+
+    again = Calibrations(settings)
+    restored = again.get(run.id)
+    after = restored.status()
+    assert after["poses"] == before["poses"] and after["counts"] == before["counts"]
+    assert np.allclose(after["estimate"]["T_flange_camera"], before["estimate"]["T_flange_camera"], atol=1e-9)
+    assert after["estimate"]["residuals_mm"] == pytest.approx(before["estimate"]["residuals_mm"])
+    restored.approve(8)  # it goes on, and that is journaled too
+    assert Calibrations(settings).get(run.id).status()["poses"][8]["status"] != "pending"
+    again.close(run.id)
+    assert [c.id for c in Calibrations(settings).list()] == []

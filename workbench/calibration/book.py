@@ -16,6 +16,7 @@ plate angle of devices/calibration/poses.py, default all): fewer poses for a qui
 
 from __future__ import annotations
 
+import logging
 import math
 import secrets
 import threading
@@ -23,11 +24,15 @@ from typing import Any
 
 from devices.calibration import DEFAULT_TARGET, Calibration, CalibrationError, calibration_poses, sim_truth
 from devices.calibration.poses import PLATE_ANGLES_DEG, VIEWS
+from devices.protocols import DeviceError
+from workbench.calibration.journal import CalibrationJournal, read_calibrations
 from workbench.calibration.run import CalibrationRun
-from workbench.errors import Conflict, Invalid, NotFound
+from workbench.errors import Conflict, Invalid, NotFound, StorageFault, WorkbenchError
 from workbench.settings import WorkbenchSettings
 from workbench.sources.camera_models import check_camera_models
 from workbench.sources.hardware import hardware_cell, hardware_source
+
+log = logging.getLogger(__name__)
 
 MAX_CALIBRATIONS = 4
 """Calibrations open at once (each holds a cell; close one to start another)."""
@@ -55,6 +60,24 @@ class Calibrations:
         self.settings = settings
         self._lock = threading.Lock()
         self._runs: dict[str, CalibrationRun] = {}
+        if settings.journal:
+            self._restore()
+
+    def _restore(self) -> None:
+        """Rebuild the calibrations journaled by an earlier server (workbench/calibration/journal.py): the same
+        cell from the same request, the same pose outcomes, the estimate redone. One that cannot be rebuilt now
+        (its devices do not open) is logged and its journal kept for the next start."""
+        for entry in read_calibrations(self.settings.data_dir):
+            try:
+                run = self._build(entry.request, entry.id)
+                run.restore(entry.events)
+            except (WorkbenchError, CalibrationError, DeviceError, OSError, ValueError, KeyError, TypeError) as exc:
+                log.warning("calibration %s: not restored from its journal: %s", entry.id, exc)
+                continue
+            run.journal = CalibrationJournal(entry.directory or self.settings.data_dir)
+            with self._lock:
+                self._runs[run.id] = run
+            log.info("calibration %s restored from its journal (%d outcomes)", run.id, len(entry.events))
 
     def get(self, calibration_id: str) -> CalibrationRun:
         with self._lock:
@@ -68,8 +91,22 @@ class Calibrations:
             return list(self._runs.values())
 
     def create(self, request: dict[str, Any]) -> CalibrationRun:
-        """A new calibration (see the module docstring); Invalid for a bad request, Conflict when too many are
-        open or another holder has the devices, DeviceFault when a device cannot be opened."""
+        """A new calibration (see the module docstring), journaled (a restart keeps it); Invalid for a bad request,
+        Conflict when too many are open or another holder has the devices, DeviceFault when a device cannot be
+        opened, StorageFault when it cannot be journaled."""
+        run = self._build(request, f"cal-{secrets.token_hex(4)}")
+        if self.settings.journal:
+            try:
+                run.journal = CalibrationJournal.create(self.settings.data_dir, run.id, dict(request))
+            except (OSError, TypeError, ValueError) as exc:
+                run.close()
+                raise StorageFault(f"calibration: cannot journal it in the data directory ({exc})") from None
+        with self._lock:
+            self._runs[run.id] = run
+        return run
+
+    def _build(self, request: dict[str, Any], calibration_id: str) -> CalibrationRun:
+        """The calibration of ``request`` under ``calibration_id`` (not registered yet)."""
         unknown = sorted(set(request) - set(KEYS))
         if unknown:
             raise Invalid(f"calibration: unknown field(s) {', '.join(unknown)} (known: {', '.join(KEYS)})")
@@ -113,12 +150,7 @@ class Calibrations:
             cell.close()
             raise Invalid(str(exc)) from None
         source.update(plate_angles_deg=list(angles), views=views)
-        run = CalibrationRun(
-            f"cal-{secrets.token_hex(4)}", routine, source, cell_file, truth, self.settings.move_timeout
-        )
-        with self._lock:
-            self._runs[run.id] = run
-        return run
+        return CalibrationRun(calibration_id, routine, source, cell_file, truth, self.settings.move_timeout)
 
     def close(self, calibration_id: str) -> None:
         """Close a calibration and release its cell (NotFound when unknown; Conflict while it moves)."""
@@ -128,6 +160,8 @@ class Calibrations:
         with self._lock:
             self._runs.pop(calibration_id, None)
         run.close()
+        if run.journal is not None:
+            run.journal.delete()
 
     def close_all(self) -> None:
         with self._lock:

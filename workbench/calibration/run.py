@@ -35,6 +35,7 @@ from devices.calibration import estimate as estimate_calibration
 from devices.calibration.sim import SimTruth
 from devices.protocols import DeviceError, UnreachableError
 from devices.timeout import call_with_timeout
+from workbench.calibration.journal import CalibrationJournal, capture_from_json, capture_json
 from workbench.errors import Conflict, DeviceFault, Invalid, NotFound, StorageFault
 
 log = logging.getLogger(__name__)
@@ -126,6 +127,8 @@ class CalibrationRun:
         self._written: dict[str, str] | None = None
         self.selected: int | None = None
         """The pose a person previewed last (the views draw its move)."""
+        self.journal: CalibrationJournal | None = None
+        """Where each pose outcome is journaled before it is acknowledged (workbench/calibration/journal.py)."""
 
     # ------------------------------------------------------------------ reading
 
@@ -217,11 +220,39 @@ class CalibrationRun:
         self._notify("selected")
         return cached
 
+    def _journal(self, kind: str, **fields: Any) -> None:
+        """Journal one pose outcome before it is applied (StorageFault, nothing applied, when it cannot be)."""
+        if self.journal is None:
+            return
+        try:
+            self.journal.append(kind, **fields)
+        except (OSError, ValueError) as exc:
+            raise StorageFault(f"calibration {self.id}: cannot journal the pose's outcome ({exc})") from None
+
+    def restore(self, events: list[dict[str, Any]]) -> None:
+        """Put back the journaled pose outcomes (a restarted server; before the run is shared), then estimate."""
+        for event in events:
+            pose = self.pose(int(event["index"]))
+            if event["kind"] == "capture":
+                self._apply_capture(pose, capture_from_json(event["capture"]))
+            elif event["kind"] == "skip":
+                pose.status, pose.reason, pose.residual_mm = SKIPPED, str(event["reason"]), None
+                pose.spheres, pose.fit_rms_mm = 0, []
+                self._captures.pop(pose.index, None)
+        self._refit()
+
+    def _apply_capture(self, pose: PoseState, capture: Capture) -> None:
+        self._captures[pose.index] = capture
+        pose.status, pose.reason = CAPTURED, None
+        pose.spheres = int(capture.seen.sum())
+        pose.fit_rms_mm = [None if math.isnan(r) else round(float(r) * 1000, 4) for r in capture.fit_rms]
+
     def skip(self, index: int) -> PoseState:
         """Leave pose ``index`` out (a pending one; a captured pose's capture is dropped and the estimate redone)."""
         pose = self.pose(index)
         self._claim(f"skipping pose {index}")
         try:
+            self._journal("skip", index=index, reason="skipped by the person")
             with self._lock:
                 pose.status, pose.reason, pose.residual_mm = SKIPPED, "skipped by the person", None
                 self._captures.pop(index, None)
@@ -255,15 +286,18 @@ class CalibrationRun:
                 raise DeviceFault(f"calibration {self.id}: pose {index} ({pose.label}): {exc}") from None
             with self._lock:
                 self._moves += 1
+            reasons = self.routine.skipped[skipped_before:]
+            reason = reasons[-1][1] if reasons else "not captured"
+            if capture is None:  # journaled first: a restart keeps what this answer tells
+                self._journal("skip", index=index, reason=reason)
+            else:
+                self._journal("capture", index=index, capture=capture_json(capture))
+            with self._lock:
                 if capture is None:
-                    reasons = self.routine.skipped[skipped_before:]
-                    pose.status, pose.reason = SKIPPED, reasons[-1][1] if reasons else "not captured"
+                    pose.status, pose.reason = SKIPPED, reason
                     pose.spheres, pose.fit_rms_mm = 0, []
                 else:
-                    self._captures[index] = capture
-                    pose.status, pose.reason = CAPTURED, None
-                    pose.spheres = int(capture.seen.sum())
-                    pose.fit_rms_mm = [None if math.isnan(r) else round(float(r) * 1000, 4) for r in capture.fit_rms]
+                    self._apply_capture(pose, capture)
             if refit:
                 self._refit()
         finally:

@@ -9,7 +9,7 @@ import logging
 import secrets
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +19,7 @@ from devices.planner_noise import planner_config_for
 from planner import PlannerConfig
 from planner.config import from_dict
 from planner.evaluators import evaluator_names
-from workbench.errors import AtCapacity, Conflict, Invalid, NotFound, StorageFault
+from workbench.errors import AtCapacity, Conflict, Interrupted, Invalid, NotFound, StorageFault
 from workbench.evaluation.ceiling_service import CeilingService
 from workbench.journal.rebuild import REPLAY_STAGE, Rebuilt
 from workbench.journal.store import JournalBusyError, JournalWriter, in_use, list_journals, read_journal, sessions_dir
@@ -28,6 +28,7 @@ from workbench.registry.creations import Creation, Creations, resume_id
 from workbench.registry.dormant import DormantSession, read_dormant, unreadable
 from workbench.registry.idle import IdleSweeper
 from workbench.session.session import Session
+from workbench.session.states import BUSY
 from workbench.session.values import SessionEvent
 from workbench.settings import WorkbenchSettings
 from workbench.sources.camera_models import check_camera_models
@@ -38,6 +39,20 @@ from workbench.workers.pool import Engine
 
 __all__ = ["SURFACE_SAMPLES", "DormantSession", "SessionRegistry"]
 log = logging.getLogger(__name__)
+
+ROOM_WAIT = 60.0
+"""Seconds a create or wake at ``max_live_sessions`` waits for the creates and wakes ahead of it to finish (their
+sessions may then sleep to make room) before it is refused (AtCapacity)."""
+HOLD_TRIES = 5
+"""How often :meth:`SessionRegistry.hold` wakes a session that went back to sleep before it could hold it."""
+
+
+@dataclasses.dataclass(eq=False)
+class _Slot:
+    """One live session's place under ``max_live_sessions``, reserved by a create or a wake before its session
+    exists; handed to the session when it is registered (``used``), else given back."""
+
+    used: bool = False
 
 
 def _release(parts: SessionParts) -> None:
@@ -59,6 +74,16 @@ class SessionRegistry:
         self._used: dict[str, float] = {}
         """Live session id -> when a request last asked for it (time.monotonic): who sleeps first."""
         self._waking: dict[str, threading.Lock] = {}
+        self._changed = threading.Condition(self._lock)
+        """Notified when a slot is given back or handed to its session, a hold ends or a sleep ends."""
+        self._reserved = 0
+        """Slots reserved by creates and wakes in flight (counted as live: the limit holds under races)."""
+        self._holds: dict[str, int] = {}
+        """Live session id -> requests and jobs holding it now (:meth:`hold`): it does not sleep meanwhile."""
+        self._closing: set[str] = set()
+        """Live sessions being put to sleep now: a hold waits for the sleep to end, then wakes them."""
+        self._followers: dict[str, list[Callable[[Session, SessionEvent], None]]] = {}
+        """Session id -> listeners that follow it across sleep and wake (:meth:`follow`)."""
         self.on_create: list[Callable[[Session], None]] = []
         self.on_delete: list[Callable[[Session], None]] = []
         self.ceilings = CeilingService(settings.data_dir / "ceilings")
@@ -105,7 +130,7 @@ class SessionRegistry:
             config = self.settings.planner.replace(**overrides)
         except (ValueError, TypeError) as exc:
             raise Invalid(f"config: {exc}") from None
-        check_config(config)
+        check_config(config, self.settings.max_session_voxels, self.settings.max_live_sessions)
         return config
 
     def _new_id(self) -> str:
@@ -148,11 +173,23 @@ class SessionRegistry:
         if progress_id is not None and progress_id.startswith(resume_id("")):
             raise Invalid(f"progress_id: {progress_id!r} starts with 'resume-', which resumes use")
         camera_models = check_camera_models(camera)
-        self._make_room()
-        with self.creations.run(progress_id) as creation:
-            return self._create(
-                planner_config, model, seed, source, fault_config, faults is not None, planner, creation, camera_models
-            )
+        slot = self._make_room()
+        try:
+            with self.creations.run(progress_id) as creation:
+                return self._create(
+                    planner_config,
+                    model,
+                    seed,
+                    source,
+                    fault_config,
+                    faults is not None,
+                    planner,
+                    creation,
+                    camera_models,
+                    slot,
+                )
+        finally:
+            self._give_back(slot)
 
     def _create(
         self,
@@ -165,6 +202,7 @@ class SessionRegistry:
         planner: str,
         creation: Creation,
         camera: dict[str, str] | None = None,
+        slot: _Slot | None = None,
     ) -> Session:
         name = model or self.settings.devices.model
         devices = session_devices(self.settings, name, seed, camera)
@@ -204,8 +242,7 @@ class SessionRegistry:
                     raise StorageFault(f"cannot journal the session in the data directory ({exc.strerror})") from None
             session = self._session(session_id, parts, planner_config, devices, seed, journal, planner)
             with self._lock:
-                self._sessions[session_id] = session
-                self._used[session_id] = time.monotonic()
+                self._register(session_id, session, slot)
         except BaseException:
             if session is None:
                 _release(parts)
@@ -271,7 +308,8 @@ class SessionRegistry:
             session = self._sessions.get(session_id)
             if session is not None:
                 self._used[session_id] = time.monotonic()
-            asleep = session is None and session_id in self._dormant and self._dormant[session_id].asleep
+            waking = self._dormant.get(session_id) or self._rebuilding.get(session_id)
+            asleep = session is None and waking is not None and waking.asleep  # (being woken: wait for the waker)
             dormant = session_id in self._dormant
             rebuilding = session_id in self._rebuilding
         if asleep:
@@ -285,11 +323,59 @@ class SessionRegistry:
         return session
 
     def status(self, session_id: str) -> dict[str, Any]:
+        """A session's status. A sleeping session wakes for the tab that opens it; when it cannot wake now (every
+        live session busy, or it is being put to sleep or woken by another request) its status comes from its
+        journal: a status read never fails because the session sleeps."""
         with self._lock:
             dormant = self._dormant.get(session_id) or self._rebuilding.get(session_id)
         if dormant is not None and not dormant.asleep:
             return dormant.status()
-        return self.get(session_id).status()  # a sleeping session wakes for the tab that opens it
+        try:
+            return self.get(session_id).status()
+        except (AtCapacity, Conflict, Interrupted, StorageFault):
+            with self._lock:
+                dormant = self._dormant.get(session_id) or self._rebuilding.get(session_id)
+                session = self._sessions.get(session_id)
+            if session is not None:
+                return session.status()
+            if dormant is None:
+                raise
+            return dormant.status()
+
+    @contextlib.contextmanager
+    def hold(self, session_id: str) -> Iterator[Session]:
+        """The live session (woken when it sleeps), kept live while the ``with`` block runs: neither the idle
+        sweeper nor a create past the limit puts it to sleep meanwhile, so a request or a job in flight (a
+        timeline rebuild, a recording, a step) is never cut off by a sleep. Errors as :meth:`get`."""
+        session = None
+        for _ in range(HOLD_TRIES):
+            with self._lock:
+                while session_id in self._closing:  # being put to sleep now: wake it once it sleeps
+                    self._changed.wait(1.0)
+                live = self._sessions.get(session_id)
+                if live is not None:
+                    self._holds[session_id] = self._holds.get(session_id, 0) + 1
+                    self._used[session_id] = time.monotonic()
+                    session = live
+                    break
+            self.get(session_id)  # wakes it (or raises); another request may put it to sleep again: try again
+        if session is None:
+            raise AtCapacity(
+                f"session {session_id!r} was put back to sleep {HOLD_TRIES} times before this request could use "
+                "it (the server is at server.max_live_sessions); retry"
+            )
+        try:
+            yield session
+        finally:
+            with self._lock:
+                left = self._holds.get(session_id, 1) - 1
+                if left > 0:
+                    self._holds[session_id] = left
+                else:
+                    self._holds.pop(session_id, None)
+                if session_id in self._used:
+                    self._used[session_id] = time.monotonic()  # idle from the end of its last request
+                self._changed.notify_all()
 
     def list(self) -> list[Session]:
         with self._lock:
@@ -310,8 +396,13 @@ class SessionRegistry:
         503 (AtCapacity) when ``max_live_sessions`` are live and busy."""
         with self._lock:
             known = session_id in self._dormant
-        if known:
-            self._make_room()
+        slot = self._make_room() if known else None
+        try:
+            return self._resume(session_id, slot)
+        finally:
+            self._give_back(slot)
+
+    def _resume(self, session_id: str, slot: _Slot | None) -> tuple[Session, Rebuilt]:
         with self._lock:
             dormant = self._dormant.get(session_id)
             if dormant is None:
@@ -333,8 +424,7 @@ class SessionRegistry:
                 del self._rebuilding[session_id]
             raise
         with self._lock:  # live and no longer rebuilding in one step: never unknown in between
-            self._sessions[session_id] = session
-            self._used[session_id] = time.monotonic()
+            self._register(session_id, session, slot)
             self._resuming.discard(session_id)
             del self._rebuilding[session_id]
         for hook in list(self.on_create):
@@ -367,6 +457,8 @@ class SessionRegistry:
             if session.worker is not None:
                 session.worker.close()
             _release(parts)
+            if isinstance(exc, JobKilled):  # cut off (shutdown, a dead worker): the journal is fine, ask again
+                raise Interrupted(f"session {dormant.id}: its resume was cut off: {exc}") from None
             raise Invalid(f"session {dormant.id}: cannot resume: {exc}") from None
         if rebuilt.kept < len(journal.events):  # a damaged event or frame: the journal goes on from before it
             journal.cut(rebuilt.kept)
@@ -413,24 +505,34 @@ class SessionRegistry:
         journal, woken by the next request for it. False when it is busy, unjournaled or not live."""
         with self._lock:
             session = self._sessions.get(session_id)
-        if session is None or session.journal is None:
-            return False
-        if not session.close_state():  # fenced: an action that gets the object now is refused (state closed)
-            return False
-        directory = session.journal.directory
-        session.close()
+            if session is None or session.journal is None:
+                return False
+            if self._holds.get(session_id) or session_id in self._closing:  # a request or job holds it
+                return False
+            self._closing.add(session_id)  # a hold from now on waits for the sleep, then wakes it
+        dormant = None
         try:
-            dormant = read_dormant(directory)
-        except (ValueError, KeyError, TypeError) as exc:
-            dormant = unreadable(directory, str(exc))
+            if not session.close_state():  # fenced: an action that gets the object now is refused (state closed)
+                return False
+            directory = session.journal.directory
+            session.close()
+            try:
+                dormant = read_dormant(directory)
+            except (ValueError, KeyError, TypeError) as exc:
+                dormant = unreadable(directory, str(exc))
+            with self._lock:
+                if self._sessions.get(session_id) is session:
+                    del self._sessions[session_id]
+                    self._used.pop(session_id, None)
+                    if dormant is not None:  # else deleted meanwhile: nothing to list
+                        dormant.asleep = True
+                        self._dormant[session_id] = dormant
+        finally:
+            with self._lock:
+                self._closing.discard(session_id)
+                self._changed.notify_all()
         if dormant is None:
             return False
-        dormant.asleep = True
-        with self._lock:
-            if self._sessions.get(session_id) is session:
-                del self._sessions[session_id]
-                self._used.pop(session_id, None)
-                self._dormant[session_id] = dormant
         log.info("session %s put to sleep", session_id)
         return True
 
@@ -442,23 +544,90 @@ class SessionRegistry:
         for sid in idle:
             self.sleep(sid)
 
-    def _make_room(self) -> None:
-        """Below ``max_live_sessions`` for one more live session: the least recently used idle sessions sleep.
-        AtCapacity when every live session is busy (or cannot sleep)."""
+    def _make_room(self) -> _Slot:
+        """A reserved slot for one more live session under ``max_live_sessions`` (the caller hands it to its
+        session, :meth:`_hand_over`, or gives it back, :meth:`_give_back`). The least recently used idle sessions
+        sleep to make room; slots reserved by creates and wakes in flight count as live, so concurrent creates
+        never pass the limit. When none can sleep but creates or wakes are in flight, it waits for them (up to
+        ``ROOM_WAIT`` s: their sessions may then sleep). AtCapacity when every live session is busy or held."""
         limit = self.settings.max_live_sessions
-        if limit <= 0:
-            return
+        deadline = time.monotonic() + ROOM_WAIT
         while True:
             with self._lock:
-                live = len(self._sessions) + len(self._resuming)
-                order = sorted(self._sessions, key=lambda sid: self._used.get(sid, 0.0))
-            if live < limit:
-                return
-            if not any(self.sleep(sid) for sid in order):
-                raise AtCapacity(
-                    f"{live} sessions are live, the limit (server.max_live_sessions = {limit}), and none is idle "
-                    "enough to sleep; retry when one has finished, or delete one"
+                live = len(self._sessions) + self._reserved
+                if limit <= 0 or live < limit:
+                    self._reserved += 1
+                    return _Slot()
+                order = sorted(
+                    (sid for sid in self._sessions if not self._holds.get(sid) and sid not in self._closing),
+                    key=lambda sid: self._used.get(sid, 0.0),
                 )
+            if any(self.sleep(sid) for sid in order):
+                continue
+            with self._lock:
+                # creates and wakes in flight, sleeps under way, and reads holding an idle session end soon
+                held = any(self._holds.get(sid) and live.state not in BUSY for sid, live in self._sessions.items())
+                pending = self._reserved > 0 or bool(self._closing) or held
+                if pending and time.monotonic() < deadline and len(self._sessions) + self._reserved >= limit:
+                    self._changed.wait(min(1.0, max(0.0, deadline - time.monotonic())))
+                    continue
+                if len(self._sessions) + self._reserved < limit:
+                    continue
+            raise AtCapacity(
+                f"{live} sessions are live, the limit (server.max_live_sessions = {limit}), and none is idle "
+                "enough to sleep; retry when one has finished, or delete one"
+            )
+
+    def _register(self, session_id: str, session: Session, slot: _Slot | None) -> None:
+        """``session`` is live from now on (caller holds the lock): its followers hear it before anyone else can
+        change it, and ``slot`` is its place."""
+        for listener in self._followers.get(session_id, []):
+            session.listeners.append(listener)
+        self._sessions[session_id] = session
+        self._used[session_id] = time.monotonic()
+        self._hand_over(slot)
+
+    # ------------------------------------------------------------------ following
+
+    def follow(self, session_id: str, listener: Callable[[Session, SessionEvent], None]) -> None:
+        """Call ``listener(session, event)`` on every event of ``session_id`` from now on, whichever object the
+        session is: one woken from sleep (or resumed) is a new Session, and it is heard from its first event.
+        Following a session twice with the same listener changes nothing."""
+        with self._lock:
+            followers = self._followers.setdefault(session_id, [])
+            if listener in followers:
+                return
+            followers.append(listener)
+            session = self._sessions.get(session_id)
+            if session is not None:
+                session.listeners.append(listener)
+
+    def unfollow(self, session_id: str, listener: Callable[[Session, SessionEvent], None]) -> None:
+        """Stop following (the live object too); unknown listeners are ignored."""
+        with self._lock:
+            followers = self._followers.get(session_id, [])
+            if listener in followers:
+                followers.remove(listener)
+            if not followers:
+                self._followers.pop(session_id, None)
+            session = self._sessions.get(session_id)
+        if session is not None and listener in session.listeners:
+            with contextlib.suppress(ValueError):
+                session.listeners.remove(listener)
+
+    def _hand_over(self, slot: _Slot | None) -> None:
+        """``slot``'s session is registered now (caller holds the lock): the slot is its place from now on."""
+        if slot is not None and not slot.used:
+            slot.used = True
+            self._reserved -= 1
+            self._changed.notify_all()
+
+    def _give_back(self, slot: _Slot | None) -> None:
+        """Give back a slot no session took (the create or wake failed)."""
+        if slot is None:
+            return
+        with self._lock:
+            self._hand_over(slot)
 
     # ------------------------------------------------------------------ delete and close
 
@@ -468,6 +637,7 @@ class SessionRegistry:
         with self._lock:
             session = self._sessions.pop(session_id, None)
             self._used.pop(session_id, None)
+            self._followers.pop(session_id, None)
             dormant = self._dormant.pop(session_id, None) if session is None else None
         if session is None and dormant is None:
             raise NotFound(f"session {session_id!r}: unknown")

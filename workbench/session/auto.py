@@ -91,7 +91,7 @@ class AutoRunner:
                 self._stop.set()
                 s.emit("auto_stop")
         if running and s.worker is not None:
-            s.worker.cancel("stopped by the operator")
+            s.worker.cancel("stopped by the operator", kinds=("plan", "integrate"))  # not another tab's read
         return running
 
     def join(self, timeout: float) -> bool:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 import threading
 
-from workbench.errors import Conflict, Invalid, NotFound
+from workbench.errors import Conflict, Interrupted, Invalid, NotFound
 from workbench.journal.rebuild import replay_cell
 from workbench.journal.store import JOURNAL_FILE, Journal, read_journal
 from workbench.journal.timeline import TimelineStep, timeline_of
@@ -35,7 +35,8 @@ class History:
 
     def steps(self) -> list[TimelineStep]:
         """Every step of the session's journal as it is now. Conflict without a journal; Invalid when it cannot
-        be replayed; Gone when the session was deleted meanwhile."""
+        be replayed; Gone when the session was deleted meanwhile, Interrupted when the
+        rebuild was cut off otherwise."""
         s = self.session
         writer = s.journal
         if writer is None:
@@ -50,9 +51,11 @@ class History:
             journal = read_journal(writer.directory)
             try:
                 steps = self._build(journal)
-            except (ValueError, KeyError, TypeError, JobKilled) as exc:
+            except JobKilled as exc:  # a valid read cut off (deleted, shutdown): never the request's fault
                 if s.deleted:
                     raise s.gone() from None
+                raise Interrupted(f"session {s.id}: its timeline rebuild was cut off ({exc}); ask again") from None
+            except (ValueError, KeyError, TypeError) as exc:
                 raise Invalid(f"session {s.id}: cannot rebuild its timeline from the journal: {exc}") from None
             self._key, self._steps = key, steps
             self.builds += 1
@@ -67,6 +70,8 @@ class History:
 
     def _build(self, journal: Journal) -> list[TimelineStep]:
         s = self.session
+        if not any(e.get("frame") for e in journal.of_kind("capture")):
+            return []  # no view yet: an empty timeline (a replay cell has no frame to play back)
         worker = s.planning_worker()
         if worker is None:
             return timeline_of(journal, replay_cell(journal))

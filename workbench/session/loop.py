@@ -140,7 +140,7 @@ class ScanLoop(SessionCore):
             if self.state != State.PLANNING or self.worker is None or current is None or not current.stoppable:
                 return False
             self.stop_plan_asked = True
-        return self.worker.cancel("stopped by the operator")
+        return self.worker.cancel("stopped by the operator", kinds=("plan",))  # a timeline read or refit goes on
 
     # ------------------------------------------------------------------ inspect and override
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 from typing import Any
 
 from planner.ellipsoids import fit_at_t
-from workbench.errors import Conflict, Invalid, StorageFault
+from workbench.errors import Conflict, Interrupted, Invalid, StorageFault
 from workbench.journal.discard import last_capture
 from workbench.journal.rebuild import REPLAY_STAGE, Rebuilt
 from workbench.journal.store import JournalWriter, read_journal
@@ -103,9 +103,11 @@ class Session(ScanLoop):
             self.progress.begin("discard", [REPLAY_STAGE])
             try:
                 rebuilt = self.replay(read_journal(journal.directory), self.progress.stage)
-            except (ValueError, KeyError, TypeError, JobKilled) as exc:
+            except JobKilled as exc:  # cut off (deleted, Stop, shutdown): the request was valid
                 if self.deleted:
                     raise self.gone() from None
+                raise Interrupted(f"session {self.id}: the rebuild without the last view was cut off ({exc})") from None
+            except (ValueError, KeyError, TypeError) as exc:
                 raise Invalid(f"session {self.id}: cannot rebuild without the last view: {exc}") from None
             finally:
                 self.progress.end()

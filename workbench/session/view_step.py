@@ -124,7 +124,7 @@ class ViewStep:
                 frame = call_with_timeout(self.cell.capture, self.capture_timeout, "camera capture")
             except DeviceTimeoutError:
                 if self.worker is not None:
-                    self.worker.cancel("the capture timed out")  # a render still running is killed
+                    self.worker.cancel("the capture timed out", kinds=("render",))  # a render still running is killed
                 raise
             capture_seconds = time.perf_counter() - t_capture
             if self.journal is not None:

@@ -9,7 +9,9 @@ a file outside those two directories.
 from __future__ import annotations
 
 import hashlib
+import os
 import re
+import tempfile
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -162,12 +164,18 @@ def save_upload(settings: WorkbenchSettings, filename: str, data: bytes) -> Mode
     directory = upload_dir(settings)
     directory.mkdir(parents=True, exist_ok=True)
     final = directory / f"{stem}-{digest}{suffix}"
-    tmp = directory / f".{stem}-{digest}.part{suffix}"
-    tmp.write_bytes(data)
+    info = ModelInfo(UPLOAD_PREFIX + final.name, "upload", f"uploaded {filename}", final)
+    if final.is_file():  # the same bytes under the same name were admitted already (the name is content-addressed)
+        return info
+    # a temporary file of this upload's own: identical uploads at the same moment never share one
+    fd, name = tempfile.mkstemp(prefix=f".{stem}-{digest}.", suffix=f".part{suffix}", dir=directory)
+    tmp = Path(name)
     try:
+        with os.fdopen(fd, "wb") as out:
+            out.write(data)
         read_mesh(settings, tmp, f"upload {filename!r}")  # a bomb dies in the reader's process, not here
+        tmp.replace(final)  # atomic: a concurrent identical upload replaces it with the same bytes
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
-    tmp.replace(final)
-    return ModelInfo(UPLOAD_PREFIX + final.name, "upload", f"uploaded {filename}", final)
+    return info

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from planner import PlannerConfig
+from planner.bbox import max_voxels
 from workbench.errors import Invalid, TooLarge
 from workbench.sources.mesh_prescan import gltf_counts, gltf_json, ply_counts
 
@@ -27,6 +28,9 @@ MAX_EXHAUSTIVE_FITS = 60
 """``cluster.search = "exhaustive"`` fits every T in [t_min, t_max]: at most this many."""
 MAX_CANDIDATE_TERMS = 100_000
 """``candidates.count * 2 * cluster.t_max`` (every candidate projects every ellipsoid) at most this."""
+SERVER_BYTES_PER_VOXEL = 60
+"""What one voxel of a live session's grid costs the server process, bytes (its map, the planner's voxel lists and
+the plan it holds; measured by benchmarks/bench_session_memory.py, rounded up)."""
 
 BOUNDS: dict[str, tuple[float, float]] = {
     "voxel.resolution": (0.001, 0.2),
@@ -77,8 +81,18 @@ BOUNDS: dict[str, tuple[float, float]] = {
 """Inclusive [low, high] of every numeric config field accepted over the API."""
 
 
-def check_config(config: PlannerConfig) -> None:
-    """Invalid (422) naming the first field outside ``BOUNDS`` or the first cost product over its limit."""
+def grid_voxels(config: PlannerConfig) -> int:
+    """The most voxels a session's map can hold: its box grows to ``voxel.max_extent`` per edge."""
+    n = max_voxels(config.voxel.max_extent, config.voxel.resolution)
+    return n * n * n
+
+
+def check_config(config: PlannerConfig, max_session_voxels: int = 0, max_live_sessions: int = 0) -> None:
+    """Invalid (422) naming the first field outside ``BOUNDS`` or the first cost product over its limit.
+
+    max_session_voxels: the server's voxel budget per session (``server.max_session_voxels``; 0: none), which
+    bounds what a live session costs the server (:data:`SERVER_BYTES_PER_VOXEL`); max_live_sessions: the
+    server's limit, quoted in the refusal (what the budget is derived from)."""
     for name, (low, high) in BOUNDS.items():
         section, key = name.split(".")
         value = getattr(getattr(config, section), key)
@@ -89,6 +103,19 @@ def check_config(config: PlannerConfig) -> None:
         raise Invalid(
             f"config: voxel.max_extent / voxel.resolution = {cells:.0f} voxels per axis, "
             f"more than {MAX_GRID_CELLS_PER_AXIS} (coarser resolution or smaller max_extent)"
+        )
+    voxels = grid_voxels(config)
+    if max_session_voxels > 0 and voxels > max_session_voxels:
+        per_session = max_session_voxels * SERVER_BYTES_PER_VOXEL / 1e9
+        live = f"; {max_live_sessions} live sessions (server.max_live_sessions) x {per_session:.2f} GB" * (
+            max_live_sessions > 0
+        )
+        raise Invalid(
+            f"config: voxel.max_extent {config.voxel.max_extent:g} m / voxel.resolution {config.voxel.resolution:g} m "
+            f"is a grid of up to {voxels / 1e6:.1f} M voxels, more than this server's budget of "
+            f"{max_session_voxels / 1e6:.1f} M voxels per session (server.max_session_voxels: about "
+            f"{SERVER_BYTES_PER_VOXEL} B a voxel in the server, {per_session:.2f} GB a session{live}); "
+            "choose a coarser resolution or a smaller max_extent"
         )
     cluster = config.cluster
     fits = cluster.t_max - cluster.t_min + 1

@@ -12,7 +12,7 @@ import logging
 import multiprocessing
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from multiprocessing.connection import Connection, wait
 from pathlib import Path
 from typing import Any, Protocol
@@ -89,6 +89,8 @@ class SessionWorker:
         self._conn: Connection | None = None
         self._cancelled = threading.Event()
         self._reason: str | None = None
+        self._kind: str | None = None  # the kind of the job being run (or waiting for a slot), None: none
+        self._cancel_lock = threading.Lock()  # a cancel and the start and end of a job: never one's half
         self._closed = False
         self._hurry: Any = None  # the running process's event: a job waits (its warm-up stops early)
         self._asked = False  # a job was asked of this worker: its warm-ups are cut short from then on
@@ -189,15 +191,21 @@ class SessionWorker:
         with self._job_lock:
             if self._closed:
                 raise JobKilled(f"{what}: the session is closed")
-            self._cancelled.clear()
-            self._reason = None
+            with self._cancel_lock:
+                self._cancelled.clear()
+                self._reason = None
+                self._kind = kind
             if not self.engine.acquire(self._cancelled):
+                with self._cancel_lock:
+                    self._kind = None
                 raise JobKilled(f"{what}: {self._reason or 'cancelled'}")
             self.busy = True
             try:
                 return self._run(kind, payload, budget, what, on_progress)
             finally:
-                self.busy = False
+                with self._cancel_lock:
+                    self.busy = False
+                    self._kind = None
                 self.jobs += 1
                 self.engine.release()
                 self.engine.used(self)
@@ -302,13 +310,19 @@ class SessionWorker:
 
     # ------------------------------------------------------------------ stopping
 
-    def cancel(self, reason: str = "cancelled") -> bool:
-        """Kill the running job now (its caller gets JobKilled with ``reason``). True when one was running."""
-        self._reason = reason
-        self._cancelled.set()
-        running = self.busy
-        if running:
-            self._kill()
+    def cancel(self, reason: str = "cancelled", kinds: Collection[str] | None = None) -> bool:
+        """Kill the running job now (its caller gets JobKilled with ``reason``). True when one was running.
+
+        kinds: kill it only when it is a job of one of these kinds (``"plan"``, ``"integrate"``...): a Stop of
+        a plan or of auto mode leaves another tab's timeline rebuild or refit running. None: whatever runs."""
+        with self._cancel_lock:
+            if kinds is not None and self._kind not in kinds:
+                return False
+            self._reason = reason
+            self._cancelled.set()
+            running = self.busy
+            if running:
+                self._kill()
         return running
 
     def stop_idle(self) -> None:
