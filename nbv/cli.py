@@ -105,9 +105,9 @@ def build_parser() -> argparse.ArgumentParser:
     calibrate_cmd.add_arguments(p)
     p.set_defaults(func=calibrate_cmd.run)
 
-    for name in ("bench", "replay", "record"):
+    for name in ("bench", "replay", "record", "export-bag"):
         try:
-            module = __import__(f"nbv.{name}", fromlist=["add_arguments", "run"])
+            module = __import__(f"nbv.{name.replace('-', '_')}", fromlist=["add_arguments", "run"])
         except ImportError:
             continue
         p = sub.add_parser(
