@@ -98,6 +98,27 @@ def document_error_bodies(schema: dict[str, Any]) -> dict[str, Any]:
     return schema
 
 
+class BagTopicsIn(BaseModel):
+    """Where a ROS 2 bag's scan is (docs/bags.md); each default is realsense2_camera's / ros2_control's name."""
+
+    model_config = ConfigDict(extra="forbid")
+    depth: str | None = Field(
+        default=None,
+        min_length=1,
+        max_length=200,
+        description="depth images (default /camera/camera/depth/image_rect_raw)",
+    )
+    camera_info: str | None = Field(
+        default=None, min_length=1, max_length=200, description="camera info (default /camera/camera/depth/camera_info)"
+    )
+    joint_states: str | None = Field(
+        default=None, min_length=1, max_length=200, description="joint states (default /joint_states)"
+    )
+    plate_frame: str | None = Field(
+        default=None, min_length=1, max_length=200, description="the plate's TF frame, the views' frame (default plate)"
+    )
+
+
 class SourceIn(BaseModel):
     """Where the session's frames come from: the simulated cell, a replay of recorded / journaled frames, or the
     devices of the server's cell file (``hardware``, docs/hardware.md; the default when the server has one)."""
@@ -108,6 +129,9 @@ class SourceIn(BaseModel):
         default=None, max_length=64, description="replay: a name from GET /api/recordings (data_dir/recordings)"
     )
     session: str | None = Field(default=None, pattern=r"^[0-9a-f]{8}$", description="replay: a journaled session id")
+    topics: BagTopicsIn | None = Field(
+        default=None, description="replay of a ROS 2 bag: where its scan is (default: realsense2_camera's topics)"
+    )
     mode: Literal["sequence", "nearest"] = Field(
         default="sequence", description="replay: frames in order, or the frame nearest the approved pose"
     )
@@ -122,6 +146,8 @@ class SourceIn(BaseModel):
     def _one_origin(self) -> SourceIn:
         if self.kind == "replay" and (self.recording is None) == (self.session is None):
             raise ValueError("a replay source needs exactly one of 'recording' or 'session'")
+        if self.topics is not None and self.recording is None:
+            raise ValueError("'topics' go with the replay of a recording (a ROS 2 bag)")
         if self.kind != "replay" and (self.recording is not None or self.session is not None):
             raise ValueError(f"a {self.kind} source takes no 'recording' or 'session'")
         if self.kind != "hardware" and (self.dry_run is not None or self.truth is not None):

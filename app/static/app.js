@@ -368,6 +368,7 @@ function updateButtons() {
   $("delete").disabled = S.inFlight || !S.session;
   for (const id of ["export-ply", "export-json"]) $(id).classList.toggle("disabled", !st);
   for (const fmt of SURFACE_FORMATS) $(`export-surface-${fmt}`).classList.toggle("disabled", !st || !st.iteration);
+  $("export-bag").classList.toggle("disabled", !st || !st.iteration);
 }
 
 function renderStatus(st) {
@@ -774,6 +775,7 @@ async function init() {
       $(`export-surface-${fmt}`).href = withToken(`/api/sessions/${S.session}/surface.ply?format=${fmt}`);
     }
     $("tl-recording").href = withToken(`/api/sessions/${S.session}/recording`);
+    $("export-bag").href = withToken(`/api/sessions/${S.session}/export.mcap`);
     connectEvents(500);
     await openViewer();
   } else {

@@ -5,6 +5,8 @@ Sources (the ``source`` of a create request):
 - ``{"kind": "sim"}`` (default): the model on the simulated cell.
 - ``{"kind": "replay", "recording": NAME, "mode": "sequence" | "nearest"}``: a recording folder
   ``data_dir/recordings/NAME`` (PLY + pose JSON per view, docs/journal.md).
+  A recording may also be a ROS 2 bag there: ``NAME.mcap``, ``NAME.db3`` or a rosbag2 folder (devices/rosbag.py;
+  ``"topics": {"depth", "camera_info", "joint_states", "plate_frame"}`` names where its scan is, docs/bags.md).
 - ``{"kind": "replay", "session": ID, "mode": ...}``: the frames of a journaled session.
 - ``{"kind": "hardware", "dry_run": false, "truth": null}``: the devices of the server's cell file
   (workbench/sources/hardware.py); the default source when the server has one (``nbv serve --cell``).
@@ -67,11 +69,36 @@ def recordings_dir(settings: WorkbenchSettings) -> Path:
 
 
 def list_recordings(settings: WorkbenchSettings) -> list[str]:
-    """Names of the recording folders directly inside ``data_dir/recordings`` (no symlinks, no dot names)."""
+    """Names of the recording folders and ROS 2 bag files (``.mcap``, ``.db3``) directly inside
+    ``data_dir/recordings`` (no symlinks, no dot names)."""
+    from devices.rosbag import BAG_SUFFIXES
+
     root = recordings_dir(settings)
     if not root.is_dir():
         return []
-    return sorted(p.name for p in root.iterdir() if RECORDING_NAME.match(p.name) and p.is_dir() and not p.is_symlink())
+    return sorted(
+        p.name
+        for p in root.iterdir()
+        if RECORDING_NAME.match(p.name)
+        and not p.is_symlink()
+        and (p.is_dir() or (p.is_file() and p.suffix in BAG_SUFFIXES))
+    )
+
+
+def bag_frames(path: Path, topics: dict[str, Any] | None) -> tuple[list[DepthFrame], str | None]:
+    """(frames, ground-truth model name or None) of the ROS 2 bag at ``path``: the truth is the model of a
+    simulated session the bag was exported from (its ``/nbv/scan``). ValueError for a bad bag or bad topics."""
+    from devices.rosbag import BagTopics, load_bag
+
+    try:
+        import rosbags  # noqa: F401
+    except ImportError:
+        raise ValueError("a ROS 2 bag needs rosbags: pip install 'nbv-workbench[ros2]'") from None
+    scan = load_bag(path, BagTopics.from_dict(topics))
+    model, source = scan.info.get("model"), scan.info.get("source")
+    sim = isinstance(source, dict) and source.get("kind") == "sim"
+    truth = model.get("name") if sim and isinstance(model, dict) and isinstance(model.get("name"), str) else None
+    return list(scan.frames), truth
 
 
 def ground_truth(
@@ -99,7 +126,15 @@ def replay_frames(settings: WorkbenchSettings, source: dict[str, Any]) -> tuple[
             known = ", ".join(list_recordings(settings)) or "none"
             raise NotFound(f"recording {name!r}: unknown (known: {known})")
         try:
-            return load_recording(recordings_dir(settings) / name), f"replay:{name}", None
+            from devices.rosbag import is_bag
+
+            path = recordings_dir(settings) / name
+            if is_bag(path):
+                frames, truth = bag_frames(path, source.get("topics"))
+                return frames, f"replay:{name}", truth
+            if source.get("topics"):
+                raise ValueError("'topics' are for a ROS 2 bag; this is a folder of PLY + JSON views")
+            return load_recording(path), f"replay:{name}", None
         except ValueError as exc:
             raise Invalid(f"recording {name!r}: {str(exc).replace(str(settings.data_dir), '<data>')}") from None
     session = str(source.get("session") or "")
