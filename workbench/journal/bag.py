@@ -25,7 +25,7 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -56,9 +56,9 @@ from workbench.surface.export import layer_mesh
 
 STORAGES = {".mcap": "MCAP", ".db3": "SQLITE3"}
 """The file suffixes ``export_bag`` writes and their rosbag2 storage plugins."""
-BAG_VERSION = 9
-"""rosbag2 format version written (Iron and newer write 9; Humble's reader reads up to 9 from 0.15.x on: the
-single storage file carries its own schemas either way)."""
+BAG_VERSIONS: dict[str, Literal[8, 9]] = {"humble": 8, "jazzy": 9}
+"""The rosbag2 format version written per distro: 8 stores the QoS profiles with numeric enums (the form Humble
+parses), 9 with names (Jazzy's). The single storage file carries the message definitions either way."""
 
 
 @dataclass(frozen=True)
@@ -210,11 +210,14 @@ def _joint_names(devices: DeviceConfig | None, count: int) -> list[str]:
     return [f"joint_{i + 1}" for i in range(count)]
 
 
-def _cloud_and_surface(journal: Journal) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The registered cloud ((N, 3) float64, plate frame) of the journal's replay and its surface as triangles
-    ((3 F, 3) float64, the page's layer budget); an empty (0, 3) when there is no surface."""
-    rebuilt = rebuild(journal, replay_cell(journal))
-    cloud = np.asarray(rebuilt.planner.cloud, dtype=np.float64).reshape(-1, 3)
+def _cloud_and_surface(
+    journal: Journal, cloud: NDArray[np.float64] | None
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The registered cloud ((N, 3) float64, plate frame: ``cloud``, else that of the journal's replay) and the
+    surface as triangles ((3 F, 3) float64, the page's layer budget; (0, 3) when there is no surface)."""
+    if cloud is None:
+        cloud = rebuild(journal, replay_cell(journal)).planner.cloud
+    cloud = np.asarray(cloud, dtype=np.float64).reshape(-1, 3)
     update = surface_of_journal(journal).update
     mesh = None if update is None else update.mesh
     if mesh is None or len(mesh.faces) == 0:
@@ -223,9 +226,14 @@ def _cloud_and_surface(journal: Journal) -> tuple[NDArray[np.float64], NDArray[n
     return cloud, np.asarray(layer.vertices)[np.asarray(layer.faces).reshape(-1)]
 
 
-def export_bag(session_dir: str | Path, out: str | Path, distro: str = "humble") -> BagExport:
+def export_bag(
+    session_dir: str | Path, out: str | Path, distro: str = "humble", cloud: NDArray[np.float64] | None = None
+) -> BagExport:
     """Write the journaled session in ``session_dir`` to the rosbag2 file ``out`` (``.mcap``: MCAP, ``.db3``:
     SQLite 3; replaced when it exists) with ``distro``'s message definitions (``humble`` or ``jazzy``).
+
+    cloud: the session's registered cloud ((N, 3) float64) when the caller holds it (a live session); None:
+    replayed from the journal (``nbv replay``'s rebuild, seconds: it re-makes every plan).
 
     ValueError (nothing written) for another suffix, an unreadable journal or a session without a view."""
     from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
@@ -246,7 +254,7 @@ def export_bag(session_dir: str | Path, out: str | Path, distro: str = "humble")
         devices: DeviceConfig | None = from_dict(DeviceConfig, journal.header["devices"])
     except (KeyError, TypeError, ValueError):
         devices = None
-    cloud, triangles = _cloud_and_surface(journal)
+    cloud, triangles = _cloud_and_surface(journal, cloud)
     m = _Messages(distro)
     store = m.store
     stamps = [_ns(e["time"]) for e in captures]
@@ -264,7 +272,8 @@ def export_bag(session_dir: str | Path, out: str | Path, distro: str = "humble")
     work = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
         folder = work / "bag"
-        with Writer(folder, version=BAG_VERSION, storage_plugin=getattr(StoragePlugin, STORAGES[suffix])) as w:
+        plugin = getattr(StoragePlugin, STORAGES[suffix])
+        with Writer(folder, version=BAG_VERSIONS[distro], storage_plugin=plugin) as w:
 
             def conn(topic: str, msgtype: str, qos: list[Any] | None = None) -> Any:
                 return w.add_connection(topic, msgtype, typestore=store, offered_qos_profiles=qos or [])
@@ -323,8 +332,10 @@ def export_bag(session_dir: str | Path, out: str | Path, distro: str = "humble")
     )
 
 
-def bag_bytes(session_dir: str | Path, suffix: str = ".mcap", distro: str = "humble") -> tuple[bytes, BagExport]:
+def bag_bytes(
+    session_dir: str | Path, suffix: str = ".mcap", distro: str = "humble", cloud: NDArray[np.float64] | None = None
+) -> tuple[bytes, BagExport]:
     """The bytes of :func:`export_bag`'s file (written to a temporary folder and removed), and its summary."""
     with tempfile.TemporaryDirectory(prefix="nbv-bag-") as tmp:
-        done = export_bag(session_dir, Path(tmp) / f"scan{suffix}", distro)
+        done = export_bag(session_dir, Path(tmp) / f"scan{suffix}", distro, cloud)
         return done.path.read_bytes(), done
