@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
         import rosbags  # noqa: F401
     except ImportError:
         raise CliError("nbv export-bag needs rosbags: pip install 'nbv-workbench[ros2]'") from None
-    from workbench.journal.bag import export_bag
+    from workbench.journal import export_bag
 
     done = export_bag(args.journal, args.out, args.distro)
     print(

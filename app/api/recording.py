@@ -44,14 +44,14 @@ def _bag(session: SessionDep, fmt: Literal["mcap", "db3"], distro: str) -> Respo
         import rosbags  # noqa: F401
     except ImportError:
         raise Conflict("this server cannot write ROS 2 bags: install its ros2 extra (rosbags)") from None
-    from workbench.journal.bag import bag_bytes
+    from workbench.journal import bag_bytes
 
     journal = session.journal
     if journal is None:
         raise Conflict(f"session {session.id}: no journal to export (the server runs without one)")
     if session.status()["iteration"] == 0:
         raise Conflict(f"session {session.id}: no view yet to export")
-    data, _ = bag_bytes(journal.directory, f".{fmt}", distro)
+    data, _ = bag_bytes(journal.directory, f".{fmt}", distro, session.planner.cloud)
     return Response(
         data,
         media_type=BAG_MEDIA[fmt],
