@@ -3,8 +3,8 @@
 A *scan bag* holds, per view, a depth image (``sensor_msgs/Image``, ``32FC1`` metres or ``16UC1`` millimetres), the
 camera's ``sensor_msgs/CameraInfo``, the camera pose in ``/tf`` (and ``/tf_static``) and, optionally,
 ``sensor_msgs/JointState``. :func:`load_bag` turns such a bag into :class:`planner.types.DepthFrame` s, one per depth
-image, each posed by the TF chain from the plate frame (``BagTopics.plate_frame``) to the image's ``frame_id`` at the
-image's stamp. The camera pose is taken from TF only (a lab's ``robot_state_publisher`` turns the arm's and the
+image (with joint states: one per stop of the joints, :func:`still_images`), each posed by the TF chain from the
+plate frame (``BagTopics.plate_frame``) to the image's ``frame_id`` at the image's stamp. The camera pose is taken from TF only (a lab's ``robot_state_publisher`` turns the arm's and the
 turntable's joint states into TF); the joint states are not run through the arm's kinematics here.
 
 The writer of a session's bag is ``workbench.journal.bag``; both use the names below, so an exported bag plays back
@@ -30,7 +30,11 @@ if TYPE_CHECKING:
 BAG_SUFFIXES = (".mcap", ".db3")
 """Single-file rosbag2 storages (a rosbag2 folder holds ``metadata.yaml`` and one of these)."""
 MAX_BAG_VIEWS = 200
-"""A bag may hold at most this many depth images (views)."""
+"""A bag may hold at most this many views."""
+STILL_NS = 300_000_000
+"""A depth image is a view when the joints stood still for this long before it (ns)."""
+STILL_RAD = 1e-3
+"""Joints within this of each other (rad, or m for a prismatic joint) stand still."""
 
 PLATE_FRAME = "plate"
 WORLD_FRAME = "world"
@@ -198,14 +202,52 @@ def intrinsics_of_info(msg: Any) -> Intrinsics:
 # ---------------------------------------------------------------------- reading
 
 
+def still_images(
+    times: list[int], joints: list[tuple[int, NDArray[np.float64]]], settle_ns: int = STILL_NS, tol: float = STILL_RAD
+) -> list[int]:
+    """Which depth images are views: with no joint states, every one; else the first image of each period in which
+    the joints stood still (every joint state of the last ``settle_ns`` within ``tol`` of the latest one), so a bag
+    recorded at the camera's rate gives one view per stop of the arm and the plate.
+
+    times: (M,) the images' log times (ns, ascending); joints: (log time ns, (J,) positions) in time order, NaN
+    for a joint not heard of yet. Returns indices into ``times``."""
+    if not joints:
+        return list(range(len(times)))
+    stamps = np.array([t for t, _ in joints], dtype=np.int64)
+    q_all = np.array([q for _, q in joints], dtype=np.float64)
+    keep: list[int] = []
+    last: NDArray[np.float64] | None = None
+    moved = True
+    for i, t in enumerate(times):
+        j = int(np.searchsorted(stamps, t, side="right")) - 1
+        if j < 0:  # no joint state yet: where the arm is is unknown
+            moved = True
+            continue
+        q = q_all[j]
+        lo = int(np.searchsorted(stamps, t - settle_ns, side="left"))
+        if _spread(q_all[lo : j + 1] - q) > tol:
+            moved = True
+            continue
+        if moved or last is None or _spread(q - last) > tol:
+            keep.append(i)
+            last = q
+        moved = False
+    return keep
+
+
+def _spread(d: NDArray[np.float64]) -> float:
+    """The largest absolute difference in ``d`` (any shape), a joint not heard of (NaN) counting as none."""
+    return float(np.nan_to_num(np.abs(d), nan=0.0).max(initial=0.0))
+
+
 def load_bag(path: str | Path, topics: BagTopics | None = None) -> BagScan:
-    """The views of the rosbag2 at ``path`` (a ``.mcap`` / ``.db3`` file or a rosbag2 folder), one per depth image,
-    in time order.
+    """The views of the rosbag2 at ``path`` (a ``.mcap`` / ``.db3`` file or a rosbag2 folder) in time order: one
+    per depth image, or, when the bag has joint states, one per stop of the joints (:func:`still_images`).
 
     ValueError (naming what is missing or wrong) for: not a bag, no depth-image or camera-info topic (or one of
-    another type), an unsupported encoding, a camera info missing before the images, an image whose size differs from
-    its camera info, TF that does not connect the plate frame to the image's frame, no depth image, more than
-    :data:`MAX_BAG_VIEWS` of them."""
+    another type), an unsupported encoding, no camera info message, an image whose size differs from its camera info,
+    TF that does not connect the plate frame to the image's frame, no depth image, more than :data:`MAX_BAG_VIEWS`
+    views."""
     from rosbags.highlevel import AnyReader, AnyReaderError
 
     topics = topics or BagTopics()
@@ -222,33 +264,50 @@ def load_bag(path: str | Path, topics: BagTopics | None = None) -> BagScan:
                     raise ValueError(f"{path.name}: no topic {topic} ({msgtype}); the bag has: {have}")
                 if types[topic] != msgtype:
                     raise ValueError(f"{path.name}: topic {topic} is {types[topic]}, expected {msgtype}")
-            wanted = [topics.depth, topics.camera_info, "/tf", "/tf_static", SCAN_TOPIC]
+            wanted = [topics.depth, topics.camera_info, topics.joint_states, "/tf", "/tf_static", SCAN_TOPIC]
             connections = [c for c in reader.connections if c.topic in wanted]
             tf = TfBuffer()
             infos: list[tuple[int, Any]] = []
-            images: list[tuple[int, Any]] = []
+            image_times: list[int] = []
+            joint_log: list[tuple[int, dict[str, float]]] = []
+            current: dict[str, float] = {}
             info: dict[str, Any] = {}
-            for con, _, raw in reader.messages(connections=connections):
+            for con, logged, raw in reader.messages(connections=connections):
+                if con.topic == topics.depth:  # read in the second pass, only the views
+                    image_times.append(int(logged))
+                    continue
                 msg: Any = reader.deserialize(raw, con.msgtype)
                 if con.topic in ("/tf", "/tf_static") and con.msgtype == "tf2_msgs/msg/TFMessage":
                     tf.add(msg, static=con.topic == "/tf_static")
                 elif con.topic == topics.camera_info:
                     infos.append((_stamp(msg.header), msg))
-                elif con.topic == topics.depth:
-                    images.append((_stamp(msg.header), msg))
-                    if len(images) > MAX_BAG_VIEWS:
-                        raise ValueError(f"{path.name}: more than {MAX_BAG_VIEWS} depth images on {topics.depth}")
+                elif con.topic == topics.joint_states and con.msgtype == "sensor_msgs/msg/JointState":
+                    current.update(zip(msg.name, (float(v) for v in msg.position), strict=False))
+                    joint_log.append((int(logged), dict(current)))
                 elif con.topic == SCAN_TOPIC and con.msgtype == "std_msgs/msg/String":
                     info = _scan_info(msg.data)
+            if not image_times:
+                raise ValueError(f"{path.name}: no message on {topics.depth}")
+            if not infos:
+                raise ValueError(f"{path.name}: no camera info on {topics.camera_info}")
+            names = sorted({n for _, q in joint_log for n in q})
+            joints = [(t, np.array([q.get(n, np.nan) for n in names], dtype=np.float64)) for t, q in joint_log]
+            views = still_images(image_times, joints)
+            if len(views) > MAX_BAG_VIEWS:
+                raise ValueError(f"{path.name}: {len(views)} views on {topics.depth}, more than {MAX_BAG_VIEWS}")
+            chosen = set(views)
+            images: list[tuple[int, Any]] = []
+            depth_connections = [c for c in connections if c.topic == topics.depth]
+            for n, (con, _, raw) in enumerate(reader.messages(connections=depth_connections)):
+                if n in chosen:
+                    msg = reader.deserialize(raw, con.msgtype)
+                    images.append((n, msg))
     except (AnyReaderError, OSError, KeyError) as exc:
         raise ValueError(f"{path.name}: not a readable rosbag2 ({exc})") from None
-    if not images:
-        raise ValueError(f"{path.name}: no message on {topics.depth}")
-    if not infos:
-        raise ValueError(f"{path.name}: no camera info on {topics.camera_info}")
     frames, stamps = [], []
-    for i, (stamp, msg) in sorted(enumerate(images), key=lambda im: (im[1][0], im[0])):
-        where = f"{path.name}: depth image {i + 1} on {topics.depth}"
+    for n, msg in sorted(images, key=lambda im: (_stamp(im[1].header), im[0])):
+        stamp = _stamp(msg.header)
+        where = f"{path.name}: depth image {n + 1} on {topics.depth}"
         before = [m for s, m in infos if s <= stamp]
         k = intrinsics_of_info(before[-1] if before else infos[0][1])
         try:

@@ -17,7 +17,7 @@ from fastapi.testclient import TestClient
 
 from app.main import create_app
 from app.settings import AppSettings
-from devices.rosbag import CAMERA_INFO_TOPIC, DEPTH_TOPIC, BagTopics, load_bag, typestore
+from devices.rosbag import CAMERA_INFO_TOPIC, DEPTH_TOPIC, BagTopics, load_bag, still_images, typestore
 from nbv.cli import main
 from planner import DepthFrame, Intrinsics, Pose
 from tests.helpers import with_small_costs
@@ -186,6 +186,22 @@ def test_a_hand_made_bag_in_millimetres_reads_as_metres(tmp_path: Path) -> None:
     assert frame.depth.dtype == np.float32 and np.allclose(frame.depth, 0.5)
     assert np.allclose(frame.T_world_camera.translation, [0.4, 0.0, 0.3])
     assert frame.intrinsics == Intrinsics(4, 3, 3.0, 3.0, 1.5, 1.0)
+
+
+def test_a_recording_at_the_camera_s_rate_gives_one_view_per_stop_of_the_joints() -> None:
+    ms = 1_000_000
+    images = [i * 100 * ms for i in range(40)]  # 10 Hz for 4 s
+    # joints at 50 Hz: still until 0.9 s, moving to 2.0 s, still to 3.0 s, the plate turning to 3.4 s, still after
+    joints = []
+    for i in range(200):
+        t = i * 20 * ms
+        arm = min(max(t - 900 * ms, 0), 1100 * ms) / (1100 * ms)
+        plate = min(max(t - 3000 * ms, 0), 400 * ms) / (400 * ms)
+        joints.append((t, np.array([arm, 0.5, plate])))
+    views = still_images(images, joints)
+    assert views == [0, 23, 37]  # the first image, then the first one 0.3 s after each stop (2.3 s, 3.7 s)
+    assert still_images(images, []) == list(range(40))  # no joint states: every image is a view
+    assert still_images(images[:3], [(500 * ms, np.array([0.0]))]) == []  # before any joint state: unknown
 
 
 @pytest.mark.parametrize(
