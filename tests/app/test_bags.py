@@ -31,7 +31,8 @@ VIEWS = 5
 @pytest.fixture(scope="module")
 def scan(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
     """One 5-view simulated session (the mug, coarse map), a server on its data directory, and the session as
-    an MCAP bag written by ``nbv export-bag`` and a .db3 bag downloaded from the REST route."""
+    an MCAP bag written by ``nbv export-bag`` (Humble, rosbag2 version 8) and a .db3 bag downloaded from the REST
+    route (Jazzy, version 9)."""
     root = tmp_path_factory.mktemp("bags")
     settings = with_small_costs(AppSettings(viser_port=0, scene=False, data_dir=root / "data"))
     with TestClient(create_app(settings), base_url=BASE_URL) as client:
@@ -43,7 +44,7 @@ def scan(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
         directory = settings.data_dir / "sessions" / sid
         mcap = root / "scan.mcap"
         assert main(["export-bag", str(directory), "--out", str(mcap)]) == 0
-        r = client.get(f"/api/sessions/{sid}/export.db3")
+        r = client.get(f"/api/sessions/{sid}/export.db3?distro=jazzy")  # the CLI's: Humble's definitions
         assert r.status_code == 200 and r.headers["content-type"] == "application/vnd.sqlite3"
         db3 = root / "scan.db3"
         db3.write_bytes(r.content)
@@ -243,4 +244,10 @@ def test_export_bag_refuses_another_suffix_and_writes_nothing(scan: dict[str, An
     assert main(["export-bag", str(scan["dir"]), "--out", str(tmp_path / "scan.bag")]) == 2
     assert "a bag is a .mcap (MCAP) or .db3 (SQLite 3) file" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
-    assert typestore("jazzy").types["visualization_msgs/msg/Marker"]
+    with pytest.raises(ValueError, match="'humble' or 'jazzy'"):
+        typestore("iron")
+    client = scan["client"]
+    sid = client.post("/api/sessions", json={"model": "mug", "config": SMALL}).json()["id"]
+    r = client.get(f"/api/sessions/{sid}/export.mcap")
+    assert r.status_code == 409 and "no view yet" in r.json()["detail"]
+    assert client.get(f"/api/sessions/{sid}/export.mcap?distro=iron").status_code == 422
