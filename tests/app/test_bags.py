@@ -148,8 +148,11 @@ def test_a_bag_plays_back_with_the_original_s_coverage_per_view(scan: dict[str, 
 # ---------------------------------------------------------------------- bad bags
 
 
-def write_bag(path: Path, *, encoding: str = "32FC1", info: bool = True, info_messages: bool = True) -> Path:
-    """A one-view bag: a 4x3 depth image, its camera info, /tf plate -> camera (a hand-made lab bag)."""
+def write_bag(
+    path: Path, *, encoding: str = "32FC1", info: bool = True, info_messages: bool = True, folder: bool = False
+) -> Path:
+    """A one-view bag: a 4x3 depth image, its camera info, /tf plate -> camera (a hand-made lab bag); the single
+    ``path`` (.mcap), or with ``folder`` the rosbag2 folder ``path`` without its suffix (metadata.yaml + file)."""
     from rosbags.rosbag2 import Writer
     from rosbags.rosbag2.enums import StoragePlugin
 
@@ -159,8 +162,8 @@ def write_bag(path: Path, *, encoding: str = "32FC1", info: bool = True, info_me
     k = Intrinsics(4, 3, 3.0, 3.0, 1.5, 1.0)
     frame = DepthFrame(np.full((3, 4), 0.5, dtype=np.float32), Pose.look_at([0.4, 0.0, 0.3], [0, 0, 0]), k)
     stamp = 1_000_000_000
-    folder = path.with_suffix("")
-    with Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+    bag_dir = path.with_suffix("")
+    with Writer(bag_dir, version=9, storage_plugin=StoragePlugin.MCAP) as w:
         c_tf = w.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=m.store)
         c_img = w.add_connection(DEPTH_TOPIC, "sensor_msgs/msg/Image", typestore=m.store)
         tf = m.tf([m.transform(stamp, "plate", "camera_depth_optical_frame", frame.T_world_camera)])
@@ -176,13 +179,16 @@ def write_bag(path: Path, *, encoding: str = "32FC1", info: bool = True, info_me
             c_info = w.add_connection(CAMERA_INFO_TOPIC, "sensor_msgs/msg/CameraInfo", typestore=m.store)
             if info_messages:
                 w.write(c_info, stamp, m.store.serialize_cdr(m.camera_info(stamp, frame), "sensor_msgs/msg/CameraInfo"))
-    (folder / f"{folder.name}.mcap").replace(path)
-    shutil.rmtree(folder)
+    if folder:
+        return bag_dir
+    (bag_dir / f"{bag_dir.name}.mcap").replace(path)
+    shutil.rmtree(bag_dir)
     return path
 
 
-def test_a_hand_made_bag_in_millimetres_reads_as_metres(tmp_path: Path) -> None:
-    scan = load_bag(write_bag(tmp_path / "mm.mcap", encoding="16UC1"))
+@pytest.mark.parametrize("folder", [False, True], ids=["mcap-file", "rosbag2-folder"])
+def test_a_hand_made_bag_in_millimetres_reads_as_metres(tmp_path: Path, folder: bool) -> None:
+    scan = load_bag(write_bag(tmp_path / "mm.mcap", encoding="16UC1", folder=folder))
     (frame,) = scan.frames
     assert frame.depth.dtype == np.float32 and np.allclose(frame.depth, 0.5)
     assert np.allclose(frame.T_world_camera.translation, [0.4, 0.0, 0.3])
