@@ -58,6 +58,12 @@ REDRAW_EVENTS = frozenset(
 )
 """Session events after which a viewer's scene may change (state and progress changes draw nothing)."""
 
+INITIAL_EYE = (0.78, -0.5, 0.55)
+"""Where a new tab's camera starts, metres: in front of the object on the side away from the arm's mount (-x),
+close enough that the object fills a good share of the view and the candidates' hemisphere still shows."""
+INITIAL_LOOK_AT = (0.0, 0.0, 0.07)
+"""What it looks at: the middle of an object on the plate."""
+
 
 @dataclass(eq=False)
 class Viewer:
@@ -108,8 +114,8 @@ class SceneController:
         """Viewers of something else than a session (a calibration: app/scene/calibration.py): each is asked with
         a newly connected client and its viewer's key, and returns True when it draws it."""
         configure_lighting(server)
-        server.initial_camera.position = (0.95, -0.8, 0.75)
-        server.initial_camera.look_at = (0.0, 0.0, 0.08)
+        server.initial_camera.position = INITIAL_EYE
+        server.initial_camera.look_at = INITIAL_LOOK_AT
         server.initial_camera.near = 0.01
         server.gui.configure_theme(show_share_button=False, show_logo=False)
         server.gui.main_panel.minimize()
