@@ -248,6 +248,7 @@ async function openViewer() {
     S.layers = Object.keys(known).length ? await api("PUT", `/api/scene/${S.viewer}/layers`, known) : scene.layers;
     P.renderLayers(S.layers, toggleLayer);
     P.renderLegend(scene);
+    if (S.status) await showObjectBeforeFirstView(S.status);
   } catch (e) {
     showError("3D viewer unavailable: " + e.message);
   }
