@@ -582,6 +582,9 @@ function wire() {
     window.open(pageUrl({ compare: ids.join(",") }), "_blank");
   });
   $("demo").addEventListener("click", startDemo);
+  $("charts-box").addEventListener("toggle", () => { // drawn folded they have no size: draw them again when opened
+    if ($("charts-box").open && S.metrics) { P.renderCharts(S.metrics, TL.view); FitPanel.markChart(); }
+  });
   $("guided-toggle").addEventListener("change", (e) => {
     sessionStorage.setItem(GUIDE_KEY, e.target.checked ? "on" : "off");
     Guide.render();
