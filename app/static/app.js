@@ -725,35 +725,6 @@ const Guide = (() => {
       `<i>empty</i>: the camera saw through it. <i>unknown</i> (${v.unknown || 0}): never seen. ` +
       `${fro} (${v.frontier || 0}): unknown cubes next to empty ones — where new surface may hide.`,
     ], "voxels"));
-    if (st.state === "planning") {
-      out.push(card("Planning", ["The planner groups the voxels into ellipsoids and scores every candidate view…"], "ellipsoids"));
-      return out;
-    }
-    const plan = st.pending_plan;
-    if (plan) {
-      out.push(card("Ellipsoids", [
-        `Each kind of voxel is summarised by a few ellipsoids (a Gaussian mixture; BIC chooses how many): ${fro} ellipsoids ` +
-        `mark what is still to be seen, ${occ} ellipsoids what is already known.`,
-      ], "ellipsoids"));
-      const items = P.Table.items.filter((c) => c.eligible).sort((a, b) => b.score - a.score);
-      const best = items[0], second = items[1];
-      if (best) {
-        const lacked = !second ? "" : second.frontier < best.frontier
-          ? `the runner-up #${second.index} (F ${P.num(second.score, 0)}) would see less ${fro} (${P.num(second.frontier, 0)} vs ${P.num(best.frontier, 0)})`
-          : `the runner-up #${second.index} (F ${P.num(second.score, 0)}) would see more ${occ} surface again (${P.num(second.occupied, 0)} vs ${P.num(best.occupied, 0)})`;
-        out.push(card(`Why view #${best.index} won`, [
-          `Each candidate (a sphere) projects the ellipsoids into its picture: F = ${fro} − ${occ} area, nearer ones counting more. ` +
-          `The highest F sees the most unknown and the least known: #${best.index} has F = ${P.num(best.frontier, 0)} − ${P.num(best.occupied, 0)} = ${P.num(best.score, 0)}` +
-          `${lacked ? "; " + lacked : ""}. F is often negative: only the order matters.`,
-          "The planner's choice is the magenta arrow; <b>Approve</b> moves the arm there.",
-        ], "score"));
-      }
-      const locked = P.Table.items.filter((c) => !c.eligible && /sector/.test(c.reason || "")).length;
-      out.push(card("Sectors", [
-        `The hemisphere of views is cut by longitude into sectors. A view comes from a sector not scanned yet, so the ` +
-        `scan goes round the object before it looks again from one side${locked ? ` (${locked} candidates wait in scanned sectors: grey)` : ""}.`,
-      ], "sectors"));
-    }
     if (n >= 2) {
       const last = (st.views || [])[n - 1] || {};
       out.push(card(`ICP at view ${n}`, [
@@ -764,6 +735,35 @@ const Guide = (() => {
           : "ICP aligned the new picture to the points of the earlier ones (it corrects small errors of the arm's reported pose); " +
             "the check passed, so the correction was applied. The cloud layer shows the points of every view together.",
       ], "icp"));
+    }
+    if (st.state === "planning") {
+      out.push(card("Planning", ["The planner groups the voxels into ellipsoids and scores every candidate view…"], "ellipsoids"));
+      return out;
+    }
+    const plan = st.pending_plan;
+    if (plan) {
+      out.push(card("Ellipsoids", [
+        `Each kind of voxel is summarised by a few ellipsoids (a Gaussian mixture; BIC chooses how many): ${fro} ellipsoids ` +
+        `mark what is still to be seen, ${occ} ellipsoids what is already known.`,
+      ], "ellipsoids"));
+      const locked = P.Table.items.filter((c) => !c.eligible && /sector/.test(c.reason || "")).length;
+      out.push(card("Sectors", [
+        `The hemisphere of views is cut by longitude into sectors. A view comes from a sector not scanned yet, so the ` +
+        `scan goes round the object before it looks again from one side${locked ? ` (${locked} candidates wait in scanned sectors: grey)` : ""}.`,
+      ], "sectors"));
+      const items = P.Table.items.filter((c) => c.eligible).sort((a, b) => b.score - a.score);
+      const best = items[0], second = items[1];
+      if (best) {
+        const lacked = !second ? "" : second.frontier < best.frontier
+          ? `the runner-up #${second.index} (F ${P.num(second.score, 0)}) would see less ${fro} (${P.num(second.frontier, 0)} vs ${P.num(best.frontier, 0)})`
+          : `the runner-up #${second.index} (F ${P.num(second.score, 0)}) would see more ${occ} surface again (${P.num(second.occupied, 0)} vs ${P.num(best.occupied, 0)})`;
+        out.push(card(`Why view #${best.index} won`, [
+          `Each candidate (a sphere) projects the ellipsoids into its picture: F = ${fro} − ${occ} area, nearer ones counting more. ` +
+          `The highest F sees the most unknown and the least known: #${best.index} has F = ${P.num(best.frontier, 0)} − ${P.num(best.occupied, 0)} = ${P.num(best.score, 0)}` +
+          `${lacked ? "; " + lacked : ""}. F is often negative: only the order matters.`,
+          "The planner's choice is the orange camera frustum (★ in the table); <b>Approve</b> moves the arm there.",
+        ], "score"));
+      }
     }
     return out;
   }

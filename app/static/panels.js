@@ -50,7 +50,8 @@ function renderTable(selected, onPick) {
     tr.className = (c.best ? "best " : "") + (c.eligible ? "" : "ineligible ") + (c.index === selected ? "selected" : "");
     const why = c.eligible ? "yes" : esc(c.reason || "no");
     if (!c.eligible && c.reason) tr.title = `not eligible: ${c.reason}`;
-    tr.innerHTML = `<td>${c.index}</td><td>${num(c.score)}</td><td>${num(c.frontier)}</td><td>${num(c.occupied)}</td>` +
+    const short = (v) => num(v, Math.abs(v) >= 100 ? 0 : 1); // narrow columns: no decimals on big numbers
+    tr.innerHTML = `<td>${c.index}</td><td>${short(c.score)}</td><td>${short(c.frontier)}</td><td>${short(c.occupied)}</td>` +
       `<td>S${c.sector}</td><td class="why">${why}</td>` +
       `<td class="c-move" data-testid="move-s">${c.move_seconds == null ? "–" : c.move_seconds.toFixed(1)}</td>` +
       `<td class="c-tour">${c.tour_order == null ? "" : c.tour_order}</td>`;
