@@ -140,7 +140,7 @@ def test_nbv_record_writes_the_recording_of_a_journal(scanned, tmp_path: Path, c
     assert "3 views" in capsys.readouterr().out
     z = zipfile.ZipFile(out)
     served = client.get(f"/api/sessions/{sid}/timeline").json()["steps"]
-    assert json.loads(z.read("steps.json"))["steps"] == served  # replayed in a replay cell: the same plans
+    assert json.loads(z.read("scan/steps.json"))["steps"] == served  # replayed in a replay cell: the same plans
     assert main(["record", str(directory), "--out", str(tmp_path / "scan.tar")]) == 2
     assert "FILE.zip" in capsys.readouterr().err
     assert main(["record", str(tmp_path), "--out", str(out)]) == 2
