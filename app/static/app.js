@@ -423,6 +423,7 @@ async function loadCandidates() {
   P.renderTable(S.status ? S.status.selected : null, pick);
   $("tour-info").textContent = P.tourSummary(P.Table.items);
   $("tour-info").hidden = !$("tour-info").textContent;
+  Guide.render(); // its "why this view won" reads the candidates
   if (S.viewer) P.renderLegend(await api("GET", `/api/scene/${S.viewer}`));
 }
 
@@ -641,8 +642,9 @@ function onKey(e) {
 
 // ------------------------------------------------------------------ the first screen and the guide
 
-// The demo: a session on the default object, its first view taken and the next one planned; the page then opens it
-// with Approve ready (a first approved view in two clicks from the first screen).
+// The demo: a session on the default object, opened at once (the 3D view of the cell and the object, its mesh shown
+// before the first picture), then its first view taken and the next one planned by the session's page (runDemo):
+// Approve is ready, a first approved view in two clicks from the first screen.
 async function startDemo() {
   const box = $("demo-progress");
   const err = $("demo-error");
@@ -650,20 +652,28 @@ async function startDemo() {
   $("demo").disabled = true;
   const say = (what, percent) => P.renderProgress(box, { stage: what, step: 1, steps: 1, done: 0, total: 0, percent, elapsed: 0 }, "demo");
   try {
-    say("creating the session on the default object", 5);
+    say("creating the session on the default object", 20);
     const r = await api("POST", "/api/sessions", {}); // the server's default object, planner and cell
     if ($("demo-guided").checked) sessionStorage.setItem(GUIDE_KEY, "on");
-    say("taking the first picture", 35);
-    await api("POST", `/api/sessions/${r.id}/capture`);
-    say("planning the next view (scoring every candidate)", 60);
-    await api("POST", `/api/sessions/${r.id}/plan`);
-    location.href = pageUrl({ session: r.id });
+    location.href = pageUrl({ session: r.id, demo: "1" });
   } catch (e) {
     box.hidden = true;
     err.textContent = explainError(e.message);
     err.hidden = false;
     $("demo").disabled = false;
   }
+}
+
+// The demo's session page (?demo=1, dropped from the address at once so a reload does not repeat it): once the
+// session shows "new", its first picture, then a plan.
+async function runDemo() {
+  history.replaceState(null, "", pageUrl({ session: S.session }));
+  for (let i = 0; i < 100 && !(S.status && S.status.state); i++) await new Promise((r) => setTimeout(r, 100));
+  if (!S.status || S.status.state !== "new") return;
+  let captured = false;
+  await action("taking the first picture", async () => { await api("POST", `/api/sessions/${S.session}/capture`); captured = true; });
+  if (!captured) return;
+  await action("planning the next view (scoring every candidate)", () => api("POST", `/api/sessions/${S.session}/plan`));
 }
 
 // Before the first picture the map is empty: the object's mesh is shown so the plate does not look empty (turned
@@ -1014,6 +1024,7 @@ async function init() {
     $("tl-recording").href = withToken(`/api/sessions/${S.session}/recording`);
     connectEvents(500);
     await openViewer();
+    if (QUERY.get("demo")) runDemo();
   } else {
     $("picker").hidden = false;
     $("viewer").hidden = true;

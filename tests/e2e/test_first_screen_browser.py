@@ -128,7 +128,9 @@ def test_a_first_time_user_reaches_an_approved_view_in_two_clicks(server: LiveSe
     assert hovered["ratio"] >= 4.5 and hovered["bg"][2] > hovered["bg"][0] + 60, hovered  # still blue, readable
     page.get_by_test_id("demo").click()
     clicks += 1
+    expect(page.get_by_test_id("viewer")).to_be_visible(timeout=30_000)  # the cell in 3D while the demo runs
     expect(page.locator("#state")).to_have_text("planned", timeout=120_000)
+    assert "demo" not in page.url  # a reload does not run the demo again
 
     # the guide (ticked on the first screen): the newest step first, why the view won and what the runner-up lacked
     expect(page.get_by_test_id("guide")).to_be_visible()
