@@ -30,7 +30,8 @@ def run(args: argparse.Namespace) -> int:
     if not step_seconds > 0:
         raise ValueError(f"--step-seconds {args.step_seconds}: must be > 0")
     steps, scene = journal_timeline(args.journal)
-    built = build_recording(steps, scene, f"NBV scan {scene.session_id}", step_seconds)
+    # its files in one folder named as the zip (unzipping does not spill them into the current directory)
+    built = build_recording(steps, scene, f"NBV scan {scene.session_id}", step_seconds, folder=args.out.stem)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     tmp = args.out.with_name(args.out.name + ".part")
     tmp.write_bytes(built.data)

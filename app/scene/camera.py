@@ -43,3 +43,33 @@ def client_cameras(server: viser.ViserServer) -> list[dict[str, Any]]:
             }
         )
     return out
+
+
+FRAMING_DISTANCE = 0.85
+"""How far a framing camera is from what it looks at, metres: the object fills a good share of the view and the
+candidates' hemisphere (radius about 0.45 m) still shows."""
+FRAMING_ELEVATION_DEG = 32.0
+"""How high it looks down from, degrees above the horizon."""
+FRAMING_OFFSET_DEG = 35.0
+"""How far round from straight opposite the arm's mount it stands, degrees (the arm shows beside the object, not
+behind it)."""
+FRAMING_FOV_DEG = 50.0
+"""Its vertical field of view, degrees (viser's default 75 made the object a speck)."""
+FRAMING_LOOK_AT = (0.0, 0.0, 0.07)
+"""What it looks at: the middle of an object on the plate, metres."""
+
+
+def framing(mount_xy: tuple[float, float] | None) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """(eye, look_at) of a camera on the object from the side away from the arm's mount at ``mount_xy`` (the
+    scene's frame, metres; its azimuth changes as the plate turns), or from the front-right without an arm."""
+    import math
+
+    if mount_xy is None or math.hypot(*mount_xy) < 1e-6:
+        azimuth = math.radians(-35.0)
+    else:
+        azimuth = math.atan2(mount_xy[1], mount_xy[0]) + math.pi + math.radians(FRAMING_OFFSET_DEG)
+    e = math.radians(FRAMING_ELEVATION_DEG)
+    x, y, z = FRAMING_LOOK_AT
+    d = FRAMING_DISTANCE
+    eye = (x + d * math.cos(e) * math.cos(azimuth), y + d * math.cos(e) * math.sin(azimuth), z + d * math.sin(e))
+    return eye, FRAMING_LOOK_AT

@@ -27,7 +27,7 @@ import numpy as np
 import viser
 
 from app.scene.arm import ArmTarget, SessionArm
-from app.scene.camera import client_cameras
+from app.scene.camera import FRAMING_FOV_DEG, client_cameras, framing
 from app.scene.drawing import SessionDrawing
 from app.scene.fit_view import FitViews, viewer_message
 from app.scene.geometry import COLORS, DEFAULT_LAYERS, SCALE_PERCENTILES, VIRIDIS, candidate_colors, outward_camera
@@ -58,6 +58,9 @@ REDRAW_EVENTS = frozenset(
 )
 """Session events after which a viewer's scene may change (state and progress changes draw nothing)."""
 
+INITIAL_EYE, INITIAL_LOOK_AT = framing(None)
+"""Where a tab's camera starts before it is framed on its session (from the front-right, on the object)."""
+
 
 @dataclass(eq=False)
 class Viewer:
@@ -74,6 +77,9 @@ class Viewer:
     """The arm in this viewer's scene (``/robot/...``), when the session's cell has an arm model."""
     step: TimelineStep | None = None
     """The timeline's view this viewer shows (the session after that view), None: the session now."""
+    framed: tuple[float, float, float] | None = None
+    """Where this page put the client's camera last (:meth:`SceneController._frame`); a camera still there follows
+    the arm round (the person did not move it)."""
 
 
 class SceneController:
@@ -108,8 +114,8 @@ class SceneController:
         """Viewers of something else than a session (a calibration: app/scene/calibration.py): each is asked with
         a newly connected client and its viewer's key, and returns True when it draws it."""
         configure_lighting(server)
-        server.initial_camera.position = (0.95, -0.8, 0.75)
-        server.initial_camera.look_at = (0.0, 0.0, 0.08)
+        server.initial_camera.position = INITIAL_EYE
+        server.initial_camera.look_at = INITIAL_LOOK_AT
         server.initial_camera.near = 0.01
         server.gui.configure_theme(show_share_button=False, show_logo=False)
         server.gui.main_panel.minimize()
@@ -163,6 +169,18 @@ class SceneController:
             self._watch(session)
             data = session.scene_data()
             v.drawing.update(data)
+        self._frame(v, session)
+
+        @client.camera.on_update
+        def _(camera: Any) -> None:  # viser's client puts its camera at the server's initial one when it first draws
+            at = np.asarray(camera.position, dtype=float)
+            if (
+                v.framed is not None
+                and np.linalg.norm(at - INITIAL_EYE) < 1e-3
+                and np.linalg.norm(at - v.framed) > 1e-3
+            ):
+                self._frame(v, session)
+
         arm = self.arm_of(session)
         if arm is not None:
             target = arm.target(data)
@@ -221,6 +239,42 @@ class SceneController:
                 arm.after_capture(robot)
             else:
                 arm.show_target(robot, target)
+        if event == SessionEvent.CAPTURED:  # the plate turned: cameras nobody moved go round with it
+            with self._lock:
+                viewers = [v for v in self._viewers.values() if v.session_id == session.id and v.step is None]
+            for v in viewers:
+                if v.client is not None and v.framed is not None and self._camera_unmoved(v):
+                    self._frame(v, session)
+
+    def _frame(self, v: Viewer, session: Session) -> None:
+        """Point ``v``'s client at the object from the side away from the arm's mount (the object in front, the arm
+        beside it: :func:`app.scene.camera.framing`)."""
+        client = v.client
+        if client is None:
+            return
+        arm = self.arm_of(session)
+        mount_xy = None
+        if arm is not None:
+            angle = float(session.cell.angle)
+            t = np.asarray(arm.model.T_base_mount.translation, dtype=float)
+            c, s = math.cos(-angle), math.sin(-angle)
+            mount_xy = (c * t[0] - s * t[1], s * t[0] + c * t[1])
+        eye, look_at = framing(mount_xy)
+        with client.atomic():
+            client.camera.up_direction = (0.0, 0.0, 1.0)
+            client.camera.position = np.asarray(eye, dtype=float)
+            client.camera.look_at = np.asarray(look_at, dtype=float)
+            client.camera.fov = math.radians(FRAMING_FOV_DEG)
+        v.framed = eye
+
+    @staticmethod
+    def _camera_unmoved(v: Viewer) -> bool:
+        """Whether ``v``'s client camera is still where :meth:`_frame` put it (within 2 cm)."""
+        assert v.client is not None and v.framed is not None
+        try:
+            return bool(np.linalg.norm(np.asarray(v.client.camera.position, dtype=float) - v.framed) < 0.02)
+        except Exception:  # a client that never reported its camera
+            return True
 
     def _on_session_deleted(self, session: Session) -> None:
         with self._lock:

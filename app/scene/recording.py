@@ -13,6 +13,8 @@ label naming the step. The zip holds::
     scene.viser    the same scene as a file, for viser's ``?playbackPath=scene.viser`` players
     steps.json     the steps' summaries (``TimelineStep.summary``)
 
+(the server's download puts them in one top-level folder, ``nbv-ID-recording/``, so unzipping makes a folder)
+
 so ``index.html`` plays from the unzipped folder (file://) and from any static host (``python -m http.server``).
 """
 
@@ -100,9 +102,10 @@ def _caption(step: TimelineStep, views: int) -> str:
 
 
 def build_recording(
-    steps: Sequence[TimelineStep], now: SceneData, title: str, step_seconds: float = STEP_SECONDS
+    steps: Sequence[TimelineStep], now: SceneData, title: str, step_seconds: float = STEP_SECONDS, folder: str = ""
 ) -> Recording:
-    """The zip of a recording of ``steps`` (see the module docstring). ValueError without a step."""
+    """The zip of a recording of ``steps`` (see the module docstring). ValueError without a step. ``folder``: the
+    zip's one top-level folder its files are in (unzipping then makes that folder, not loose files); "": none."""
     t0 = time.perf_counter()
     scene = record_scene(steps, now, step_seconds)
     summaries = [jsonable(step.summary()) for step in steps]
@@ -114,7 +117,7 @@ def build_recording(
     ]
     with zipfile.ZipFile(buf, "w") as z:
         for name, data, method in files:
-            info = zipfile.ZipInfo(name, date_time=time.localtime()[:6])
+            info = zipfile.ZipInfo(f"{folder}/{name}" if folder else name, date_time=time.localtime()[:6])
             info.compress_type = method
             info.external_attr = 0o644 << 16  # readable by a static server run as anyone
             z.writestr(info, data)

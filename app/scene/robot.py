@@ -29,8 +29,8 @@ from devices.arm.model import ArmModel
 from devices.trajectory import JointTrajectory
 from planner.types import Pose
 
-GHOST_COLOR = (0.35, 0.65, 1.0, 0.35)
-"""RGBA of the ghost arm at a target: translucent blue."""
+GHOST_COLOR = (0.45, 0.7, 1.0, 0.18)
+"""RGBA of the ghost arm at a target: faint translucent blue (it must not hide the object in front of it)."""
 PATH_COLOR = (255, 170, 0)
 """RGB of the camera's path."""
 FRAME_SECONDS = 1 / 30

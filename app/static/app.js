@@ -37,7 +37,10 @@ const TL = {
   views: 0, // compare mode: the most views of the sessions compared
 };
 const FORM_KEY = "nbv-form";
-const LAYER_KEY = "nbv-layers";
+// A tab's layer choices, per session and per tab (sessionStorage): a new tab or another session starts from the
+// server's layers, not from the last person's choices.
+const layerKey = () => `nbv-layers:${S.session}`;
+const GUIDE_KEY = "nbv-guide"; // this tab's guide switch (sessionStorage): "on", "off" or unset (the session's)
 const SURFACE_FORMATS = ["ply", "obj", "glb"]; // GET /api/sessions/{id}/surface.ply?format=
 
 // ------------------------------------------------------------------ helpers
@@ -79,6 +82,15 @@ async function api(method, path, body) {
   return data;
 }
 
+// A server's answer in words a person can act on (the session limit: what to do about it).
+function explainError(msg) {
+  if (/^(409|429|503)/.test(msg) && /live session|max_live_sessions|too many sessions/i.test(msg)) {
+    return msg + " — the server holds this many live sessions at once: close or delete a session you no longer " +
+      "need, or ask whoever runs the server to raise server.max_live_sessions.";
+  }
+  return msg;
+}
+
 function showError(msg) {
   $("error").textContent = msg;
   $("error").hidden = !msg;
@@ -89,7 +101,8 @@ function showNotice(msg) {
   $("notice").hidden = !msg;
 }
 
-async function action(label, fn) {
+// Where an action's error shows: by the form for a create (errorBox), else the Scan box.
+async function action(label, fn, errorBox) {
   if (S.inFlight) return;
   S.inFlight = true;
   $("busy").textContent = label + "…";
@@ -97,12 +110,14 @@ async function action(label, fn) {
   try {
     showError("");
     showNotice("");
+    if (errorBox) { $(errorBox).hidden = true; }
     await fn();
   } catch (e) {
     const stale = e.message.startsWith("409") && /stale|already used|not the pending plan/.test(e.message);
     const stopped = e.message.startsWith("409") && /was stopped|cancelled/.test(e.message);
     if (stopped) showNotice("Stopped: " + e.message.slice(5));
     else if (stale) showNotice("The plan changed (another tab planned or approved): " + e.message.slice(5) + ". The new state is shown; check it and approve again.");
+    else if (errorBox) { $(errorBox).textContent = explainError(e.message); $(errorBox).hidden = false; }
     else showError(e.message);
   } finally {
     S.inFlight = false;
@@ -227,12 +242,13 @@ async function openViewer() {
     $("viewer").src = v.url;
     if (v.note) showNotice(v.note);
     let saved = {};
-    try { saved = JSON.parse(localStorage.getItem(LAYER_KEY) || "{}"); } catch (e) { saved = {}; }
+    try { saved = JSON.parse(sessionStorage.getItem(layerKey()) || "{}"); } catch (e) { saved = {}; }
     const scene = await api("GET", `/api/scene/${S.viewer}`);
     const known = Object.fromEntries(Object.entries(saved).filter(([k]) => k in scene.layers));
     S.layers = Object.keys(known).length ? await api("PUT", `/api/scene/${S.viewer}/layers`, known) : scene.layers;
     P.renderLayers(S.layers, toggleLayer);
     P.renderLegend(scene);
+    if (S.status) await showObjectBeforeFirstView(S.status);
   } catch (e) {
     showError("3D viewer unavailable: " + e.message);
   }
@@ -302,7 +318,14 @@ async function onMessage(m) {
 
 async function onStatus(st, event) {
   S.status = st;
+  const listed = S.sessions.findIndex((s) => s.id === st.id);
+  if (listed >= 0 && (S.sessions[listed].state !== st.state || S.sessions[listed].iteration !== st.iteration)) {
+    S.sessions[listed] = { ...S.sessions[listed], state: st.state, iteration: st.iteration, coverage: st.coverage };
+    renderSessions(); // the Open session list says what the Scan panel says
+  }
   renderTimeline();
+  await showObjectBeforeFirstView(st);
+  Guide.render();
   if (TL.view !== null) { updateButtons(); return; } // the panels show the timeline's step, not now
   renderStatus(st);
   showProgress(st.progress || null);
@@ -332,6 +355,7 @@ async function onStatus(st, event) {
     S.metrics = await api("GET", `/api/sessions/${S.session}/metrics`);
     P.renderCharts(S.metrics, TL.view);
     FitPanel.markChart();
+    if (!S.planId) await FitPanel.load(); // the last plan's fit (none before the first plan: no request)
   }
 }
 
@@ -400,6 +424,7 @@ async function loadCandidates() {
   P.renderTable(S.status ? S.status.selected : null, pick);
   $("tour-info").textContent = P.tourSummary(P.Table.items);
   $("tour-info").hidden = !$("tour-info").textContent;
+  Guide.render(); // its "why this view won" reads the candidates
   if (S.viewer) P.renderLegend(await api("GET", `/api/scene/${S.viewer}`));
 }
 
@@ -432,7 +457,13 @@ async function loadArm() {
 }
 
 function preview() {
-  return action("previewing the move", () => api("POST", `/api/sessions/${S.session}/arm/preview`));
+  return action("previewing the move", async () => {
+    const r = await api("POST", `/api/sessions/${S.session}/arm/preview`);
+    const t = S.arm && S.arm.target;
+    const secs = r && typeof r.duration === "number" ? r.duration : t && t.duration;
+    showNotice(`Preview: the translucent arm in the 3D view plays the move${secs ? ` (${secs.toFixed(1)} s)` : ""}; ` +
+      "nothing moves until you approve.");
+  });
 }
 
 async function loadInspector(selected) {
@@ -452,7 +483,7 @@ function pick(index) {
 async function onViewer(m) {
   if (m.viewer !== S.viewer) return;
   S.layers = m.layers;
-  localStorage.setItem(LAYER_KEY, JSON.stringify(m.layers));
+  sessionStorage.setItem(layerKey(), JSON.stringify(m.layers));
   P.renderLayers(S.layers, toggleLayer);
   await FitPanel.onViewer(m);
 }
@@ -460,7 +491,7 @@ async function onViewer(m) {
 function toggleLayer(name, on) {
   return api("PUT", `/api/scene/${S.viewer}/layers`, { [name]: on }).then((layers) => {
     S.layers = layers;
-    localStorage.setItem(LAYER_KEY, JSON.stringify(layers));
+    sessionStorage.setItem(layerKey(), JSON.stringify(layers));
     P.renderLayers(layers, toggleLayer);
   }).catch((e) => showError(e.message));
 }
@@ -499,7 +530,7 @@ function wire() {
     } finally {
       follow.close();
     }
-  }));
+  }, "create-error"));
   $("create-cancel").addEventListener("click", () => {
     const id = $("create-cancel").dataset.progressId;
     if (id) api("DELETE", `/api/creations/${encodeURIComponent(id)}`).catch((e) => showError(e.message));
@@ -544,9 +575,25 @@ function wire() {
       location.href = pageUrl({});
     });
   });
-  $("compare-open").addEventListener("click", () => {
-    const ids = prompt("Sessions to compare (ids, comma-separated; the same object):", S.session || "");
-    if (ids) window.open(pageUrl({ compare: ids.replace(/\s+/g, "") }), "_blank");
+  $("compare-open").addEventListener("click", openCompareDialog);
+  $("compare-cancel").addEventListener("click", () => { $("compare-dialog").hidden = true; });
+  $("compare-go").addEventListener("click", () => {
+    const ids = Array.from($("compare-list").querySelectorAll("input:checked")).map((c) => c.value);
+    if (ids.length < 1) return;
+    $("compare-dialog").hidden = true;
+    window.open(pageUrl({ compare: ids.join(",") }), "_blank");
+  });
+  $("demo").addEventListener("click", startDemo);
+  $("charts-box").addEventListener("toggle", () => { // drawn folded they have no size: draw them again when opened
+    if ($("charts-box").open && S.metrics) { P.renderCharts(S.metrics, TL.view); FitPanel.markChart(); }
+  });
+  $("guided-toggle").addEventListener("change", (e) => {
+    sessionStorage.setItem(GUIDE_KEY, e.target.checked ? "on" : "off");
+    Guide.render();
+  });
+  $("guide-close").addEventListener("click", () => {
+    sessionStorage.setItem(GUIDE_KEY, "off");
+    Guide.render();
   });
   $("gizmo").addEventListener("change", (e) => toggleLayer("gizmo", e.target.checked));
   for (const th of $("candidates").querySelectorAll("th[data-sort]")) {
@@ -578,7 +625,8 @@ function onKey(e) {
   const keys = {
     c: () => click("capture"), p: () => click("plan"), a: () => click("approve"), u: () => click("auto"),
     s: () => click("stop"), d: () => click("discard"), n: () => step(1), j: () => step(1), k: () => step(-1),
-    g: () => $("gizmo").click(), "?": () => { $("help").hidden = !$("help").hidden; }, Escape: () => { $("help").hidden = true; },
+    g: () => $("gizmo").click(), "?": () => { $("help").hidden = !$("help").hidden; },
+    Escape: () => { $("help").hidden = true; $("compare-dialog").hidden = true; },
   };
   if (keys[e.key]) { e.preventDefault(); keys[e.key](); return; }
   if ((e.key === "ArrowLeft" || e.key === "ArrowRight") && !$("timeline").hidden) {
@@ -591,6 +639,183 @@ function onKey(e) {
     const name = names[Number(e.key) - 1];
     if (name) toggleLayer(name, !S.layers[name]);
   }
+}
+
+// ------------------------------------------------------------------ the first screen and the guide
+
+// The demo: a session on the default object, opened at once (the 3D view of the cell and the object, its mesh shown
+// before the first picture), then its first view taken and the next one planned by the session's page (runDemo):
+// Approve is ready, a first approved view in two clicks from the first screen.
+async function startDemo() {
+  const box = $("demo-progress");
+  const err = $("demo-error");
+  err.hidden = true;
+  $("demo").disabled = true;
+  const say = (what, percent) => P.renderProgress(box, { stage: what, step: 1, steps: 1, done: 0, total: 0, percent, elapsed: 0 }, "demo");
+  try {
+    say("creating the session on the default object", 20);
+    const r = await api("POST", "/api/sessions", {}); // the server's default object, planner and cell
+    if ($("demo-guided").checked) sessionStorage.setItem(GUIDE_KEY, "on");
+    location.href = pageUrl({ session: r.id, demo: "1" });
+  } catch (e) {
+    box.hidden = true;
+    err.textContent = explainError(e.message);
+    err.hidden = false;
+    $("demo").disabled = false;
+  }
+}
+
+// The demo's session page (?demo=1, dropped from the address at once so a reload does not repeat it): once the
+// session shows "new", its first picture, then a plan.
+async function runDemo() {
+  history.replaceState(null, "", pageUrl({ session: S.session }));
+  for (let i = 0; i < 100 && !(S.status && S.status.state); i++) await new Promise((r) => setTimeout(r, 100));
+  if (!S.status || S.status.state !== "new") return;
+  let captured = false;
+  await action("taking the first picture", async () => { await api("POST", `/api/sessions/${S.session}/capture`); captured = true; });
+  if (!captured) return;
+  await action("planning the next view (scoring every candidate)", () => api("POST", `/api/sessions/${S.session}/plan`));
+}
+
+// Before the first picture the map is empty: the object's mesh is shown so the plate does not look empty (turned
+// off again by the first view unless the person chose it).
+let meshShownByPage = false;
+async function showObjectBeforeFirstView(st) {
+  if (!S.viewer || !S.layers || !("mesh" in S.layers)) return;
+  const saved = sessionStorage.getItem(layerKey());
+  if (st.iteration === 0 && !S.layers.mesh && !saved) {
+    meshShownByPage = true;
+    await toggleLayer("mesh", true);
+  } else if (st.iteration > 0 && meshShownByPage) {
+    meshShownByPage = false;
+    if (S.layers.mesh) await toggleLayer("mesh", false);
+  }
+}
+
+// The guided mode: at each step a short panel over the 3D view says what one sees and why, with a button that
+// shows it (the layers that draw it). On when the session is guided (a class switched it on) or this tab's guide box.
+const Guide = (() => {
+  const LAYERS = {
+    cell: { mesh: true, turntable: true },
+    voxels: { occupied: true, frontier: true, unknown: true, ellipsoids: false, candidates: false, sectors: false, cloud: false },
+    ellipsoids: { occupied: false, frontier: false, unknown: false, ellipsoids: true, candidates: false, sectors: false },
+    score: { ellipsoids: true, candidates: true, nbv: true, sectors: false, unknown: false },
+    sectors: { sectors: true, candidates: true, nbv: true, views: true },
+    icp: { cloud: true, views: true, occupied: false, frontier: false, unknown: false, ellipsoids: false, candidates: false },
+  };
+
+  function on() {
+    const local = sessionStorage.getItem(GUIDE_KEY);
+    if (local === "on") return true;
+    if (local === "off") return false;
+    return !!(S.status && S.status.guided === true); // the session's flag (absent: false)
+  }
+
+  function card(title, paragraphs, show) {
+    return { title, html: paragraphs.map((t) => `<p>${t}</p>`).join(""), show };
+  }
+
+  const occ = '<span class="k-occupied">occupied</span>';
+  const fro = '<span class="k-frontier">frontier</span>';
+
+  function steps() {
+    const st = S.status;
+    if (!st) return [];
+    const n = st.iteration;
+    const out = [];
+    if (n === 0) {
+      out.push(card("The cell", [
+        "The object sits on a turntable; the arm holds a depth camera. The scan starts knowing nothing about the object's shape.",
+        "<b>Capture</b> takes the first picture from where the camera is now.",
+      ], "cell"));
+      return out;
+    }
+    const v = st.voxels || {};
+    out.push(card(`What the ${n === 1 ? "first picture" : n + " pictures"} taught`, [
+      `Space is cut into small cubes (voxels). ${occ} (${v.occupied || 0}): a surface was seen there. ` +
+      `<i>empty</i>: the camera saw through it. <i>unknown</i> (${v.unknown || 0}): never seen. ` +
+      `${fro} (${v.frontier || 0}): unknown cubes next to empty ones — where new surface may hide.`,
+    ], "voxels"));
+    if (n >= 2) {
+      const last = (st.views || [])[n - 1] || {};
+      out.push(card(`ICP at view ${n}`, [
+        last.icp_rejected
+          ? `ICP tried to align the new picture to the earlier ones and its check did not pass (${P.esc(last.icp_rejected)}), so the camera's ` +
+            "reported pose was kept. With a simulated cell that reports exact poses this changes nothing; on a real cell, " +
+            "many rejections in a row mean the poses drift."
+          : "ICP aligned the new picture to the points of the earlier ones (it corrects small errors of the arm's reported pose); " +
+            "the check passed, so the correction was applied. The cloud layer shows the points of every view together.",
+      ], "icp"));
+    }
+    if (st.state === "planning") {
+      out.push(card("Planning", ["The planner groups the voxels into ellipsoids and scores every candidate view…"], "ellipsoids"));
+      return out;
+    }
+    const plan = st.pending_plan;
+    if (plan) {
+      out.push(card("Ellipsoids", [
+        `Each kind of voxel is summarised by a few ellipsoids (a Gaussian mixture; BIC chooses how many): ${fro} ellipsoids ` +
+        `mark what is still to be seen, ${occ} ellipsoids what is already known.`,
+      ], "ellipsoids"));
+      const locked = P.Table.items.filter((c) => !c.eligible && /sector/.test(c.reason || "")).length;
+      out.push(card("Sectors", [
+        `The hemisphere of views is cut by longitude into sectors. A view comes from a sector not scanned yet, so the ` +
+        `scan goes round the object before it looks again from one side${locked ? ` (${locked} candidates wait in scanned sectors: grey)` : ""}.`,
+      ], "sectors"));
+      const items = P.Table.items.filter((c) => c.eligible).sort((a, b) => b.score - a.score);
+      const best = items[0], second = items[1];
+      if (best) {
+        const lacked = !second ? "" : second.frontier < best.frontier
+          ? `the runner-up #${second.index} (F ${P.num(second.score, 0)}) would see less ${fro} (${P.num(second.frontier, 0)} vs ${P.num(best.frontier, 0)})`
+          : `the runner-up #${second.index} (F ${P.num(second.score, 0)}) would see more ${occ} surface again (${P.num(second.occupied, 0)} vs ${P.num(best.occupied, 0)})`;
+        out.push(card(`Why view #${best.index} won`, [
+          `Each candidate (a sphere) projects the ellipsoids into its picture: F = ${fro} − ${occ} area, nearer ones counting more. ` +
+          `The highest F sees the most unknown and the least known: #${best.index} has F = ${P.num(best.frontier, 0)} − ${P.num(best.occupied, 0)} = ${P.num(best.score, 0)}` +
+          `${lacked ? "; " + lacked : ""}. F is often negative: only the order matters.`,
+          "The planner's choice is the orange camera frustum (★ in the table); <b>Approve</b> moves the arm there.",
+        ], "score"));
+      }
+    }
+    return out;
+  }
+
+  function render() {
+    const shown = on();
+    $("guided-toggle").checked = shown;
+    const box = $("guide");
+    box.hidden = !shown || !S.status;
+    if (box.hidden) return;
+    const cards = steps().reverse(); // the newest step first, the earlier ones below it
+    $("guide-title").textContent = cards.length ? cards[0].title : "";
+    $("guide-body").innerHTML = cards.map((c, i) =>
+      `<div class="guide-step${i ? " earlier" : ""}" data-step="${c.show}">` + (i ? `<b>${P.esc(c.title)}</b>` : "") + c.html +
+      `<button class="show-me small" data-show="${c.show}" title="set the 3D view's layers to show this">Show in 3D</button></div>`).join("");
+    for (const b of box.querySelectorAll("button.show-me")) b.addEventListener("click", () => show(b.dataset.show));
+  }
+
+  async function show(what) {
+    const want = LAYERS[what];
+    if (!want || !S.viewer || !S.layers) return;
+    const known = Object.fromEntries(Object.entries(want).filter(([k]) => k in S.layers));
+    try {
+      S.layers = await api("PUT", `/api/scene/${S.viewer}/layers`, known);
+      sessionStorage.setItem(layerKey(), JSON.stringify(S.layers));
+      P.renderLayers(S.layers, toggleLayer);
+    } catch (e) { showError(e.message); }
+  }
+
+  return { render, show, on };
+})();
+
+// Compare: sessions on the same object as this one, ticked in a list (this one ticked).
+function openCompareDialog() {
+  const here = S.sessions.find((s) => s.id === S.session);
+  const same = S.sessions.filter((s) => !here || s.model === here.model);
+  $("compare-list").innerHTML = same.length ? same.map((s) =>
+    `<label><input type="checkbox" value="${P.esc(s.id)}"${s.id === S.session ? " checked" : ""}> ${P.esc(s.id)} · ` +
+    `${P.esc(s.planner || "projection")} · ${s.iteration} views · ${s.coverage === null ? "–" : (100 * s.coverage).toFixed(1) + " %"}</label>`).join("")
+    : '<p class="small muted">No sessions yet.</p>';
+  $("compare-dialog").hidden = false;
 }
 
 // ------------------------------------------------------------------ the timeline
@@ -646,6 +871,21 @@ async function showView(view) {
     renderTimeline();
     return;
   }
+  $("tl-loading").textContent = view === null ? "" : `loading view ${view}…`;
+  try {
+    await showViewNow(view);
+  } finally {
+    $("tl-loading").textContent = "";
+  }
+}
+
+async function showViewNow(view) {
+  if (TL.compare) {
+    TL.view = view;
+    TL.compare(view);
+    renderTimeline();
+    return;
+  }
   const step = await api("PUT", `/api/scene/${S.viewer}/timeline`, { view });
   TL.view = view;
   TL.step = step;
@@ -668,6 +908,10 @@ async function showView(view) {
 
 // The status and candidate panels as they were after the step's view.
 function renderStep(step) {
+  // the Scan box speaks of then: no state, termination or notice of now
+  $("state").textContent = `view ${step.view} (past)`;
+  $("terminated").hidden = true;
+  showNotice("");
   $("iteration").textContent = step.view;
   $("coverage").textContent = step.coverage !== null ? (100 * step.coverage).toFixed(1) + " %" : "–";
   $("points").textContent = step.points;
@@ -765,9 +1009,13 @@ async function init() {
   if (QUERY.has("calibrate")) {
     await window.Calibrate.open(QUERY.get("calibrate")); // calibrate.js: commissioning a cell
   } else if (compare) {
+    document.body.classList.add("comparing");
     $("health").textContent = "compare";
     await showCompare(compare.split(",").filter(Boolean));
   } else if (S.session) {
+    document.body.classList.add("has-session");
+    // a short window: the 3D view gets the height, the charts are one click away (7 · Charts)
+    if (window.innerHeight < 800) $("charts-box").open = false;
     document.title = `${S.session} · NBV workbench`;
     $("export-ply").href = withToken(`/api/sessions/${S.session}/cloud.ply`);
     $("export-json").href = withToken(`/api/sessions/${S.session}/export`);
@@ -778,6 +1026,7 @@ async function init() {
     $("export-bag").href = withToken(`/api/sessions/${S.session}/export.mcap`);
     connectEvents(500);
     await openViewer();
+    if (QUERY.get("demo")) runDemo();
   } else {
     $("picker").hidden = false;
     $("viewer").hidden = true;
@@ -785,6 +1034,7 @@ async function init() {
     $("health").textContent = "choose a session";
     $("create-box").open = true;
   }
+  Guide.render();
   updateButtons();
 }
 

@@ -56,11 +56,14 @@ function lineChart(svg, series, opts) {
   if (y1 === y0) { const d = Math.abs(y0) * 0.1 || 1; y0 -= d; y1 += d; }
   const X = (x) => m.l + ((x - x0) / (x1 - x0)) * (W - m.l - m.r);
   const Y = (y) => H - m.b - ((y - y0) / (y1 - y0)) * (H - m.t - m.b);
-  for (const t of niceTicks(y0, y1, 4)) {
+  // as many ticks as fit without their labels touching (18 px a row, 40 px a column)
+  const yTicks = Math.max(1, Math.min(4, Math.floor((H - m.t - m.b) / 18)));
+  const xTicks = Math.max(2, Math.min(6, Math.floor((W - m.l - m.r) / 40)));
+  for (const t of niceTicks(y0, y1, yTicks)) {
     svgEl("line", { x1: m.l, x2: W - m.r, y1: Y(t), y2: Y(t), stroke: "#eceef2" }, svg);
     svgEl("text", { x: m.l - 4, y: Y(t) + 3, "text-anchor": "end" }, svg).textContent = fmt(t);
   }
-  let xt = niceTicks(x0, x1, 6);
+  let xt = niceTicks(x0, x1, xTicks);
   if (opts.xInteger) xt = xt.filter((t) => Number.isInteger(t));
   for (const t of xt) {
     svgEl("text", { x: X(t), y: H - m.b + 12, "text-anchor": "middle" }, svg).textContent = fmt(t);

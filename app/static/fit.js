@@ -13,7 +13,10 @@ const FitPanel = (() => {
   const KIND_TEXT = { occupied: "occupied", frontier: "frontier" };
 
   async function load() {
-    if (!S.viewer || !S.planId && !(S.status && S.status.iteration)) { F.info = null; render(); return; }
+    // a fit exists once a plan was made (the pending one, or the last one's in the metrics): before, no request
+    // (it would answer 409, a console error in every new session)
+    const planned = S.planId || (S.metrics && S.metrics.fits && S.metrics.fits.length);
+    if (!S.viewer || !planned) { F.info = null; render(); return; }
     try {
       F.info = await api("GET", `/api/scene/${S.viewer}/fit`);
     } catch (e) {

@@ -50,13 +50,17 @@ function renderTable(selected, onPick) {
     tr.className = (c.best ? "best " : "") + (c.eligible ? "" : "ineligible ") + (c.index === selected ? "selected" : "");
     const why = c.eligible ? "yes" : esc(c.reason || "no");
     if (!c.eligible && c.reason) tr.title = `not eligible: ${c.reason}`;
-    tr.innerHTML = `<td>${c.index}</td><td>${num(c.score)}</td><td>${num(c.frontier)}</td><td>${num(c.occupied)}</td>` +
+    const short = (v) => num(v, Math.abs(v) >= 100 ? 0 : 1); // narrow columns: no decimals on big numbers
+    tr.innerHTML = `<td>${c.index}</td><td>${short(c.score)}</td><td>${short(c.frontier)}</td><td>${short(c.occupied)}</td>` +
       `<td>S${c.sector}</td><td class="why">${why}</td>` +
-      `<td data-testid="move-s">${c.move_seconds == null ? "–" : c.move_seconds.toFixed(1)}</td>` +
-      `<td>${c.tour_order == null ? "" : c.tour_order}</td>`;
+      `<td class="c-move" data-testid="move-s">${c.move_seconds == null ? "–" : c.move_seconds.toFixed(1)}</td>` +
+      `<td class="c-tour">${c.tour_order == null ? "" : c.tour_order}</td>`;
     tr.addEventListener("click", () => onPick(c.index));
     tbody.appendChild(tr);
   }
+  // a column no candidate fills (the default planner has no move times and no tour) is not shown
+  $("candidates").classList.toggle("no-move", !rows.some((c) => c.move_seconds != null));
+  $("candidates").classList.toggle("no-tour", !rows.some((c) => c.tour_order != null));
   $("page-info").textContent = rows.length ? `page ${Table.page + 1} / ${pages} · ${rows.length} candidates` : "no plan";
   for (const th of $("candidates").querySelectorAll("th[data-sort]")) {
     th.classList.toggle("sorted", th.dataset.sort === Table.sort.key);
@@ -120,10 +124,13 @@ const SECTOR_HELP = "Sectors S0…Sβ-1 split the hemisphere by longitude. 'scan
 function renderLegend(scene) {
   const stops = scene.colormap.map((c, i, a) => `rgb(${c.join(",")}) ${(100 * i) / (a.length - 1)}%`);
   $("cb-grad").style.background = `linear-gradient(to right, ${stops.join(",")})`;
-  $("cb-what").textContent = "F";
-  $("colorbar").title = `candidate colour: ${scene.scale}; beyond either end the end colour; grey: not eligible`;
-  $("cb-lo").textContent = "p5 " + num(scene.score_range[0]);
-  $("cb-hi").textContent = num(scene.score_range[1]) + " p95";
+  $("cb-what").textContent = "view score F";
+  $("colorbar").title = `candidate colour: ${scene.scale}; from the 5th to the 95th percentile of F ` +
+    `(${num(scene.score_range[0], 0)} … ${num(scene.score_range[1], 0)}), beyond either end the end colour; grey: not eligible. ` +
+    "F = frontier − occupied: it is negative when a view would see more already-known surface than unknown space; " +
+    "only the order matters, the highest F wins.";
+  $("cb-lo").textContent = "worse";
+  $("cb-hi").textContent = "better";
   const box = $("voxel-legend");
   box.innerHTML = "";
   for (const name of ["occupied", "frontier", "unknown", "empty"]) {
@@ -258,7 +265,11 @@ const SHORTCUTS = [
 function renderViewNotes(box, views) {
   const notes = [];
   for (const v of views) {
-    if (v.icp_rejected) notes.push(`view ${v.iteration}: ICP rejected the frame (${v.icp_rejected}); its reported pose was kept`);
+    if (v.icp_rejected) {
+      notes.push(`view ${v.iteration}: ICP's correction was not applied (${v.icp_rejected.replace(/^rejected: /, "")}); ` +
+        "the camera's reported pose was kept. Nothing to do when the cell reports exact poses (a simulated cell " +
+        "without a calibration error); on a real cell, several in a row mean the poses drift: check the calibration.");
+    }
     for (const r of v.refused || []) notes.push(`view ${v.iteration}: candidate ${r.candidate} refused (${r.reason}), the next one taken`);
   }
   box.innerHTML = notes.map((n) => `<div class="view-note">${esc(n)}</div>`).join("");

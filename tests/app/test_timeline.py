@@ -105,12 +105,13 @@ def test_the_recording_plays_one_step_per_view(scanned, tmp_path: Path) -> None:
     assert r.status_code == 200 and r.headers["content-type"] == "application/zip"
     assert f"nbv-{sid}-recording.zip" in r.headers["content-disposition"]
     z = zipfile.ZipFile(io.BytesIO(r.content))
-    assert sorted(z.namelist()) == ["index.html", "scene.viser", "steps.json"]
-    page = z.read("index.html").decode()
+    top = f"nbv-{sid}-recording/"  # one folder: unzipping does not spill files into the current directory
+    assert sorted(z.namelist()) == [top + "index.html", top + "scene.viser", top + "steps.json"]
+    page = z.read(top + "index.html").decode()
     assert "window.__VISER_EMBED_DATA__=" in page and 'data-testid="recording-steps"' in page
     timeline = client.get(f"/api/sessions/{sid}/timeline").json()["steps"]
-    assert json.loads(z.read("steps.json"))["steps"] == timeline
-    duration, messages = decode_viser(z.read("scene.viser"))
+    assert json.loads(z.read(top + "steps.json"))["steps"] == timeline
+    duration, messages = decode_viser(z.read(top + "scene.viser"))
     assert duration == pytest.approx(3 * 2.0)
     labels = [(t, m["props"]["text"]) for t, m in messages if m.get("name") == "/recording/step" and "props" in m]
     assert [text.split(" · ")[0] for _, text in labels] == ["view 1 of 3", "view 2 of 3", "view 3 of 3"]
@@ -139,7 +140,7 @@ def test_nbv_record_writes_the_recording_of_a_journal(scanned, tmp_path: Path, c
     assert "3 views" in capsys.readouterr().out
     z = zipfile.ZipFile(out)
     served = client.get(f"/api/sessions/{sid}/timeline").json()["steps"]
-    assert json.loads(z.read("steps.json"))["steps"] == served  # replayed in a replay cell: the same plans
+    assert json.loads(z.read("scan/steps.json"))["steps"] == served  # replayed in a replay cell: the same plans
     assert main(["record", str(directory), "--out", str(tmp_path / "scan.tar")]) == 2
     assert "FILE.zip" in capsys.readouterr().err
     assert main(["record", str(tmp_path), "--out", str(out)]) == 2

@@ -42,8 +42,8 @@ def main(out: str, player_out: str, width: int = 1600, height: int = 1000, model
             save_screenshot(page, out, 5000)  # SwiftShader: the scene loads and renders
             print(f"saved {out}")
 
-            folder = Path(tmp) / "recording"
-            zipfile.ZipFile(io.BytesIO(api.get(f"/api/sessions/{sid}/recording").content)).extractall(folder)
+            zipfile.ZipFile(io.BytesIO(api.get(f"/api/sessions/{sid}/recording").content)).extractall(tmp)
+            folder = Path(tmp) / f"nbv-{sid}-recording"  # the zip's one top-level folder
             with served(folder) as base:
                 player = browser.new_page(viewport={"width": width, "height": height}, device_scale_factor=1)
                 goto_when_up(player, f"{base}/index.html")

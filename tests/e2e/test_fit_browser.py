@@ -143,6 +143,8 @@ def test_debugging_a_fit(live_server: LiveServer, browser_context: BrowserContex
     kind = chosen.kind
     t = max(t for t, _ in chosen.bic if t != chosen.t_chosen)
     mark = len(tab.frames)
+    if not page.locator("#charts-box").evaluate("(d) => d.open"):  # folded on a short window
+        page.locator("#charts-box > summary").click()
     page.locator(f"#chart-bic circle[data-series='{kind}'][data-x='{t}']").click()
     expect(page.locator(f"#fit-kinds [data-kind='{kind}']")).to_contain_text(f"fit at T={t}", timeout=60_000)
     expect(page.locator(f"#chart-bic circle.fit-picked[data-kind='{kind}']")).to_have_attribute("data-t", str(t))

@@ -10,7 +10,7 @@ import pytest
 from playwright.sync_api import BrowserContext, expect
 
 from devices.sensors.presets import SENSORS
-from tests.e2e.forms import fill_small_form
+from tests.e2e.forms import fill_small_form, open_advanced
 from tests.servers import LiveServer
 
 pytestmark = pytest.mark.e2e  # tests/conftest.py: the long groups are handed out first
@@ -24,6 +24,7 @@ def test_a_d435_session_from_the_form_charts_precision(
     options = page.locator("#sensor option")
     expect(options).to_have_count(len(SENSORS) + 1)  # the server's default, then every model
     page.select_option("#model", "l-block")
+    open_advanced(page)  # the sensor and calibration models are advanced choices
     page.select_option("#sensor", "realsense-d435")
     page.select_option("#calibration", "typical")
     fill_small_form(page)

@@ -133,8 +133,8 @@ def test_scrub_the_timeline_and_play_the_recording_offline(
     page.close()  # its viewer renders all the time: SwiftShader's cores go to the player from here
 
     # the recording of the 5 views, played with no workbench server
-    folder = tmp_path / "recording"
-    zipfile.ZipFile(io.BytesIO(recording.content)).extractall(folder)
+    zipfile.ZipFile(io.BytesIO(recording.content)).extractall(tmp_path)
+    folder = tmp_path / f"nbv-{sid}-recording"  # the zip's one top-level folder
     with served(folder) as base:
         player = browser_context.new_page()
         player.add_init_script(HOLD_PAGE_FRAMES)  # the player is a viewer itself: it draws for the last check only

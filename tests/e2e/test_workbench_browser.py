@@ -247,7 +247,7 @@ def test_long_operations_show_their_progress_and_stop(
     live_server.registry.creations.listeners.append(hold_first_stage)
     page.reload()
     _state(tab, "ready")  # the page has opened its session (its layout settled): the click lands on the summary
-    page.locator("#create-box summary").click()
+    page.locator("#create-box > summary").click()
     expect(page.locator("#model")).to_be_visible()
     page.locator("#model").select_option("ball.obj")
     sessions = len(api.get("/api/sessions").json())
