@@ -228,16 +228,18 @@ def read_range_ply(path: str | Path) -> RangeScan:
     return RangeScan(points, grid.reshape(rows, cols), info)
 
 
-def scanner_direction(scan: RangeScan) -> NDArray[np.float64]:
+def scanner_direction(scan: RangeScan, centre: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
     """(3,) unit vector in the scan's frame from the object towards the scanner.
 
     An organised range image's rows and columns are the scanner's lateral coordinates and its range runs across
     them: a point's position along the lateral axes follows from its (column, row) cell, its position along the
     viewing axis does not (that is the object's shape). So the points are regressed on (column, row, 1) by least
     squares and the viewing axis is the direction of the largest residual variance (the principal axis of what the
-    grid cell does not explain). Its sign: the surface normals of neighbouring cells (cross products of the column
-    and row steps, all oriented alike) face the scanner on a visible surface, so their sum points to it. ValueError
-    for a scan of fewer than 4 returns.
+    grid cell does not explain). Its sign: with the object's ``centre`` (3,) in the scan's frame, the scanner is on
+    the side of the centre its points are (a scan sees the near side of the object); without it, the surface
+    normals of neighbouring cells (cross products of the column and row steps) face the scanner on a visible
+    surface, so their sum points to it, which holds for a grid laid out as the scanner's own right-handed image
+    axes (the Stanford scans: both rules agree on all ten). ValueError for a scan of fewer than 4 returns.
     """
     rows, cols = np.nonzero(scan.grid >= 0)
     if rows.size < 4:
@@ -248,6 +250,8 @@ def scanner_direction(scan: RangeScan) -> NDArray[np.float64]:
     residual = pts - design @ coef
     _, vectors = np.linalg.eigh(residual.T @ residual)
     axis = vectors[:, -1]
+    if centre is not None:
+        return axis if float((pts.mean(axis=0) - np.asarray(centre, dtype=np.float64)) @ axis) >= 0 else -axis
     grid_points = np.full((*scan.grid.shape, 3), np.nan)
     grid_points[rows, cols] = pts
     d_col = grid_points[:-1, 1:] - grid_points[:-1, :-1]
@@ -353,9 +357,11 @@ def read_stanford(
         else np.concatenate([T.apply(s.points) for _, s, T in scans])
     )
     T_table_ref = _placement(ref_points, up)
+    centre_ref = 0.5 * (ref_points.min(axis=0) + ref_points.max(axis=0))
     views = []
     for name, scan, T_ref_scan in scans:
-        T_scan_sensor = _sensor_pose(scanner_direction(scan), scan.points, distance)
+        direction = scanner_direction(scan, T_ref_scan.inverse().apply(centre_ref[None])[0])
+        T_scan_sensor = _sensor_pose(direction, scan.points, distance)
         views.append(
             RecordedView(name, T_scan_sensor.inverse().apply(scan.points), T_table_ref @ T_ref_scan @ T_scan_sensor)
         )

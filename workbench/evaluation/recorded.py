@@ -218,3 +218,87 @@ def run_recorded(
 def _nearest(recorded: RecordedSet, pose: Pose) -> int:
     positions = np.array([v.T_world_sensor.translation for v in recorded.views])
     return int(np.argmin(np.linalg.norm(positions - pose.translation, axis=1)))
+
+
+@dataclass
+class RecordedBench:
+    """The planners compared on one recorded set: per-run rows (:meth:`RecordedRun.metrics` plus the per-view
+    curves), the recorded ceiling and the brute-force fewest views to 95 %."""
+
+    name: str
+    views: int
+    ceiling: float
+    ceiling_fscore: float
+    ceiling_surface_fscore: float | None
+    fewest: tuple[int, tuple[int, ...]] | None
+    rows: list[dict[str, Any]]
+
+    def summary(self) -> list[dict[str, Any]]:
+        """One row per planner: the metrics, random's (or any seeded planner's) as the mean over its seeds (with
+        ``views_to_95_sd`` and ``auc_sd``)."""
+        out: list[dict[str, Any]] = []
+        for planner in dict.fromkeys(r["planner"] for r in self.rows):
+            rows = [r for r in self.rows if r["planner"] == planner]
+            if len(rows) == 1:
+                out.append(rows[0])
+                continue
+            merged: dict[str, Any] = {"planner": f"{planner} (mean of {len(rows)})", "seed": None, "order": []}
+            for key in ("views_to_95", "auc", "final_coverage", "final_precision_5mm", "final_fscore_5mm"):
+                values = [float(r[key]) for r in rows]
+                merged[key] = float(np.mean(values))
+                merged[f"{key}_sd"] = float(np.std(values, ddof=1))
+            surfaces = [r["surface_fscore_5mm"] for r in rows if r["surface_fscore_5mm"] is not None]
+            merged["surface_fscore_5mm"] = float(np.mean(surfaces)) if surfaces else None
+            out.append(merged)
+        return out
+
+    def table(self) -> str:
+        """The summary as a markdown table."""
+        lines = [
+            "| planner | views to 95 % | AUC | final coverage | cloud F@5mm | surface F@5mm | order |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for r in self.summary():
+            v95 = f"{r['views_to_95']:.2f} ± {r['views_to_95_sd']:.2f}" if "views_to_95_sd" in r else r["views_to_95"]
+            auc = f"{r['auc']:.3f} ± {r['auc_sd']:.3f}" if "auc_sd" in r else f"{r['auc']:.3f}"
+            surface = "-" if r["surface_fscore_5mm"] is None else f"{r['surface_fscore_5mm']:.3f}"
+            lines.append(
+                f"| {r['planner']} | {v95} | {auc} | {r['final_coverage']:.3f} | {r['final_fscore_5mm']:.3f} | "
+                f"{surface} | {' '.join(r['order'])} |"
+            )
+        return "\n".join(lines)
+
+
+def bench_recorded(
+    recorded: RecordedSet,
+    planners: Sequence[str],
+    config: PlannerConfig,
+    *,
+    seeds: int = 1,
+    surface: bool = True,
+    on_run: Callable[[dict[str, Any]], None] | None = None,
+) -> RecordedBench:
+    """Run ``planners`` (``oracle`` among them: :func:`greedy_order` from the first view) on ``recorded``; random
+    with ``seeds`` seeds (0, 1, ...), the others once (seed 0). The ceiling: all views in recorded order."""
+    truth = recorded_truth(recorded)
+    views = len(recorded.views)
+    base = run_recorded(recorded, "all views", config, truth, order=list(range(views)), surface=surface)
+    ceiling = base.coverage[-1]
+    cover = view_cover(recorded, truth)
+    rows: list[dict[str, Any]] = []
+    for name in planners:
+        for seed in range(seeds if name == "random" else 1):
+            if name == ORACLE:
+                run = run_recorded(recorded, ORACLE, config, truth, order=greedy_order(cover, first=0), surface=surface)
+            else:
+                run = run_recorded(recorded, name, config, truth, seed=seed, surface=surface)
+            row = {
+                **run.metrics(ceiling, views),
+                "coverage": run.coverage,
+                "precision_5mm": run.precision,
+                "fscore_5mm": run.fscore,
+            }
+            rows.append(row)
+            if on_run is not None:
+                on_run(row)
+    return RecordedBench(recorded.name, views, ceiling, base.fscore[-1], base.surface_fscore, fewest_views(cover), rows)
