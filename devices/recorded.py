@@ -264,6 +264,22 @@ def scanner_direction(scan: RangeScan, centre: NDArray[np.float64] | None = None
     return axis
 
 
+def trim_edges(scan: RangeScan, cells: int) -> RangeScan:
+    """``scan`` without the returns within ``cells`` grid cells (chessboard distance) of a cell without one: the
+    rims of what the scanner saw, where it measures at grazing angles and mixes foreground and background."""
+    if cells <= 0:
+        return scan
+    from scipy import ndimage
+
+    has = scan.grid >= 0
+    keep = has & (ndimage.distance_transform_cdt(np.pad(has, 1), metric="chessboard")[1:-1, 1:-1] > cells)
+    index = np.full(len(scan.points), -1, dtype=np.int64)
+    kept = scan.grid[keep]
+    index[kept] = np.arange(len(kept))
+    grid = np.where(keep, index[np.where(has, scan.grid, 0)], -1)
+    return RangeScan(scan.points[kept], grid, scan.info)
+
+
 def read_conf(path: str | Path) -> dict[str, Pose]:
     """``{file name: T_ref_scan}`` of a Stanford ``.conf`` (``bmesh FILE tx ty tz qi qj qk qw``, the quaternion
     scalar-last and applied inverted: ``p_ref = R(q)^-1 p_scan + t``). ValueError naming the line otherwise."""
@@ -317,14 +333,19 @@ def read_stanford(
     up: str = "y",
     distance: float = STANFORD_DISTANCE,
     intrinsics: Intrinsics = STANFORD_INTRINSICS,
+    edge_trim: int = 0,
 ) -> RecordedSet:
     """A folder of Stanford range scans as a :class:`RecordedSet` (module docstring).
 
     conf: the ``.conf`` (default: the folder's only ``*.conf``). reference: a mesh in the conf's reference frame
     (default: ``*_zipper.ply`` in the folder when there is one; pass "" for none). up: the data's up axis.
     Each scan's virtual sensor stands ``distance`` from its points' centre on :func:`scanner_direction`, looking
-    back along it. ValueError naming the file for a missing or malformed one.
+    back along it. edge_trim: drop the returns within this many grid cells of a cell without one
+    (:func:`trim_edges`: a scanner's worst points are at the edges of what it saw). ValueError naming the file for a
+    missing or malformed one.
     """
+    if not (isinstance(edge_trim, int) and edge_trim >= 0):
+        raise ValueError(f"edge_trim: must be an integer >= 0, got {edge_trim!r}")
     root = Path(folder)
     if not root.is_dir():
         raise ValueError(f"recorded set {str(folder)!r}: not a folder")
@@ -341,7 +362,7 @@ def read_stanford(
         path = root / file_name
         if not path.is_file():
             raise ValueError(f"{Path(conf).name}: scan {file_name!r} not found in {root.name}")
-        scans.append((Path(file_name).stem, read_range_ply(path), T_ref_scan))
+        scans.append((Path(file_name).stem, trim_edges(read_range_ply(path), edge_trim), T_ref_scan))
     mesh: trimesh.Trimesh | None = None
     if reference is None:
         zippers = sorted(root.glob("*_zipper.ply"))
@@ -525,14 +546,14 @@ def write_view_folder(
     return path
 
 
-def read_recorded(path: str | Path, reference: str | Path | None = None) -> RecordedSet:
+def read_recorded(path: str | Path, reference: str | Path | None = None, edge_trim: int = 0) -> RecordedSet:
     """The recorded set at ``path``: our folder format when it holds ``views.json``, else Stanford range scans (a
     ``.conf``). ``reference``: a reference mesh in the set's frame for the Stanford reader (its own by default)."""
     root = Path(path)
     if (root / MANIFEST).is_file():
         return read_view_folder(root)
     if root.is_dir() and any(root.glob("*.conf")):
-        return read_stanford(root, reference=reference)
+        return read_stanford(root, reference=reference, edge_trim=edge_trim)
     raise ValueError(f"recorded set {str(path)!r}: neither {MANIFEST} nor a Stanford .conf found")
 
 

@@ -127,6 +127,9 @@ class RecordedRun:
     surface_fscore: float | None = None
     cloud: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
     poses: list[Pose] = field(default_factory=list)
+    """The registered pose of each view taken (after ICP)."""
+    rejected: int = 0
+    """Views whose ICP correction the acceptance gate refused (their given pose was kept)."""
 
     def metrics(self, ceiling: float, views: int) -> dict[str, Any]:
         """Views to 95 % of ``ceiling``, AUC of coverage / ceiling over ``views`` views, the final scores."""
@@ -178,6 +181,7 @@ def run_recorded(
     precision: list[float] = []
     fscore: list[float] = []
     names: list[str] = []
+    rejected = 0
     if order is None and perturb is None:
         planner = Planner(cfg, evaluator=planner_name)
         cell = RecordedCell(recorded)
@@ -192,6 +196,7 @@ def run_recorded(
             coverage.append(float(acc.get("recall_5mm") or 0.0))
             precision.append(float(acc.get("precision_5mm") or 0.0))
             fscore.append(float(acc.get("fscore_5mm") or 0.0))
+            rejected += bool(record.registration is not None and not record.registration.get("accepted", True))
         names = [recorded.views[_nearest(recorded, r.pose)].name for r in result.records]
     else:
         planner = Planner(cfg, evaluator="projection")
@@ -199,6 +204,7 @@ def run_recorded(
             pose = recorded.views[index].T_world_sensor
             frame = recorded.frame(index, pose if perturb is None else perturb(index, pose))
             report = planner.integrate(frame)
+            rejected += report.registration is not None and not report.registration.accepted
             if integrator is not None:
                 integrator.integrate(frame.with_pose(report.T_world_camera))
             scores = accuracy(truth, planner.cloud)
@@ -212,7 +218,9 @@ def run_recorded(
             surface_f = surface_accuracy(integrator.mesh(), truth).fscore_5mm
         except ValueError:
             surface_f = math.nan
-    return RecordedRun(planner_name, seed, names, coverage, precision, fscore, surface_f, planner.cloud, planner.views)
+    return RecordedRun(
+        planner_name, seed, names, coverage, precision, fscore, surface_f, planner.cloud, planner.views, rejected
+    )
 
 
 def _nearest(recorded: RecordedSet, pose: Pose) -> int:
