@@ -590,7 +590,10 @@ class RecordedCell(Cell):
     view's recorded data with its recorded pose. Moves are not timed (the views were taken already)."""
 
     def __init__(self, recorded: RecordedSet, config: CellConfig | None = None) -> None:
-        config = config if config is not None else CellConfig(kinematics="reach_sphere")
+        from dataclasses import replace
+
+        # no arm to plan for: the views were taken already (the reach sphere only keeps the cell's state)
+        config = replace(config if config is not None else CellConfig(), kinematics="reach_sphere")
         arm = SimulatedArm()
         turntable = SimulatedTurntable()
         camera = RecordedCamera(recorded, pose_source=lambda: self.pose)

@@ -13,6 +13,7 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from devices.builtins import make_builtin
+from devices.config import CellConfig
 from devices.recorded import (
     RecordedCell,
     read_conf,
@@ -23,10 +24,9 @@ from devices.recorded import (
     write_view_folder,
 )
 from devices.sim import make_sim_cell
-from devices.config import CellConfig
 from planner import Planner
 from planner.config import PlannerConfig
-from planner.types import Intrinsics, Pose
+from planner.types import Intrinsics
 from tests.helpers import orbit_view
 from workbench.evaluation.accuracy import accuracy
 from workbench.evaluation.recorded import fewest_views, greedy_order, recorded_truth, run_recorded
@@ -42,8 +42,8 @@ def sphere_scan(path: Path, extra_lines: int = 0) -> np.ndarray:
     n = int(2.4 * RADIUS / STEP)
     coords = (np.arange(n) - (n - 1) / 2) * STEP
     points, cells = [], []
-    for row, y in enumerate(coords):
-        for col, x in enumerate(coords):
+    for y in coords:
+        for x in coords:
             r2 = RADIUS**2 - x * x - y * y
             if r2 > (0.2 * RADIUS) ** 2:  # the grazing rim gives no return, as a scanner's does
                 cells.append(f"1 {len(points)}")
