@@ -272,7 +272,8 @@ def trim_edges(scan: RangeScan, cells: int) -> RangeScan:
     from scipy import ndimage
 
     has = scan.grid >= 0
-    keep = has & (ndimage.distance_transform_cdt(np.pad(has, 1), metric="chessboard")[1:-1, 1:-1] > cells)
+    to_hole = np.asarray(ndimage.distance_transform_cdt(np.pad(has, 1), metric="chessboard"))
+    keep = has & (to_hole[1:-1, 1:-1] > cells)
     index = np.full(len(scan.points), -1, dtype=np.int64)
     kept = scan.grid[keep]
     index[kept] = np.arange(len(kept))
