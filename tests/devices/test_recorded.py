@@ -238,3 +238,38 @@ def test_folder_format_errors_name_the_field(tmp_path: Path) -> None:
     (tmp_path / "views.json").write_text(json.dumps({"format": "nbv-views", "intrinsics": k, "views": [escape]}))
     with pytest.raises(ValueError, match=r"not a file inside"):
         read_view_folder(tmp_path)
+
+
+def test_trim_edges_drops_the_rim_of_what_the_scanner_saw(tmp_path: Path) -> None:
+    from devices.recorded import trim_edges
+
+    sphere_scan(tmp_path / "s.ply")
+    scan = read_range_ply(tmp_path / "s.ply")
+    trimmed = trim_edges(scan, 2)
+    rows, cols = np.nonzero(trimmed.grid >= 0)
+    # what is left sits where the scan had returns 2 cells around, and the grid still maps to the same points
+    np.testing.assert_allclose(trimmed.points[trimmed.grid[rows, cols]], scan.points[scan.grid[rows, cols]])
+    for dr in (-2, 0, 2):
+        for dc in (-2, 0, 2):
+            assert np.all(scan.grid[rows + dr, cols + dc] >= 0)
+    radius = np.hypot(trimmed.points[:, 0], trimmed.points[:, 1]).max()
+    assert radius < np.hypot(scan.points[:, 0], scan.points[:, 1]).max() - 1.5 * STEP
+    assert trim_edges(scan, 0) is scan
+
+
+def test_given_candidate_poses_keep_their_order_and_sectors() -> None:
+    from planner.candidates import candidates_from_poses
+    from planner.config import PartitionConfig
+    from planner.types import BoundingBox
+
+    box = BoundingBox(np.array([-0.05, -0.05, 0.0]), np.array([0.05, 0.05, 0.1]))
+    poses = [orbit_view((0, 0, 0.05), 20, a) for a in (10, 100, 190, 280)]
+    candidates, centre, radius = candidates_from_poses(poses, box, PartitionConfig())
+    assert [c.index for c in candidates] == [0, 1, 2, 3]
+    assert [c.sector for c in candidates] == [0, 1, 2, 3]
+    assert all(c.T_world_camera is p for c, p in zip(candidates, poses, strict=True))
+    np.testing.assert_allclose(centre, [0, 0, 0.05])
+    assert radius == pytest.approx(0.45)
+    assert math.degrees(candidates[0].elevation) == pytest.approx(20)
+    with pytest.raises(ValueError, match="none given"):
+        candidates_from_poses([], box, PartitionConfig())
