@@ -23,7 +23,7 @@ from scipy.spatial.transform import Rotation
 from devices.recorded import read_recorded
 from planner import Pose
 from planner.config import PlannerConfig
-from workbench.evaluation.recorded import ORACLE, bench_recorded, recorded_truth, run_recorded, view_cover
+from workbench.evaluation import ORACLE, bench_recorded, recorded_truth, run_recorded, view_cover
 
 PLANNERS = "projection,projection-zbuffer,tour,raycast-apora,raycast-oa,raycast-uv,raycast-rse"
 

@@ -13,7 +13,7 @@ from nbv.options import CliError, planner_config_from_args
 def planner_names(text: str) -> list[str]:
     """``--planners`` for a recorded set: any planner, and ``oracle``. CliError for an unknown or repeated name."""
     from planner.evaluators import evaluator_names
-    from workbench.evaluation.recorded import ORACLE
+    from workbench.evaluation import ORACLE
 
     names = [n.strip() for n in text.split(",") if n.strip()]
     known = [*evaluator_names(), ORACLE]
@@ -43,7 +43,7 @@ def load(path: Path, mesh: Path | None) -> Any:
 
 def run_recorded_bench(args: argparse.Namespace) -> int:
     """Run the planners on the recorded set, print the table, write results.json and summary.md to ``--out``."""
-    from workbench.evaluation.recorded import bench_recorded
+    from workbench.evaluation import bench_recorded
 
     if args.models:
         raise CliError("--recorded: give it instead of --models, not with them")
@@ -93,7 +93,7 @@ def scan_recorded(args: argparse.Namespace) -> dict[str, Any]:
     """``nbv scan --recorded DIR``: ``--planner`` (or ``oracle``) chooses among the set's views; prints a row per
     view and writes metrics.json, cloud.ply (and surface.ply) to ``--out``. Returns the metrics document."""
     from devices.ply import write_ply
-    from workbench.evaluation.recorded import ORACLE, greedy_order, recorded_truth, run_recorded, view_cover
+    from workbench.evaluation import ORACLE, greedy_order, recorded_truth, run_recorded, view_cover
 
     planner = planner_names(args.planner)[0]
     recorded = load(args.recorded, None)

@@ -8,8 +8,7 @@ from fastapi import APIRouter, UploadFile
 
 from app.api.deps import Settings
 from app.schemas import ModelOut
-from workbench import TooLarge, list_models, list_recordings, save_upload
-from workbench.sources.parts import list_recorded
+from workbench import TooLarge, list_models, list_recorded, list_recordings, save_upload
 
 router = APIRouter(prefix="/models", tags=["catalog"])
 recordings_router = APIRouter(prefix="/recordings", tags=["catalog"])
