@@ -120,11 +120,18 @@ class BagTopicsIn(BaseModel):
 
 
 class SourceIn(BaseModel):
-    """Where the session's frames come from: the simulated cell, a replay of recorded / journaled frames, or the
-    devices of the server's cell file (``hardware``, docs/hardware.md; the default when the server has one)."""
+    """Where the session's frames come from: the simulated cell, a replay of recorded / journaled frames, the
+    devices of the server's cell file (``hardware``, docs/hardware.md; the default when the server has one), or a
+    recorded view set whose views are the only candidates (``recorded``, docs/real-data.md)."""
 
     model_config = ConfigDict(extra="forbid")
-    kind: Literal["sim", "replay", "hardware"] = "sim"
+    kind: Literal["sim", "replay", "hardware", "recorded"] = "sim"
+    recorded: str | None = Field(
+        default=None,
+        max_length=64,
+        description="recorded: a recorded view set from GET /api/recorded (data_dir/recorded); the planner chooses "
+        "among its views",
+    )
     recording: str | None = Field(
         default=None, max_length=64, description="replay: a name from GET /api/recordings (data_dir/recordings)"
     )
@@ -150,6 +157,8 @@ class SourceIn(BaseModel):
             raise ValueError("'topics' go with the replay of a recording (a ROS 2 bag)")
         if self.kind != "replay" and (self.recording is not None or self.session is not None):
             raise ValueError(f"a {self.kind} source takes no 'recording' or 'session'")
+        if (self.kind == "recorded") != (self.recorded is not None):
+            raise ValueError("a recorded source needs 'recorded' (a set's name); other sources take none")
         if self.kind != "hardware" and (self.dry_run is not None or self.truth is not None):
             raise ValueError(f"a {self.kind} source takes no 'dry_run' or 'truth'")
         return self

@@ -96,6 +96,11 @@ class ScanCell(Protocol):
 
     def is_reachable(self, T_table_camera: Pose) -> bool: ...
 
+    def candidate_poses(self) -> Sequence[Pose] | None:
+        """The views the planner must choose among (``T_table_camera`` each: a recorded set's views), None: the
+        planner proposes its own (the paper's hemisphere)."""
+        ...
+
     def set_object_box(self, bbox: BoundingBox | None) -> None:
         """The object's box the arm keeps clear of (nothing to do without a collision model)."""
         ...
@@ -246,6 +251,10 @@ class Cell:
     def joint_positions(self) -> NDArray[np.float64] | None:
         """(n,) the arm's joints, radians (None for the reach-sphere arm)."""
         return self.reach.joint_positions()
+
+    def candidate_poses(self) -> Sequence[Pose] | None:
+        """None: the planner proposes its candidates (a recorded set's cell gives its views instead)."""
+        return None
 
     def set_object_box(self, bbox: BoundingBox | None) -> None:
         """The object's box B (table frame) the arm keeps clear of (padded by ``arm.object_padding``); None = none.

@@ -46,7 +46,23 @@ __all__ = ["RunOutcome", "RunTask", "add_arguments", "execute", "make_tasks", "o
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The ``nbv bench`` options: the scan options of ``nbv scan`` plus models, planners, seeds, jobs, out."""
     parser.add_argument(
-        "--models", nargs="+", required=True, metavar="MODEL", help="built-in object names and/or mesh files"
+        "--models", nargs="+", default=None, metavar="MODEL", help="built-in object names and/or mesh files"
+    )
+    parser.add_argument(
+        "--recorded",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="instead of --models: a recorded view set (views.json folder or Stanford range scans); the planners "
+        "(and 'oracle') choose among its views (docs/real-data.md)",
+    )
+    parser.add_argument(
+        "--recorded-mesh",
+        type=Path,
+        default=None,
+        metavar="MESH",
+        help="with --recorded: the reference mesh in the set's frame (default: the set's own; without one the union "
+        "of the views is the truth)",
     )
     parser.add_argument(
         "--planners", default=DEFAULT_PLANNERS, help="comma-separated view evaluators (default %(default)s)"
@@ -228,6 +244,14 @@ def compute_ceilings(
 
 def run(args: argparse.Namespace) -> int:
     """The body of ``nbv bench``: 0 when every run succeeded, 1 when any failed (2 on bad input, via CliError)."""
+    if args.recorded is not None:
+        from nbv.bench_recorded import run_recorded_bench
+
+        return run_recorded_bench(args)
+    if not args.models:
+        raise CliError("--models: give at least one model (or --recorded DIR)")
+    if args.recorded_mesh is not None:
+        raise CliError("--recorded-mesh: only with --recorded")
     from rich.console import Console
     from rich.markup import escape
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn

@@ -21,6 +21,11 @@ SCAN_USAGE = "nbv {} --model MODEL [--config FILE] [--SECTION.KEY VALUE ...] [op
 def cmd_scan(args: argparse.Namespace) -> int:
     from nbv.scan_cmd import run_and_report
 
+    if args.recorded is not None:
+        from nbv.bench_recorded import scan_recorded
+
+        scan_recorded(args)
+        return 0
     run_and_report(args, profile=False)
     return 0
 
@@ -55,7 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
         usage=SCAN_USAGE.format("scan"),
         allow_abbrev=False,
     )
-    add_scan_options(p)
+    add_scan_options(p, recorded=True)
     p.add_argument("--planner", default="projection", help="view evaluator (default %(default)s)")
     p.add_argument(
         "--out", type=Path, default=Path("out/scan"), help="output directory (metrics.json, cloud.ply, surface.ply)"

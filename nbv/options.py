@@ -35,9 +35,20 @@ class CliError(Exception):
     """A user-facing error: printed as one line, exit code 2."""
 
 
-def add_scan_options(p: argparse.ArgumentParser, *, model_required: bool = True) -> None:
-    """Options shared by scan, profile and bench (names match the config fields)."""
-    if model_required:
+def add_scan_options(p: argparse.ArgumentParser, *, model_required: bool = True, recorded: bool = False) -> None:
+    """Options shared by scan, profile and bench (names match the config fields). ``recorded``: ``--model`` or
+    ``--recorded DIR`` (a recorded view set, docs/real-data.md), one of them required."""
+    if recorded:
+        group = p.add_mutually_exclusive_group(required=True)
+        group.add_argument("--model", help="a built-in object name or a mesh file (PLY/OBJ/STL/OFF/GLB)")
+        group.add_argument(
+            "--recorded",
+            type=Path,
+            metavar="DIR",
+            help="scan a recorded view set instead (views.json folder or Stanford range scans): the planner chooses "
+            "among its views",
+        )
+    elif model_required:
         p.add_argument("--model", required=True, help="a built-in object name or a mesh file (PLY/OBJ/STL/OFF/GLB)")
     add_config_flags(p, PlannerConfig, aliases=PLANNER_ALIASES, title="planner")
     p.add_argument("--size", type=float, default=0.2, help="largest extent of the object, m (default %(default)s)")

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 import threading
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -159,3 +160,27 @@ def _proposed(
     ]
     center.setflags(write=False)
     return tuple(candidates), center, radius
+
+
+def candidates_from_poses(
+    poses: Sequence[Pose], bbox: BoundingBox, partitions: PartitionConfig
+) -> tuple[tuple[Candidate, ...], NDArray[np.float64], float]:
+    """Given views as candidates (a recorded set's, in the order given), described about ``bbox``'s centre like the
+    hemisphere's: (candidates, centre (3,), radius = the mean distance of the views from the centre). Each
+    candidate's ``parallel`` is 0 (given views lie on no parallel); its sector is that of its azimuth.
+    ValueError for no poses."""
+    if not poses:
+        raise ValueError("candidate poses: none given")
+    center = np.array(bbox.center, dtype=np.float64)
+    out = []
+    distances = []
+    for i, pose in enumerate(poses):
+        if not isinstance(pose, Pose):
+            raise ValueError(f"candidate poses[{i}]: expected a Pose, got {type(pose).__name__}")
+        d = pose.translation - center
+        distance = float(np.linalg.norm(d))
+        distances.append(distance)
+        azimuth = math.atan2(d[1], d[0]) % (2 * math.pi)
+        elevation = math.asin(max(-1.0, min(1.0, d[2] / distance))) if distance > 0 else 0.0
+        out.append(Candidate(i, pose, elevation, azimuth, 0, sector_of(azimuth, partitions)))
+    return tuple(out), center, float(np.mean(distances))

@@ -22,7 +22,7 @@ from typing import cast
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.candidates import held_aim, propose_candidates
+from planner.candidates import candidates_from_poses, held_aim, propose_candidates
 from planner.clustering import single_thread_blas
 from planner.config import PlannerConfig
 from planner.evaluators import Evaluation, EvaluationContext, ViewEvaluator, make_evaluator
@@ -255,12 +255,21 @@ class Planner:
             fresh = not_taken(candidates, self.views, spacing, center=center)
         return fresh
 
+    def _not_given_taken(self, candidates: Sequence[Candidate]) -> NDArray[np.bool_]:
+        """(C,) bool: given candidates no view taken stands at (each view taken rules out its nearest candidate)."""
+        fresh = np.ones(len(candidates), dtype=bool)
+        positions = np.array([c.position for c in candidates])
+        for view in self.views:
+            fresh[int(np.argmin(np.linalg.norm(positions - view.translation, axis=1)))] = False
+        return fresh
+
     def plan(
         self,
         reachable: Callable[[Pose], bool] | None = None,
         move_cost: Callable[[Sequence[Candidate], NDArray[np.bool_]], NDArray[np.float64]] | None = None,
         progress: ProgressFn | None = None,
         move_times: Callable[[Sequence[Candidate], Sequence[int]], NDArray[np.float64]] | None = None,
+        candidate_poses: Sequence[Pose] | None = None,
     ) -> PlanResult:
         """Score every candidate and pick the next best view.
 
@@ -276,10 +285,14 @@ class Planner:
         without it, straight lines at a nominal speed.
         progress: called with a :class:`planner.progress.PlanProgress` at each stage (candidates,
         reachability, the evaluator's stages, move costs, select) and as its items are done.
+        candidate_poses: the views to choose among instead of the hemisphere (a recorded set's,
+        :func:`planner.candidates.candidates_from_poses`): each view taken rules out the given view nearest it
+        (a registered pose is not the recorded one to the bit), and when the longitude partitions leave no view
+        eligible the partitions are dropped (a few given views can leave a sector empty).
         Raises ValueError before the first frame. BLAS runs on one thread meanwhile (as in :meth:`integrate`).
         """
         with single_thread_blas():
-            return self._plan(reachable, move_cost, progress, move_times)
+            return self._plan(reachable, move_cost, progress, move_times, candidate_poses)
 
     def _plan(
         self,
@@ -287,6 +300,7 @@ class Planner:
         move_cost: Callable[[Sequence[Candidate], NDArray[np.bool_]], NDArray[np.float64]] | None,
         progress: ProgressFn | None,
         move_times: Callable[[Sequence[Candidate], Sequence[int]], NDArray[np.float64]] | None,
+        candidate_poses: Sequence[Pose] | None = None,
     ) -> PlanResult:
         if self.iteration == 0 or self.voxel_map.bbox is None or self.intrinsics is None:
             raise ValueError("plan: no frame has been integrated yet; capture one first")
@@ -307,7 +321,10 @@ class Planner:
         t0 = time.perf_counter()
         stages("candidates", 0, 1)
         bbox = self.voxel_map.bbox
-        candidates, center, radius = propose_candidates(self.candidate_box(), cfg.candidates, cfg.partitions)
+        if candidate_poses is None:
+            candidates, center, radius = propose_candidates(self.candidate_box(), cfg.candidates, cfg.partitions)
+        else:
+            candidates, center, radius = candidates_from_poses(candidate_poses, self.candidate_box(), cfg.partitions)
         timings["candidates"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
@@ -322,7 +339,13 @@ class Planner:
                 stages("reachability", i, len(candidates))
                 reach[i] = bool(reachable(c.T_world_camera))
         eligible = in_sector & reach
-        fresh = self._not_revisited(candidates, center, eligible)
+        if candidate_poses is None:
+            fresh = self._not_revisited(candidates, center, eligible)
+        else:
+            fresh = self._not_given_taken(candidates)
+            if not np.any(eligible & fresh):
+                in_sector = np.ones(len(candidates), dtype=bool)
+                eligible = reach.copy()
         eligible &= fresh
         reasons = ineligible_reasons(in_sector, reach, fresh)
         timings["select"] = time.perf_counter() - t0

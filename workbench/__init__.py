@@ -35,7 +35,7 @@ from workbench.session.values import SceneData, SessionEvent
 from workbench.settings import WorkbenchSettings
 from workbench.sources.camera_models import camera_models
 from workbench.sources.catalog import list_models, save_upload
-from workbench.sources.parts import list_recordings
+from workbench.sources.parts import list_recorded, list_recordings
 
 __all__ = [
     "BUSY",
@@ -68,6 +68,7 @@ __all__ = [
     "camera_models",
     "jsonable",
     "list_models",
+    "list_recorded",
     "list_recordings",
     "plan_summary",
     "resume_id",

@@ -13,7 +13,8 @@ def plan_in(cell: ScanCell, planner: Planner, progress: ProgressFn | None = None
     (``cell.set_object_box``: nothing to do for the reach sphere), the move times the selection may trade against
     (``cell.move_costs``, used when ``selection.move_cost_weight`` > 0) and the move times between views the
     ``tour`` planner orders its tour by (``cell.move_times``; none from a cell that does not know where its camera
-    is, ``cell.knows_pose``: a worker's device-less reach-sphere cell). ValueError before the first frame.
+    is, ``cell.knows_pose``: a worker's device-less reach-sphere cell) and the cell's own candidate views, if it
+    has them (``cell.candidate_poses``: a recorded set's). ValueError before the first frame.
     progress: the plan's stages as it goes (``Planner.plan``)."""
     if planner.voxel_map.bbox is not None:
         cell.set_object_box(planner.voxel_map.bbox)  # the arm keeps clear of the object's (padded) box
@@ -22,4 +23,5 @@ def plan_in(cell: ScanCell, planner: Planner, progress: ProgressFn | None = None
         move_cost=cell.move_costs,
         progress=progress,
         move_times=cell.move_times if cell.knows_pose else None,
+        candidate_poses=cell.candidate_poses(),
     )

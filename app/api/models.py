@@ -8,10 +8,11 @@ from fastapi import APIRouter, UploadFile
 
 from app.api.deps import Settings
 from app.schemas import ModelOut
-from workbench import TooLarge, list_models, list_recordings, save_upload
+from workbench import TooLarge, list_models, list_recorded, list_recordings, save_upload
 
 router = APIRouter(prefix="/models", tags=["catalog"])
 recordings_router = APIRouter(prefix="/recordings", tags=["catalog"])
+recorded_router = APIRouter(prefix="/recorded", tags=["catalog"])
 
 
 @router.get("", response_model=list[ModelOut])
@@ -35,4 +36,11 @@ def recordings(settings: Settings) -> list[str]:
     return list_recordings(settings)
 
 
-routers = [router, recordings_router]
+@recorded_router.get("", response_model=list[str])
+def recorded(settings: Settings) -> list[str]:
+    """Recorded view sets in ``data_dir/recorded`` (``views.json`` folders or Stanford range scans), usable as a
+    ``recorded`` source: the planner chooses among their views."""
+    return list_recorded(settings)
+
+
+routers = [router, recordings_router, recorded_router]

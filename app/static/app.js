@@ -156,6 +156,8 @@ function paramConfig() {
 
 // ------------------------------------------------------------------ models, planners, sessions
 
+const RECORDED = "recorded:";
+
 async function loadModels(select) {
   const models = await api("GET", "/api/models");
   const sel = $("model");
@@ -176,7 +178,27 @@ async function loadModels(select) {
     }
     sel.appendChild(og);
   }
+  // Recorded view sets (real scans): the session's candidates are the set's views, no simulator.
+  const sets = await api("GET", "/api/recorded");
+  if (sets.length) {
+    const og = document.createElement("optgroup");
+    og.label = "recorded view sets";
+    for (const name of sets) {
+      const o = document.createElement("option");
+      o.value = RECORDED + name;
+      o.textContent = name;
+      o.title = "real views: the planner chooses among them";
+      og.appendChild(o);
+    }
+    sel.appendChild(og);
+  }
   if (keep) sel.value = keep;
+}
+
+// The create body's model and source for the object select's value (a recorded set: RECORDED + its name).
+function objectChoice(value) {
+  if (value && value.startsWith(RECORDED)) return { model: null, source: { kind: "recorded", recorded: value.slice(RECORDED.length) } };
+  return { model: value || null };
 }
 
 async function loadPlanners() {
@@ -520,7 +542,7 @@ function wire() {
     saveForm();
     const progressId = "c" + Math.random().toString(36).slice(2) + Date.now().toString(36);
     const camera = { sensor: $("sensor").value || null, calibration: $("calibration").value || null };
-    const body = { model: $("model").value || null, planner: $("planner").value, config: paramConfig(),
+    const body = { ...objectChoice($("model").value), planner: $("planner").value, config: paramConfig(),
       seed: Number($("p-seed").value), progress_id: progressId,
       camera: camera.sensor || camera.calibration ? camera : null };
     const follow = await followCreate(progressId);

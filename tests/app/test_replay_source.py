@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 from apphelpers import SMALL
 from fastapi.testclient import TestClient
 
@@ -93,3 +94,36 @@ def test_a_resumed_replay_session_continues_with_the_next_recorded_view(settings
 
         r = b.post(f"/api/sessions/{sid}/step")
         assert r.status_code == 503 and "all 3 recorded frames" in r.json()["detail"]
+
+
+@pytest.mark.slow
+def test_a_recorded_set_is_a_source_whose_views_are_the_only_candidates(
+    client: TestClient, settings: AppSettings
+) -> None:
+    from devices.config import CellConfig
+    from devices.recorded import write_view_folder
+
+    mesh = make_builtin("two-boxes", 0.2)
+    cell = make_sim_cell(mesh, cell_config=CellConfig(kinematics="reach_sphere"))
+    frames = []
+    for a in (0.3, 2.4, -1.9, 1.2):
+        cell.move_to(Pose.look_at([0.5 * np.cos(a), 0.5 * np.sin(a), 0.3], [0.0, 0.0, 0.08]))
+        frames.append(cell.capture())
+    write_view_folder(settings.data_dir / "recorded" / "boxes", frames, reference=mesh)
+    assert client.get("/api/recorded").json() == ["boxes"]
+    body = {"config": SMALL, "source": {"kind": "recorded", "recorded": "boxes"}}
+    sid = client.post("/api/sessions", json=body).json()["id"]
+    st = client.post(f"/api/sessions/{sid}/capture").json()
+    assert (st["model"], st["source"], st["iteration"]) == ("recorded:boxes", "recorded", 1)
+    assert 0.1 < st["coverage"] < 0.9  # scored against the set's reference mesh
+    plan = client.post(f"/api/sessions/{sid}/plan").json()
+    assert plan["n_candidates"] == 4  # the recorded views, not the hemisphere's candidates
+    assert 1 <= plan["n_eligible"] <= 3 and plan["best"]["index"] != 0  # the view taken is not offered again
+    st = client.post(f"/api/sessions/{sid}/approve", json={"plan_id": plan["plan_id"], "index": plan["best"]["index"]})
+    assert st.status_code == 200 and st.json()["iteration"] == 2
+    got = np.array(client.get(f"/api/sessions/{sid}/export").json()["iterations"][1]["pose"]["position"])
+    recorded = np.array([f.T_world_camera.translation for f in frames[1:]])
+    assert np.min(np.linalg.norm(recorded - got, axis=1)) < 0.01  # a recorded view (ICP-refined)
+    bad = {"config": SMALL, "source": {"kind": "recorded", "recorded": "nope"}}
+    assert client.post("/api/sessions", json=bad).status_code == 404
+    assert client.post("/api/sessions", json={"source": {"kind": "recorded"}}).status_code == 422

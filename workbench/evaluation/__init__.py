@@ -42,6 +42,18 @@ from workbench.evaluation.curves import (
 )
 from workbench.evaluation.executors import execute, one_line, run_dask, run_local
 from workbench.evaluation.object_ceiling import Ceiling, cached_ceiling, ceiling_mask, object_ceiling, reference_mask
+from workbench.evaluation.recorded import (
+    ORACLE,
+    PointTruth,
+    RecordedBench,
+    RecordedRun,
+    bench_recorded,
+    fewest_views,
+    greedy_order,
+    recorded_truth,
+    run_recorded,
+    view_cover,
+)
 from workbench.evaluation.runs import MeshPayload, RunOutcome, RunTask
 from workbench.evaluation.scan import (
     PLAN_STAGES,
@@ -58,6 +70,7 @@ from workbench.evaluation.simulate import SimScan, simulate
 __all__ = [
     "ACCURACY_COLUMNS",
     "DEFAULT_CEILING",
+    "ORACLE",
     "PLAN_STAGES",
     "STAGES",
     "TAUS_MM",
@@ -70,6 +83,9 @@ __all__ = [
     "IterationRecord",
     "MeshPayload",
     "Paired",
+    "PointTruth",
+    "RecordedBench",
+    "RecordedRun",
     "RunMetrics",
     "RunOutcome",
     "RunTask",
@@ -77,14 +93,17 @@ __all__ = [
     "SimScan",
     "accuracy",
     "area_under_curve",
+    "bench_recorded",
     "cached_ceiling",
     "ceiling_mask",
     "coverage",
     "coverage_and_accuracy",
     "cumulative_seconds",
     "execute",
+    "fewest_views",
     "final_accuracy",
     "fscore",
+    "greedy_order",
     "icp_rejections",
     "make_record",
     "mean_std",
@@ -92,13 +111,16 @@ __all__ = [
     "one_line",
     "paired_comparison",
     "ratio_curve",
+    "recorded_truth",
     "reference_mask",
     "run_dask",
     "run_local",
     "run_metrics",
+    "run_recorded",
     "run_scan",
     "simulate",
     "time_to_reach",
+    "view_cover",
     "view_coverage",
     "views_to_reach",
 ]

@@ -287,7 +287,10 @@ class SessionRegistry:
             capture_budget=s.capture_budget,
             surface_points=s.surface_score_points,
         )
-        if parts.surface_samples is not None and parts.model_kind != "replay":  # a ground truth in the sim cell
+        if parts.surface_samples is not None and parts.model_kind not in (
+            "replay",
+            "recorded",
+        ):  # a ground truth in the sim cell
 
             def request() -> None:
                 def done(value: float) -> None:

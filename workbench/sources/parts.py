@@ -8,6 +8,9 @@ Sources (the ``source`` of a create request):
   A recording may also be a ROS 2 bag there: ``NAME.mcap``, ``NAME.db3`` or a rosbag2 folder (devices/rosbag.py;
   ``"topics": {"depth", "camera_info", "joint_states", "plate_frame"}`` names where its scan is, docs/bags.md).
 - ``{"kind": "replay", "session": ID, "mode": ...}``: the frames of a journaled session.
+- ``{"kind": "recorded", "recorded": NAME}``: a recorded view set ``data_dir/recorded/NAME`` (a ``views.json``
+  folder or Stanford range scans, docs/real-data.md): its views are the only candidates, its reference mesh (or
+  the union of its views) the ground truth.
 - ``{"kind": "hardware", "dry_run": false, "truth": null}``: the devices of the server's cell file
   (workbench/sources/hardware.py); the default source when the server has one (``nbv serve --cell``).
 
@@ -99,6 +102,39 @@ def bag_frames(path: Path, topics: dict[str, Any] | None) -> tuple[list[DepthFra
     sim = isinstance(source, dict) and source.get("kind") == "sim"
     truth = model.get("name") if sim and isinstance(model, dict) and isinstance(model.get("name"), str) else None
     return list(scan.frames), truth
+
+
+def recorded_dir(settings: WorkbenchSettings) -> Path:
+    return settings.data_dir / "recorded"
+
+
+def list_recorded(settings: WorkbenchSettings) -> list[str]:
+    """Names of the recorded view sets directly inside ``data_dir/recorded`` (no symlinks, no dot names)."""
+    root = recorded_dir(settings)
+    if not root.is_dir():
+        return []
+    return sorted(p.name for p in root.iterdir() if RECORDING_NAME.match(p.name) and p.is_dir() and not p.is_symlink())
+
+
+def recorded_parts(settings: WorkbenchSettings, source: dict[str, Any], seed: int) -> tuple[Any, Any, Any]:
+    """(the recorded set, its truth mesh (empty without a reference), surface samples) of a recorded source.
+    404 for an unknown name, 422 for a set that cannot be read."""
+    from devices.mesh import sample_surface
+    from devices.recorded import read_recorded
+
+    name = str(source.get("recorded") or "")
+    if name not in list_recorded(settings):  # a lookup among what exists, never a path join
+        known = ", ".join(list_recorded(settings)) or "none"
+        raise NotFound(f"recorded set {name!r}: unknown (known: {known})")
+    try:
+        recorded = read_recorded(recorded_dir(settings) / name)
+    except ValueError as exc:
+        raise Invalid(f"recorded set {name!r}: {str(exc).replace(str(settings.data_dir), '<data>')}") from None
+    if recorded.reference is not None:
+        return recorded, recorded.reference, sample_surface(recorded.reference, SURFACE_SAMPLES, seed=seed)
+    union = recorded.union_world()
+    pick = np.random.default_rng(seed).choice(len(union), size=min(SURFACE_SAMPLES, len(union)), replace=False)
+    return recorded, trimesh.Trimesh(), union[pick]
 
 
 def ground_truth(
@@ -200,6 +236,13 @@ def build_parts(
         except ValueError as exc:
             raise Invalid(f"{name}: {exc}") from None
         model_kind = "replay"
+    elif kind == "recorded":
+        from devices.recorded import RecordedCell
+
+        recorded, mesh, samples = recorded_parts(settings, source, seed)
+        stage("building the cell")
+        cell = RecordedCell(recorded, devices.cell)
+        name, model_kind = f"recorded:{source['recorded']}", "recorded"
     elif kind == "hardware":
         from workbench.sources.hardware import hardware_cell, hardware_source
 
@@ -230,7 +273,7 @@ def build_parts(
         if not source["dry_run"]:
             return SessionParts(name, model_kind, mesh, cell, samples, source, None, cell.noise_model)
     else:
-        raise Invalid(f"source.kind: 'sim', 'replay' or 'hardware', got {kind!r}")
+        raise Invalid(f"source.kind: 'sim', 'replay', 'hardware' or 'recorded', got {kind!r}")
     injector = FaultInjector(faults)
     with_faults(cell, injector)
     return SessionParts(name, model_kind, mesh, cell, samples, source, injector)
