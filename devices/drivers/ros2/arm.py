@@ -182,7 +182,7 @@ class Ros2Arm:
         age = self.states.age()
         if self.last_joint_positions is None or age is None or age > self.config.state_timeout_s:
             raise DeviceError(
-                f"arm: no joint state on {self.config.state_topic} for "
+                f"arm: joint states silent: none on {self.config.state_topic} for "
                 f"{'ever' if age is None else f'{age:.1f} s'} (limit {self.config.state_timeout_s:g} s)"
             )
         return self.last_joint_positions.copy()

@@ -117,7 +117,11 @@ class Subscription:
         )
 
     def _on_data(self, reader: Any) -> None:
-        for sample in reader.take(N=64):
+        try:
+            samples = reader.take(N=64)
+        except Exception:  # noqa: BLE001 - the reader is being deleted (the device closed): nothing to take
+            return
+        for sample in samples:
             if not isinstance(sample, self.message):  # an invalid sample (a writer's dispose)
                 continue
             if self._on_sample is not None:

@@ -118,7 +118,7 @@ class Ros2Turntable:
     def _joint_now(self) -> float:
         age = self.states.age()
         if self._position is None or age is None or age > self.config.state_timeout_s:
-            raise DeviceError(f"turntable: no joint state on {self.config.state_topic} for {age or 0:.1f} s")
+            raise DeviceError(f"turntable: joint states silent: none on {self.config.state_topic} for {age or 0:.1f} s")
         return self._position
 
     @property
