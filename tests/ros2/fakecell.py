@@ -59,7 +59,7 @@ max_joint_speed_deg = 85
 [devices.turntable]
 driver = "ros2"
 {net}
-speed_deg = 90
+speed_deg = 180
 {turntable}
 
 [devices.hand_eye]
@@ -107,6 +107,7 @@ def fake_ros2_cell(
         "min_depth": camera.min_depth,
         "max_depth": camera.max_depth,
         "rate_hz": rate_hz,
+        "turntable_speed_deg": 180.0,
     }
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
     process = subprocess.Popen(
