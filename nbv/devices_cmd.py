@@ -15,7 +15,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="devices_command", required=True)
     check = sub.add_parser("check", help="connect to each device of the cell file and read its state")
     check.add_argument(
-        "--config", "--cell", dest="config", type=Path, required=True, help="the cell file (TOML with a [devices] table)"
+        "--config",
+        "--cell",
+        dest="config",
+        type=Path,
+        required=True,
+        help="the cell file (TOML with a [devices] table)",
     )
 
 

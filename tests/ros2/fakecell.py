@@ -38,6 +38,7 @@ def fresh_domain() -> int:
 def cell_toml(domain: int, *, arm: str = "", camera: str = "", turntable: str = "", allow_auto: bool = False) -> str:
     """A ros2 cell file on ``domain`` over loopback; ``arm`` / ``camera`` / ``turntable``: extra lines of a section."""
     net = f'domain_id = {domain}\ninterface = "lo"\npeers = ["127.0.0.1"]'
+    timeout = "" if "timeout_s" in camera else "timeout_s = 3.0"
     return f"""
 [devices]
 allow_auto = {"true" if allow_auto else "false"}
@@ -47,7 +48,7 @@ driver = "ros2"
 {net}
 min_depth = 0.05
 max_depth = 3.0
-timeout_s = 3.0
+{timeout}
 {camera}
 
 [devices.arm]

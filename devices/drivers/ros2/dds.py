@@ -119,7 +119,7 @@ class Subscription:
     def _on_data(self, reader: Any) -> None:
         try:
             samples = reader.take(N=64)
-        except Exception:  # noqa: BLE001 - the reader is being deleted (the device closed): nothing to take
+        except Exception:  # the reader is being deleted (the device closed): nothing to take
             return
         for sample in samples:
             if not isinstance(sample, self.message):  # an invalid sample (a writer's dispose)
