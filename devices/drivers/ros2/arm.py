@@ -148,7 +148,9 @@ class Ros2Arm:
         self._history: list[tuple[float, float, NDArray[np.float64]]] = []  # (arrival, stamp, q) while moving
         self._recording = False
         self._lock = threading.Lock()
+        self._held = False
         self.node = acquire(config.dds)
+        self._held = True
         try:
             self.states = Subscription(self.node, config.state_topic, JointState, self._on_state)
             self.writer = self.node.writer(config.command_topic, Message)
@@ -284,10 +286,10 @@ class Ros2Arm:
         )
 
     def close(self) -> None:
-        node, self.node = getattr(self, "node", None), None
-        if node is not None:
-            self.states = self.writer = None  # type: ignore[assignment]
-            release(node)
+        """Release this device's share of the DDS participant (idempotent)."""
+        if self._held:
+            self._held = False
+            release(self.node)
 
 
 def _dense(trajectory: JointTrajectory, dt: float = 0.02) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

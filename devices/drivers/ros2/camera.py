@@ -116,7 +116,9 @@ class Ros2Camera:
         from devices.drivers.ros2.messages import CameraInfo, Image
 
         self.config = config
+        self._held = False
         self.node = acquire(config.dds)
+        self._held = True
         try:
             self.info = Subscription(self.node, config.info_topic, CameraInfo)
             self.depth = Subscription(self.node, config.depth_topic, Image)
@@ -166,7 +168,7 @@ class Ros2Camera:
         return f"ROS 2 camera {self.config.depth_topic} ({k.width}x{k.height}, fx {k.fx:.1f})"
 
     def close(self) -> None:
-        node, self.node = getattr(self, "node", None), None
-        if node is not None:
-            self.info = self.depth = None  # type: ignore[assignment]
-            release(node)
+        """Release this device's share of the DDS participant (idempotent)."""
+        if self._held:
+            self._held = False
+            release(self.node)

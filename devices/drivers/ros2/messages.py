@@ -16,12 +16,25 @@ protocol when sending: a numpy array, a memoryview).
 # no "from __future__ import annotations": cyclonedds reads the member annotations as types
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from cyclonedds.idl import IdlStruct
 from cyclonedds.idl._machinery import KeyEnabled, Machine, StructMachine
 from cyclonedds.idl._support import DeserializeKind, KeyScanner, SerializeKind
 from cyclonedds.idl.types import array, float64, int32, sequence, uint8, uint32
+
+if TYPE_CHECKING:  # what the members hold, for the type checker; cyclonedds reads the IDL types below
+    Floats = list[float]
+    Strings = list[str]
+    Bytes = Any  # bytes when received; anything with the buffer protocol (a numpy array) when sent
+    Floats9 = list[float]
+    Floats12 = list[float]
+else:
+    Floats = sequence[float64]
+    Strings = sequence[str]
+    Bytes = sequence[uint8]
+    Floats9 = array[float64, 9]
+    Floats12 = array[float64, 12]
 
 ROS_TYPE_NAMES: dict[str, str] = {}
 """Our class name -> its ROS 2 type name (``Image`` -> ``sensor_msgs/msg/Image``), for rosbags and the check."""
@@ -117,7 +130,7 @@ class Image(IdlStruct, typename=_ros("sensor_msgs", "Image")):
     encoding: str = ""
     is_bigendian: uint8 = 0
     step: uint32 = 0
-    data: sequence[uint8] = b""  # type: ignore[assignment]
+    data: Bytes = b""
 
 
 @dataclass
@@ -139,10 +152,10 @@ class CameraInfo(IdlStruct, typename=_ros("sensor_msgs", "CameraInfo")):
     height: uint32 = 0
     width: uint32 = 0
     distortion_model: str = ""
-    d: sequence[float64] = field(default_factory=list)
-    k: array[float64, 9] = field(default_factory=lambda: [0.0] * 9)
-    r: array[float64, 9] = field(default_factory=lambda: [0.0] * 9)
-    p: array[float64, 12] = field(default_factory=lambda: [0.0] * 12)
+    d: Floats = field(default_factory=list)
+    k: Floats9 = field(default_factory=lambda: [0.0] * 9)
+    r: Floats9 = field(default_factory=lambda: [0.0] * 9)
+    p: Floats12 = field(default_factory=lambda: [0.0] * 12)
     binning_x: uint32 = 0
     binning_y: uint32 = 0
     roi: RegionOfInterest = field(default_factory=RegionOfInterest)
@@ -153,10 +166,10 @@ class JointState(IdlStruct, typename=_ros("sensor_msgs", "JointState")):
     """``sensor_msgs/msg/JointState``: positions in radians (metres for prismatic joints)."""
 
     header: Header = field(default_factory=Header)
-    name: sequence[str] = field(default_factory=list)
-    position: sequence[float64] = field(default_factory=list)
-    velocity: sequence[float64] = field(default_factory=list)
-    effort: sequence[float64] = field(default_factory=list)
+    name: Strings = field(default_factory=list)
+    position: Floats = field(default_factory=list)
+    velocity: Floats = field(default_factory=list)
+    effort: Floats = field(default_factory=list)
 
 
 @dataclass
@@ -169,6 +182,12 @@ class PointField(IdlStruct, typename=_ros("sensor_msgs", "PointField")):
     count: uint32 = 0
 
 
+if TYPE_CHECKING:
+    PointFields = list[PointField]
+else:
+    PointFields = sequence[PointField]
+
+
 @dataclass
 class PointCloud2(IdlStruct, typename=_ros("sensor_msgs", "PointCloud2")):
     """``sensor_msgs/msg/PointCloud2``; ``data`` is bytes (see the module docstring)."""
@@ -176,11 +195,11 @@ class PointCloud2(IdlStruct, typename=_ros("sensor_msgs", "PointCloud2")):
     header: Header = field(default_factory=Header)
     height: uint32 = 0
     width: uint32 = 0
-    fields: sequence[PointField] = field(default_factory=list)
+    fields: PointFields = field(default_factory=list)
     is_bigendian: bool = False
     point_step: uint32 = 0
     row_step: uint32 = 0
-    data: sequence[uint8] = b""  # type: ignore[assignment]
+    data: Bytes = b""
     is_dense: bool = False
 
 
@@ -188,11 +207,17 @@ class PointCloud2(IdlStruct, typename=_ros("sensor_msgs", "PointCloud2")):
 class JointTrajectoryPoint(IdlStruct, typename=_ros("trajectory_msgs", "JointTrajectoryPoint")):
     """``trajectory_msgs/msg/JointTrajectoryPoint``."""
 
-    positions: sequence[float64] = field(default_factory=list)
-    velocities: sequence[float64] = field(default_factory=list)
-    accelerations: sequence[float64] = field(default_factory=list)
-    effort: sequence[float64] = field(default_factory=list)
+    positions: Floats = field(default_factory=list)
+    velocities: Floats = field(default_factory=list)
+    accelerations: Floats = field(default_factory=list)
+    effort: Floats = field(default_factory=list)
     time_from_start: Duration = field(default_factory=Duration)
+
+
+if TYPE_CHECKING:
+    TrajectoryPoints = list[JointTrajectoryPoint]
+else:
+    TrajectoryPoints = sequence[JointTrajectoryPoint]
 
 
 @dataclass
@@ -200,8 +225,8 @@ class JointTrajectory(IdlStruct, typename=_ros("trajectory_msgs", "JointTrajecto
     """``trajectory_msgs/msg/JointTrajectory``: what a ros2_control joint trajectory controller executes."""
 
     header: Header = field(default_factory=Header)
-    joint_names: sequence[str] = field(default_factory=list)
-    points: sequence[JointTrajectoryPoint] = field(default_factory=list)
+    joint_names: Strings = field(default_factory=list)
+    points: TrajectoryPoints = field(default_factory=list)
 
 
 _pack_byte_sequences(Image, ("data",))

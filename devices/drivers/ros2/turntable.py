@@ -82,7 +82,9 @@ class Ros2Turntable:
         self._stop = threading.Event()
         self._position: float | None = None
         self._stamp = 0.0
+        self._held = False
         self.node = acquire(config.dds)
+        self._held = True
         try:
             self.states = Subscription(self.node, config.state_topic, JointState, self._on_state)
             self.writer = self.node.writer(
@@ -189,7 +191,7 @@ class Ros2Turntable:
         return f"ROS 2 turntable {self.config.joint_name}: plate at {math.degrees(self.angle):.2f} deg"
 
     def close(self) -> None:
-        node, self.node = getattr(self, "node", None), None
-        if node is not None:
-            self.states = self.writer = None  # type: ignore[assignment]
-            release(node)
+        """Release this device's share of the DDS participant (idempotent)."""
+        if self._held:
+            self._held = False
+            release(self.node)
