@@ -83,11 +83,11 @@ def main() -> None:
         wire = msg.serialize()
         print(f"\n{width}x{height} {encoding}: {len(wire) / 1e6:.2f} MB on the wire")
         print(f"  byte block  serialise   {fmt(series(msg.serialize, args.repeat * 4))}")
-        print(f"  byte block  deserialise {fmt(series(lambda: Image.deserialize(wire), args.repeat * 4))}")
+        print(f"  byte block  deserialise {fmt(series(lambda wire=wire: Image.deserialize(wire), args.repeat * 4))}")
         generic = GenericImage(msg.header, height, width, encoding, 0, msg.step, list(data))
         assert generic.serialize() == wire  # the same bytes
         print(f"  generic     serialise   {fmt(series(generic.serialize, args.repeat))}")
-        print(f"  generic     deserialise {fmt(series(lambda: GenericImage.deserialize(wire), args.repeat))}")
+        print(f"  generic     deserialise {fmt(series(lambda wire=wire: GenericImage.deserialize(wire), args.repeat))}")
 
     node = acquire(DdsConfig(domain_id=1 + os.getpid() % 200, interface="lo", peers=("127.0.0.1",)))
     try:
