@@ -38,7 +38,7 @@ class GenericImage(IdlStruct, typename="bench::GenericImage_"):
     encoding: str = ""
     is_bigendian: uint8 = 0
     step: uint32 = 0
-    data: sequence[uint8] = field(default_factory=list)
+    data: sequence[uint8] = field(default_factory=list)  # pyright: ignore[reportAssignmentType]
 
 
 def series(f, n: int) -> list[float]:
@@ -84,7 +84,7 @@ def main() -> None:
         print(f"\n{width}x{height} {encoding}: {len(wire) / 1e6:.2f} MB on the wire")
         print(f"  byte block  serialise   {fmt(series(msg.serialize, args.repeat * 4))}")
         print(f"  byte block  deserialise {fmt(series(lambda wire=wire: Image.deserialize(wire), args.repeat * 4))}")
-        generic = GenericImage(msg.header, height, width, encoding, 0, msg.step, list(data))
+        generic = GenericImage(msg.header, height, width, encoding, 0, msg.step, list(data))  # pyright: ignore[reportArgumentType]
         assert generic.serialize() == wire  # the same bytes
         print(f"  generic     serialise   {fmt(series(generic.serialize, args.repeat))}")
         print(f"  generic     deserialise {fmt(series(lambda wire=wire: GenericImage.deserialize(wire), args.repeat))}")
