@@ -130,8 +130,12 @@ def test_each_device_fault_ends_in_error_and_the_session_goes_on(tmp_path: Path,
         sid = r.json()["id"]
         assert c.post(f"/api/sessions/{sid}/capture").status_code == 200
         for fault, words in FAULTS:
-            fresh.command(fault)
-            r = approve_best(c, sid)
+            plan = c.post(f"/api/sessions/{sid}/plan").json()
+            assert plan["best"] is not None, plan
+            fresh.command(fault)  # while the arm moves to the planned view
+            r = c.post(
+                f"/api/sessions/{sid}/approve", json={"plan_id": plan["plan_id"], "index": plan["best"]["index"]}
+            )
             assert r.status_code == 503, (fault, r.text)
             status = c.get(f"/api/sessions/{sid}").json()
             assert status["state"] == "error", status
@@ -140,6 +144,16 @@ def test_each_device_fault_ends_in_error_and_the_session_goes_on(tmp_path: Path,
             journal = read_journal(sessions_dir(s.data_dir) / sid)
             assert words in journal.of_kind("error")[-1]["message"]
             fresh.command("reset")
+        # silent joint states when planning: the plan cannot start from the arm's joints; error, nothing changed
+        fresh.command("silent_joints")
+        r = c.post(f"/api/sessions/{sid}/plan")
+        assert r.status_code == 503 and "joint states silent" in r.json()["detail"], r.text
+        status = c.get(f"/api/sessions/{sid}").json()
+        assert status["state"] == "error" and "joint states silent" in status["error"], status
+        fresh.command("reset")
+        arm = c.app.state.registry.get(sid).cell.rig.arm  # type: ignore[attr-defined]
+        heard = arm.states.count
+        assert arm.states.wait(lambda m: arm.states.count > heard, 3.0) is not None  # the joints speak again
         # the devices are well again: a new plan from where the arm is now, and the scan goes on
         r = approve_best(c, sid)
         assert r.status_code == 200, r.text
