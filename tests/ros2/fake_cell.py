@@ -8,7 +8,8 @@ domain, interface, peers) and publishes over DDS, like ``realsense2_camera`` and
   (CAMERA_JSON: a :class:`devices.config.CameraConfig`'s fields, plus ``model``, ``size``) at the pose forward
   kinematics of the current joints (the cell file's arm model and hand-eye) and the plate angle give;
 - executes a ``trajectory_msgs/JointTrajectory`` in real time as a joint trajectory controller does (an empty one:
-  hold where it is), and a ``std_msgs/Float64`` turntable position at ``turntable_speed_deg`` deg/s.
+  hold where it is), and turns the plate at ``turntable_speed_deg`` deg/s to a ``std_msgs/Float64`` position (the
+  cell file's command topic) or to the last point of a one-joint ``JointTrajectory`` on ``TABLE_JTC``.
 
 It prints ``ready`` once publishing. Faults are lines on stdin, each answered by ``ok``: ``silent_camera``,
 ``ignore_trajectory``, ``jump`` (joints jump 20 degrees in the middle of the next move), ``encoding rgb8``,
@@ -25,6 +26,9 @@ import time
 from typing import Any
 
 import numpy as np
+
+TABLE_JTC = "/turntable_controller/joint_trajectory"
+"""The turntable also follows a one-joint JointTrajectory here (a ros2_control joint trajectory controller)."""
 
 
 def main(argv: list[str]) -> int:
@@ -102,8 +106,18 @@ def main(argv: list[str]) -> int:
         with lock:
             state["table_target"] = float(message.data)
 
+    def on_table_trajectory(message: Any) -> None:
+        with lock:
+            if list(message.joint_names) != [table_cfg.joint_name]:
+                return
+            if message.points:
+                state["table_target"] = float(message.points[-1].positions[0])
+            else:  # an empty trajectory: hold here
+                state["table_target"] = state["theta_joint"]
+
     _traj = Subscription(node, arm_cfg.command_topic, JointTrajectory, on_trajectory, qos=command_qos())
     _table = Subscription(node, table_cfg.command_topic, Float64, on_table, qos=command_qos())
+    _table_jtc = Subscription(node, TABLE_JTC, JointTrajectory, on_table_trajectory, qos=command_qos())
     joints_writer = node.sensor_writer(arm_cfg.state_topic, JointState)
     image_writer = node.sensor_writer(cam_cfg.depth_topic, Image)
     info_writer = node.sensor_writer(cam_cfg.info_topic, CameraInfo)

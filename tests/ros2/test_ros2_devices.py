@@ -4,6 +4,7 @@ and the arm's refusals and stop."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 import time
@@ -16,11 +17,13 @@ import pytest
 from devices.cellfile import load_cell_file
 from devices.config import CameraConfig, CellConfig
 from devices.drivers.common import ArmFaultError
+from devices.drivers.ros2.turntable import Ros2Turntable
 from devices.hwcell import dry_run_cell
 from devices.protocols import DeviceError
 from devices.rig import open_device, open_rig
 from devices.trajectory import JointTrajectory
 from nbv.cli import main
+from tests.ros2.fake_cell import TABLE_JTC
 from tests.ros2.fakecell import FakeRos2Cell, cell_toml, fake_ros2_cell
 
 VGA = CameraConfig(width=640, height=480, fx=610.0, fy=610.0, cx=319.5, cy=239.5, min_depth=0.05, max_depth=3.0)
@@ -141,3 +144,23 @@ def test_the_arm_refuses_a_far_start_and_stops_on_request(cell: FakeRos2Cell) ->
         assert np.allclose(arm.joint_positions(), q0, atol=math.radians(0.5))
     finally:
         arm.close()
+
+
+@pytest.mark.parametrize("command", ["float64", "trajectory"])
+def test_the_turntable_turns_by_either_command(cell: FakeRos2Cell, command: str) -> None:
+    spec = load_cell_file(cell.path).turntable
+    assert spec is not None
+    topic = spec.config.command_topic if command == "float64" else TABLE_JTC
+    table = Ros2Turntable(dataclasses.replace(spec.config, command=command, command_topic=topic))
+    try:
+        start = table.angle
+        began = time.monotonic()
+        table.rotate_to(start + math.radians(45.0))
+        took = time.monotonic() - began
+        assert table.angle == pytest.approx(start + math.radians(45.0), abs=math.radians(0.2))
+        assert took >= 45.0 / 180.0  # the fake turns at 180 deg/s
+        assert table.node.settled_stamp > 0
+        table.rotate_to(start)
+        assert table.angle == pytest.approx(start, abs=math.radians(0.2))
+    finally:
+        table.close()
