@@ -2,8 +2,8 @@
 
 ``[devices.camera] driver = "realsense"`` picks ``REGISTRY[("camera", "realsense")]``: the remaining keys of
 the section build its config class (one frozen dataclass per driver, fields documented there), and
-``open(config)`` connects the device. Built in: cameras ``realsense``, ``sim``, ``replay``; arm ``ur``;
-turntables ``grbl``, ``modbus``, ``sim``. Nothing here imports a vendor package.
+``open(config)`` connects the device. Built in: cameras ``realsense``, ``sim``, ``replay``, ``ros2``; arms ``ur``,
+``ros2``; turntables ``grbl``, ``modbus``, ``sim``, ``ros2``. Nothing here imports a vendor package.
 
 :func:`override` swaps how a registered driver opens, for a ``with`` block: the tests run
 ``nbv devices check`` in-process on a production cell file (``driver = "ur"``) with the UR driver talking
@@ -23,6 +23,7 @@ from devices.config import CameraConfig
 from devices.drivers.grbl import GrblConfig
 from devices.drivers.modbus import ModbusTurntableConfig
 from devices.drivers.realsense import RealSenseConfig
+from devices.drivers.ros2 import Ros2ArmConfig, Ros2CameraConfig, Ros2TurntableConfig
 from devices.drivers.ur import URConfig
 from planner.validate import finite, integer, require
 
@@ -128,6 +129,24 @@ def _open_sim_turntable(config: SimTurntableConfig) -> Any:
     return SimulatedTurntable(math.radians(config.angle_deg))
 
 
+def _open_ros2_camera(config: Ros2CameraConfig) -> Any:
+    from devices.drivers.ros2.camera import Ros2Camera
+
+    return Ros2Camera(config)
+
+
+def _open_ros2_arm(config: Ros2ArmConfig) -> Any:
+    from devices.drivers.ros2.arm import Ros2Arm
+
+    return Ros2Arm(config)
+
+
+def _open_ros2_turntable(config: Ros2TurntableConfig) -> Any:
+    from devices.drivers.ros2.turntable import Ros2Turntable
+
+    return Ros2Turntable(config)
+
+
 @dataclass(frozen=True)
 class Driver:
     """One driver of the cell file: its config class, which of its fields are file paths, how to open it."""
@@ -145,6 +164,9 @@ REGISTRY: dict[tuple[Kind, str], Driver] = {
     ("turntable", "grbl"): Driver(GrblConfig, _open_grbl),
     ("turntable", "modbus"): Driver(ModbusTurntableConfig, _open_modbus),
     ("turntable", "sim"): Driver(SimTurntableConfig, _open_sim_turntable),
+    ("camera", "ros2"): Driver(Ros2CameraConfig, _open_ros2_camera),
+    ("arm", "ros2"): Driver(Ros2ArmConfig, _open_ros2_arm),
+    ("turntable", "ros2"): Driver(Ros2TurntableConfig, _open_ros2_turntable),
 }
 
 

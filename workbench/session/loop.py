@@ -19,7 +19,7 @@ from collections.abc import Callable
 from typing import Any
 
 from devices.cell import Motion
-from devices.protocols import UnreachableError
+from devices.protocols import DeviceError, UnreachableError
 from planner import Pose
 from workbench.errors import Conflict, Invalid, NotFound, Unreachable
 from workbench.evaluation.coverage import coverage
@@ -101,7 +101,8 @@ class ScanLoop(SessionCore):
         """Plan (the caller claimed a busy state) and publish the plan as pending.
 
         With a worker the plan runs there under ``plan_budget``; killed (budget, DELETE, Stop), the session goes
-        to state error with the reason (DeviceFault), its map and pending plan unchanged; plan again to go on.
+        to state error with the reason (DeviceFault), its map and pending plan unchanged; plan again to go on. The
+        same when a device cannot say where it is (the arm's joints, the plate's angle: a DeviceError).
         stopping: auto mode was asked to stop (a plan killed by that Stop just ends auto mode).
         """
         planner = self.planner
@@ -128,6 +129,8 @@ class ScanLoop(SessionCore):
                     f"session {self.id}: the plan was stopped; the map and the pending plan are unchanged"
                 ) from None
             self.fail_plan(str(exc))
+        except DeviceError as exc:  # the arm's joints or the plate's angle could not be read (a silent device)
+            self.fail_plan(f"device fault: {exc}")
         finally:
             self.progress.end()
         return self.publish_plan(result, planner, secrets.token_hex(8))

@@ -1,0 +1,134 @@
+"""The ROS 2 fake cell (``tests/ros2/fake_cell.py``) as a context manager: a cell file on loopback and the process.
+
+:func:`fake_ros2_cell` writes ``folder/cell.toml`` (``driver = "ros2"`` for the camera, the arm and the turntable,
+the arm mounted like the simulator's UR5 beside the plate), on a DDS domain of its own, the loopback interface and
+unicast discovery to 127.0.0.1 (no multicast: the tests never touch a network, and parallel test processes do not
+hear each other), starts the fake cell process on it and yields a :class:`FakeRos2Cell`; the process ends on exit.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from devices.config import CameraConfig
+
+ROOT = Path(__file__).resolve().parents[2]
+
+CAMERA = CameraConfig(width=160, height=120, fx=140.0, fy=140.0, cx=79.5, cy=59.5, min_depth=0.05, max_depth=3.0)
+"""A small camera (quick to render and send) that still sees the object well from every candidate."""
+
+_next_domain = [0]
+
+
+def fresh_domain() -> int:
+    """A DDS domain for one fake cell: from the process id (the parallel test workers differ) and a counter."""
+    _next_domain[0] += 1
+    return 1 + (os.getpid() * 7 + _next_domain[0]) % 200
+
+
+def cell_toml(domain: int, *, arm: str = "", camera: str = "", turntable: str = "", allow_auto: bool = False) -> str:
+    """A ros2 cell file on ``domain`` over loopback; ``arm`` / ``camera`` / ``turntable``: extra lines of a section."""
+    net = f'domain_id = {domain}\ninterface = "lo"\npeers = ["127.0.0.1"]'
+    timeout = "" if "timeout_s" in camera else "timeout_s = 3.0"
+    return f"""
+[devices]
+allow_auto = {"true" if allow_auto else "false"}
+
+[devices.camera]
+driver = "ros2"
+{net}
+min_depth = 0.05
+max_depth = 3.0
+{timeout}
+{camera}
+
+[devices.arm]
+driver = "ros2"
+{net}
+max_joint_speed_deg = 85
+{arm}
+
+[devices.turntable]
+driver = "ros2"
+{net}
+speed_deg = 180
+{turntable}
+
+[devices.hand_eye]
+translation = [0.0, 0.0, 0.05]
+
+[devices.arm_base]
+translation = [-0.85, 0.0, 0.0]
+"""
+
+
+@dataclass
+class FakeRos2Cell:
+    """The cell file, its domain and the fake cell process (:meth:`command` injects a fault)."""
+
+    path: Path
+    domain: int
+    process: subprocess.Popen[str]
+    lock: threading.Lock
+
+    def command(self, line: str) -> None:
+        """Send a fault line (``silent_camera``, ``ignore_trajectory``, ``jump``, ``encoding rgb8``, ``reset``)."""
+        with self.lock:
+            assert self.process.stdin is not None and self.process.stdout is not None
+            self.process.stdin.write(line + "\n")
+            self.process.stdin.flush()
+            answer = self.process.stdout.readline().strip()
+        assert answer == "ok", f"the fake cell answered {answer!r} to {line!r}"
+
+
+@contextmanager
+def fake_ros2_cell(
+    folder: Path, camera: CameraConfig = CAMERA, rate_hz: float = 15.0, **sections: Any
+) -> Iterator[FakeRos2Cell]:
+    """See the module docstring; ``sections``: :func:`cell_toml`'s keywords."""
+    domain = fresh_domain()
+    path = folder / "cell.toml"
+    path.write_text(cell_toml(domain, **sections))
+    spec = {
+        "width": camera.width,
+        "height": camera.height,
+        "fx": camera.fx,
+        "fy": camera.fy,
+        "cx": camera.cx,
+        "cy": camera.cy,
+        "min_depth": camera.min_depth,
+        "max_depth": camera.max_depth,
+        "rate_hz": rate_hz,
+        "turntable_speed_deg": 180.0,
+    }
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
+    process = subprocess.Popen(
+        [sys.executable, "-m", "tests.ros2.fake_cell", str(path), json.dumps(spec)],
+        cwd=ROOT,
+        env=env,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert process.stdout is not None
+        line = process.stdout.readline().strip()
+        assert line == "ready", f"the fake ROS 2 cell did not start (said {line!r}, exit {process.poll()})"
+        yield FakeRos2Cell(path, domain, process, threading.Lock())
+    finally:
+        if process.stdin is not None:
+            process.stdin.close()
+        try:
+            process.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
