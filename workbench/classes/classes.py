@@ -47,6 +47,8 @@ class Classes:
             log.warning("class file not read: %s", problem)
         for room in rooms:
             self._rooms[room.id] = room
+            for seat in room.seats:  # after a restart: asleep, woken by the next request for it (no resume)
+                registry.doze(seat.session)
         self._update_limit()
 
     # ------------------------------------------------------------------ create

@@ -556,6 +556,17 @@ class SessionRegistry:
         log.info("session %s put to sleep", session_id)
         return True
 
+    def doze(self, session_id: str) -> bool:
+        """Count a session of an earlier server process as asleep, not interrupted: the next request for it wakes it
+        (a class's seats after a restart: a student's tab goes on without a resume). False when it is not such a
+        session, or its journal is damaged (that one waits for an explicit resume)."""
+        with self._lock:
+            dormant = self._dormant.get(session_id)
+            if dormant is None or dormant.damage is not None:
+                return False
+            dormant.asleep = True
+            return True
+
     def sleep_idle(self) -> None:
         """Put every session idle for longer than ``idle_sleep`` seconds to sleep (the sweeper's job)."""
         limit = time.monotonic() - self.settings.idle_sleep
