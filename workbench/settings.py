@@ -74,7 +74,7 @@ class WorkbenchSettings:
     ``max_live_sessions`` (16) within about 6 GB of a 24 GB machine (16 x (0.15 GB + 4 M x 60 B)), its workers
     beside them; the paper's default grid (1 m at 1 cm) is 1 M voxels. 0: no limit (the operator's own risk)."""
     max_class_seats: int = 40
-    """Seats a class (``POST /api/classes``, docs/class.md) may have at most (422 beyond it). A class raises the live
+    """Seats a class (class mode, docs/class.md) may have at most (422 beyond it). A class raises the live
     limit to hold its seats: ``max_live_sessions`` counts as at least the seats of all classes, up to this many."""
     idle_sleep: float = 1800.0
     """A live session nobody asked anything for this many seconds is put to sleep (its memory freed, its
