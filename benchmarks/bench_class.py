@@ -10,7 +10,8 @@ seat counts. Bounded: loopback only, ``--timeout`` s per request, and the whole 
     .venv/bin/python benchmarks/bench_class.py [--seats 30] [--steps 3] [--max-live 16] [--idle-sleep 0]
 
 ``--max-class-seats`` below ``--seats`` is refused by the server (422); ``--max-live`` below the seats does not
-keep seats from being live (a class raises the limit), ``--idle-sleep S`` puts seats idle for S s to sleep.
+keep seats from being live (a class raises the limit), ``--idle-sleep S`` puts seats idle for S s to sleep, and
+``--think T`` makes each seat wait T s between its steps (a student reading): with T > S seats sleep and wake.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import httpx
 import psutil
@@ -68,6 +70,7 @@ def main() -> None:
     parser.add_argument("--max-live", type=int, default=16, help="server.max_live_sessions")
     parser.add_argument("--max-class-seats", type=int, default=40)
     parser.add_argument("--idle-sleep", type=float, default=0.0, help="server.idle_sleep (0: never)")
+    parser.add_argument("--think", type=float, default=0.0, help="seconds a seat waits between its steps")
     parser.add_argument("--timeout", type=float, default=300.0, help="seconds a request may take")
     parser.add_argument("--minutes", type=float, default=15.0, help="the whole run stops after this long")
     args = parser.parse_args()
@@ -88,6 +91,8 @@ def main() -> None:
     steps: list[float] = []
     failures: list[str] = []
     lock = threading.Lock()
+    room: dict[str, Any] = {}
+    asleep: list[int] = []  # seats asleep at each look at the board
     url = f"http://127.0.0.1:{port}"
     try:
         with httpx.Client(base_url=url, timeout=args.timeout) as client:
@@ -117,9 +122,14 @@ def main() -> None:
                         stop.wait(0.2)
 
             def watch_memory() -> None:
-                while not stop.is_set():
-                    memory.append(rss_mb(proc))
-                    stop.wait(1.0)
+                with httpx.Client(base_url=url, timeout=30) as c:
+                    while not stop.is_set():
+                        memory.append(rss_mb(proc))
+                        if room:
+                            with contextlib.suppress(httpx.HTTPError, KeyError, ValueError):
+                                seen = c.get(f"/api/classes/{room['id']}").json()["seats"]
+                                asleep.append(sum(s["asleep"] for s in seen))
+                        stop.wait(1.0)
 
             watchers = [threading.Thread(target=f, daemon=True) for f in (watch_health, watch_memory)]
             for w in watchers:
@@ -130,7 +140,7 @@ def main() -> None:
             create_s = time.perf_counter() - t0
             if made.status_code != 201:
                 raise SystemExit(f"class not created: {made.status_code} {made.text}")
-            room = made.json()
+            room.update(made.json())
             print(
                 f"class of {args.seats} seats created in {create_s:.1f} s (live limit {room['live_limit']})", flush=True
             )
@@ -152,6 +162,8 @@ def main() -> None:
                         except httpx.HTTPError as exc:
                             answered, why = False, repr(exc)
                         took = time.perf_counter() - t
+                        if args.think > 0 and k < args.steps:
+                            time.sleep(args.think)  # a student reads the page: an idle seat may sleep meanwhile
                         with lock:
                             if answered:
                                 if k > 0:
@@ -202,6 +214,7 @@ def main() -> None:
         f"peak memory MB: server {peak[0]:.0f}  workers {peak[1]:.0f} ({peak[2]} processes)  total {peak[0] + peak[1]:.0f}"
         f"  (max server alone {max(m[0] for m in memory):.0f}, max workers alone {max(m[1] for m in memory):.0f})"
     )
+    print(f"seats asleep on the board: max {max(asleep, default=0)} ({len(asleep)} looks)")
     print(
         f"board at the end: {board['live']} live, {sum(s['asleep'] for s in board['seats'])} asleep, views per seat "
         f"min {min(views)} mean {statistics.mean(views):.1f} max {max(views)}"
