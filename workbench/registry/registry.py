@@ -605,8 +605,7 @@ class SessionRegistry:
                 if len(self._sessions) + self._reserved < limit:
                     continue
             raise AtCapacity(
-                f"{live} sessions are live, the limit (server.max_live_sessions = {limit}, or a class's seats), and "
-                "none is idle "
+                f"{live} sessions are live, the limit (server.max_live_sessions = {limit}), and none is idle "
                 "enough to sleep; retry when one has finished, or delete one"
             )
 
