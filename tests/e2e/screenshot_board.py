@@ -51,4 +51,4 @@ def main(out: str = "docs/class-board.png", width: int = 1400, height: int = 900
 
 if __name__ == "__main__":
     args = sys.argv[1:]
-    main(*(args[:1]), *(int(a) for a in args[1:3]))
+    main(args[0] if args else "docs/class-board.png", *(int(a) for a in args[1:3]))
