@@ -37,8 +37,7 @@ from app.schemas import document_error_bodies
 from app.security import SecurityMiddleware, install_log_redaction, openapi_security
 from app.serialize import SafeJSONResponse
 from app.settings import AppSettings, check_exposure, viewer_host
-from workbench import Calibrations, SessionRegistry, WorkbenchError
-from workbench.classes import Classes
+from workbench import Calibrations, Classes, SessionRegistry, WorkbenchError
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 log = logging.getLogger(__name__)

@@ -10,8 +10,7 @@ from fastapi import APIRouter, Depends, Request, Response
 from app.api.deps import Registry, Scene, Settings
 from app.api.viewer import viewer_ticket
 from app.schemas import BoardOut, ClassCreate, ClassOut, JoinOut, JoinRequest, PauseRequest, ViewerTicketOut
-from workbench import Conflict
-from workbench.classes import Classes, ClassRoom
+from workbench import Classes, ClassRoom, Conflict
 
 router = APIRouter(prefix="/classes", tags=["classes"])
 
