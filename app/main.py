@@ -37,7 +37,7 @@ from app.schemas import document_error_bodies
 from app.security import SecurityMiddleware, install_log_redaction, openapi_security
 from app.serialize import SafeJSONResponse
 from app.settings import AppSettings, check_exposure, viewer_host
-from workbench import Calibrations, SessionRegistry, WorkbenchError
+from workbench import Calibrations, Classes, SessionRegistry, WorkbenchError
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 log = logging.getLogger(__name__)
@@ -66,6 +66,7 @@ def create_app(settings: AppSettings | None = None) -> FastAPI:
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         registry = SessionRegistry(settings)
+        app.state.classes = Classes(registry)  # class mode: app/api/classes.py (its seats are sessions)
         server = None
         scene = None
         if settings.scene:
@@ -102,6 +103,7 @@ def create_app(settings: AppSettings | None = None) -> FastAPI:
     app.state.registry = None
     app.state.viser = None
     app.state.scene = None
+    app.state.classes = None
 
     @app.exception_handler(WorkbenchError)
     async def _workbench_error(request: Request, exc: WorkbenchError) -> JSONResponse:
@@ -160,5 +162,16 @@ def create_app(settings: AppSettings | None = None) -> FastAPI:
     @app.get("/", include_in_schema=False)
     def index() -> FileResponse:
         return FileResponse(STATIC_DIR / "index.html", headers={"Cache-Control": "no-cache"})
+
+    @app.get("/board", include_in_schema=False)
+    @app.get("/board/{class_id}", include_in_schema=False)
+    def board_page(class_id: str = "") -> FileResponse:
+        """The class board (app/static/board.html): create a class, watch its seats."""
+        return FileResponse(STATIC_DIR / "board.html", headers={"Cache-Control": "no-cache"})
+
+    @app.get("/join/{code}", include_in_schema=False)
+    def join_page(code: str) -> FileResponse:
+        """A student's join page: takes a seat with the code, then opens the seat's session in the main page."""
+        return FileResponse(STATIC_DIR / "join.html", headers={"Cache-Control": "no-cache"})
 
     return app

@@ -10,7 +10,17 @@ from typing import Annotated, Any, Literal
 
 from fastapi.encoders import jsonable_encoder
 from fastapi.openapi.models import Schema
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StrictFloat, StrictInt, create_model, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    StrictBool,
+    StrictFloat,
+    StrictInt,
+    create_model,
+    model_validator,
+)
 
 from planner import Pose
 from planner.types import QUATERNION_ZERO
@@ -214,6 +224,9 @@ class SessionCreate(BaseModel):
         default=None,
         pattern=r"^[A-Za-z0-9_-]{8,64}$",
         description="names this create: its progress on /api/events?create=ID, DELETE /api/creations/ID cancels it",
+    )
+    guided: StrictBool = Field(
+        default=False, description="guided mode: the page explains each step (journaled; the status's guided)"
     )
 
 
@@ -584,3 +597,84 @@ class ClientsOut(BaseModel):
 
 class HealthOut(BaseModel):
     status: str
+
+
+class ClassCreate(BaseModel):
+    """A class: ``seats`` sessions, each a student's, scanning one object or a list (seat i the i-th, round robin)."""
+
+    model_config = ConfigDict(extra="forbid")
+    seats: StrictInt = Field(description="how many students (1 to server.max_class_seats)")
+    model: str | list[Annotated[str, Field(max_length=200)]] | None = Field(
+        default=None, description="a model name (GET /api/models) or a list of them; default: the server's"
+    )
+    planner: str = Field(default="projection", max_length=40, description="the view evaluator of every seat")
+    guided: StrictBool = Field(default=False, description="every seat in guided mode (the page explains each step)")
+    config: dict[str, Any] = Field(default_factory=dict, description="any subset of the planner config, every seat")
+
+
+class ClassSeatOut(BaseModel):
+    seat: int = Field(description="1-based seat number")
+    session: str = Field(description="the seat's session id")
+    model: str
+    joined: bool = Field(description="a student took this seat")
+    resets: int = Field(description="how often the teacher reset it")
+
+
+class ClassOut(BaseModel):
+    """A class as created: its id, the join code students type (or scan) and every seat's session."""
+
+    id: str
+    code: str
+    join: str = Field(description="the join page's path: /join/CODE")
+    planner: str
+    models: list[str]
+    guided: bool
+    paused: bool
+    live_limit: int = Field(description="sessions this server keeps live at once now (raised to hold the seats)")
+    seats: list[ClassSeatOut]
+
+
+class BoardSeatOut(ClassSeatOut):
+    state: str = Field(description="the session's state, asleep (its memory freed; woken by its student) or gone")
+    asleep: bool
+    views: int
+    coverage: float | None
+    points: int
+    picture: bool = Field(description="GET .../seats/{seat}/picture.png has a picture")
+
+
+class BoardOut(BaseModel):
+    """The class board's data: every seat's state, read without waking a sleeping seat."""
+
+    id: str
+    code: str
+    join: str
+    planner: str
+    models: list[str]
+    guided: bool
+    paused: bool
+    created: float
+    live_limit: int
+    live: int = Field(description="seats live in memory now")
+    seats: list[BoardSeatOut]
+
+
+class JoinRequest(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    code: str = Field(min_length=4, max_length=12, description="the join code on the teacher's screen")
+    seat: StrictInt | None = Field(default=None, ge=1, description="rejoin this seat (default: the next free one)")
+
+
+class JoinOut(BaseModel):
+    class_id: str = Field(alias="class")
+    seat: int
+    session: str
+    guided: bool
+    url: str = Field(description="the page of the seat's session")
+
+    model_config = ConfigDict(populate_by_name=True)
+
+
+class PauseRequest(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    paused: StrictBool

@@ -9,6 +9,7 @@ timeout; this is the workbench's backstop.
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable
 from typing import Any, TypeVar
 
@@ -26,13 +27,20 @@ class DeviceTimeoutError(DeviceError):
 
 
 def call_with_timeout(
-    fn: Callable[[], T], timeout: float | None, what: str, on_timeout: Callable[[], None] | None = None
+    fn: Callable[[], T],
+    timeout: float | None,
+    what: str,
+    on_timeout: Callable[[], None] | None = None,
+    waited: Callable[[], float] | None = None,
 ) -> T:
     """``fn()``, or DeviceTimeoutError when it has not returned after ``timeout`` seconds (None or <= 0: no limit).
 
     Exceptions of ``fn`` are re-raised in the caller. On a timeout ``on_timeout()`` is called first (a driver's
     ``stop()``: a move that timed out must not go on); the error's ``pending`` event tells when the abandoned
     call has really ended, so a retry can wait for it instead of sending a second move.
+    ``waited()``: seconds ``fn`` has spent so far waiting its turn for a shared resource (a simulated camera's
+    render waiting for a running-job slot of the server, busy with other sessions): they do not count, so only
+    the device's own time is limited.
     """
     if timeout is None or timeout <= 0:
         return fn()
@@ -49,7 +57,12 @@ def call_with_timeout(
 
     thread = threading.Thread(target=run, name=f"device-{what}", daemon=True)
     thread.start()
-    if not done.wait(timeout):
+    start = time.monotonic()
+    while not done.is_set():
+        left = start + timeout + (waited() if waited is not None else 0.0) - time.monotonic()
+        if left <= 0 or done.wait(min(left, 0.5)):
+            break
+    if not done.is_set():
         stopped = ""
         if on_timeout is not None:
             try:

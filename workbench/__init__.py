@@ -9,6 +9,7 @@ These names are the public API the web layer (app/), the command line (nbv/) and
 """
 
 from workbench.calibration import CalibrationRun, Calibrations, PosePreview
+from workbench.classes import Classes, ClassRoom
 from workbench.errors import (
     AtCapacity,
     Conflict,
@@ -42,6 +43,8 @@ __all__ = [
     "AtCapacity",
     "CalibrationRun",
     "Calibrations",
+    "ClassRoom",
+    "Classes",
     "Conflict",
     "DeviceFault",
     "Gone",

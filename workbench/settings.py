@@ -73,6 +73,9 @@ class WorkbenchSettings:
     0.3 m, an 11 M-voxel grid, took 0.70 GB; 2 mm, 1.4 M voxels, 0.27 GB), so the default keeps the default
     ``max_live_sessions`` (16) within about 6 GB of a 24 GB machine (16 x (0.15 GB + 4 M x 60 B)), its workers
     beside them; the paper's default grid (1 m at 1 cm) is 1 M voxels. 0: no limit (the operator's own risk)."""
+    max_class_seats: int = 40
+    """Seats a class (class mode, docs/class.md) may have at most (422 beyond it). A class raises the live
+    limit to hold its seats: ``max_live_sessions`` counts as at least the seats of all classes, up to this many."""
     idle_sleep: float = 1800.0
     """A live session nobody asked anything for this many seconds is put to sleep (its memory freed, its
     journal kept); the next request for it or a tab opening it resumes it transparently. 0: never."""
@@ -134,6 +137,7 @@ class WorkbenchSettings:
             "mesh_load_memory",
             "max_live_sessions",
             "max_session_voxels",
+            "max_class_seats",
         ):
             value = getattr(self, name)
             if not integer(value) or value < 0:

@@ -17,6 +17,7 @@ from app.api import (
     arm,
     calibration,
     candidates,
+    classes,
     events,
     fit,
     loop,
@@ -30,6 +31,21 @@ from app.api import (
 from app.schemas import ERROR_RESPONSES
 
 router = APIRouter(prefix="/api", responses=ERROR_RESPONSES)
-for module in (viewer, models, sessions, loop, candidates, timeline, recording, scene, fit, events, arm, calibration):
+MODULES = (
+    viewer,
+    models,
+    sessions,
+    loop,
+    candidates,
+    timeline,
+    recording,
+    scene,
+    fit,
+    events,
+    arm,
+    calibration,
+    classes,
+)
+for module in MODULES:
     for resource in module.routers:  # each with its prefix and tags
         router.include_router(resource)

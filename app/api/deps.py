@@ -27,9 +27,15 @@ def scene_of(request: Request) -> SceneController:
     return scene
 
 
-def session_of(session_id: str, registry: Annotated[SessionRegistry, Depends(registry_of)]) -> Iterator[Session]:
+def session_of(
+    session_id: str, registry: Annotated[SessionRegistry, Depends(registry_of)], request: Request
+) -> Iterator[Session]:
     """The live session of the path, held live for the whole request (``SessionRegistry.hold``): a sleep never
-    cuts off a request in flight (a timeline rebuild, a recording, a step)."""
+    cuts off a request in flight (a timeline rebuild, a recording, a step). A change (not GET) of a seat of a
+    class the teacher paused is refused (409) before the session is touched."""
+    classes = getattr(request.app.state, "classes", None)
+    if request.method not in ("GET", "HEAD") and classes is not None and classes.paused(session_id):
+        raise Conflict(f"session {session_id}: the teacher paused the class; wait until it is resumed")
     with registry.hold(session_id) as session:
         yield session
 

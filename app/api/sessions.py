@@ -48,6 +48,7 @@ def create_session(
         planner=body.planner,
         progress_id=body.progress_id,
         camera=None if body.camera is None else body.camera.model_dump(exclude_none=True),
+        guided=body.guided,
     )
     return {"id": session.id}
 

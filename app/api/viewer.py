@@ -54,10 +54,13 @@ def open_viewer(
     return viewer_ticket(request, settings, scene, registry.get(body.session).id)
 
 
-def viewer_ticket(request: Request, settings: AppSettings, scene: SceneController, key: str) -> dict[str, Any]:
-    """A new viewer of ``key`` (a session's id, or a calibration's) as the routes answer it."""
+def viewer_ticket(
+    request: Request, settings: AppSettings, scene: SceneController, key: str, readonly: bool = False
+) -> dict[str, Any]:
+    """A new viewer of ``key`` (a session's id, or a calibration's) as the routes answer it; ``readonly``: its
+    clicks and gizmo change nothing (a class seat on the projector)."""
     host, port, note = _where(request, settings)
-    ticket = scene.open_viewer_of(key)
+    ticket = scene.open_viewer_of(key, readonly=readonly)
     return {
         "viewer": ticket.viewer,
         "session": key,

@@ -80,6 +80,8 @@ class Viewer:
     framed: tuple[float, float, float] | None = None
     """Where this page put the client's camera last (:meth:`SceneController._frame`); a camera still there follows
     the arm round (the person did not move it)."""
+    readonly: bool = False
+    """Watching only (a class seat on the projector): a click or a gizmo release in it changes nothing."""
 
 
 class SceneController:
@@ -127,14 +129,15 @@ class SceneController:
 
     # ------------------------------------------------------------------ viewers
 
-    def open_viewer_of(self, key: str) -> Ticket:
-        """A ticket for a new viewer of ``key``: a session's id, or what one of ``other_viewers`` draws."""
+    def open_viewer_of(self, key: str, readonly: bool = False) -> Ticket:
+        """A ticket for a new viewer of ``key``: a session's id, or what one of ``other_viewers`` draws;
+        ``readonly``: its clicks and gizmo change nothing."""
         ticket = self.tickets.issue(key)
         now = time.monotonic()
         with self._lock:
             for k in [k for k, v in self._viewers.items() if v.client is None and v.expires < now]:
                 del self._viewers[k]
-            self._viewers[ticket.viewer] = Viewer(ticket.viewer, key, expires=ticket.expires + 5.0)
+            self._viewers[ticket.viewer] = Viewer(ticket.viewer, key, expires=ticket.expires + 5.0, readonly=readonly)
         return ticket
 
     def viewer(self, viewer_id: str) -> Viewer:
@@ -327,6 +330,9 @@ class SceneController:
 
     def _selector(self, v: Viewer) -> Any:
         def select(index: int) -> None:
+            if v.readonly:
+                log.info("click on candidate %s ignored: viewer %s only watches", index, v.id)
+                return
             if v.step is not None:  # the past is looked at, not changed
                 log.info("click on candidate %s ignored: the viewer shows view %d of the timeline", index, v.step.view)
                 return
@@ -339,6 +345,9 @@ class SceneController:
 
     def _custom_setter(self, v: Viewer) -> Any:
         def set_custom(pose: Pose) -> None:
+            if v.readonly:
+                log.info("gizmo pose ignored: viewer %s only watches", v.id)
+                return
             if v.step is not None:
                 log.info("gizmo pose ignored: the viewer shows view %d of the timeline", v.step.view)
                 return

@@ -676,8 +676,8 @@ async function startDemo() {
   const say = (what, percent) => P.renderProgress(box, { stage: what, step: 1, steps: 1, done: 0, total: 0, percent, elapsed: 0 }, "demo");
   try {
     say("creating the session on the default object", 20);
-    const r = await api("POST", "/api/sessions", {}); // the server's default object, planner and cell
-    if ($("demo-guided").checked) sessionStorage.setItem(GUIDE_KEY, "on");
+    // the server's default object, planner and cell; "explain each step" makes it a guided session (journaled)
+    const r = await api("POST", "/api/sessions", { guided: $("demo-guided").checked });
     location.href = pageUrl({ session: r.id, demo: "1" });
   } catch (e) {
     box.hidden = true;

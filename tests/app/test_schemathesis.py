@@ -44,7 +44,12 @@ _ROOT = Path(tempfile.mkdtemp(prefix="nbv-schemathesis-"))
 APP = create_app(  # the small camera and scoring of the other API tests (tests/helpers.py): what is checked here is the API
     with_small_costs(
         AppSettings(
-            scene=False, models_dir=_ROOT / "models", data_dir=_ROOT / "data", capture_timeout=5.0, fault_api=True
+            scene=False,
+            models_dir=_ROOT / "models",
+            data_dir=_ROOT / "data",
+            capture_timeout=5.0,
+            fault_api=True,
+            max_class_seats=3,  # a generated class of 40 default sessions would take the budget: over 3 is a 422
         )
     )
 )

@@ -84,6 +84,8 @@ class SessionRegistry:
         """Live sessions being put to sleep now: a hold waits for the sleep to end, then wakes them."""
         self._followers: dict[str, list[Callable[[Session, SessionEvent], None]]] = {}
         """Session id -> listeners that follow it across sleep and wake (:meth:`follow`)."""
+        self.class_seats = 0
+        """Seats of the server's classes (workbench/classes): the live limit holds at least this many sessions."""
         self.on_create: list[Callable[[Session], None]] = []
         self.on_delete: list[Callable[[Session], None]] = []
         self.ceilings = CeilingService(settings.data_dir / "ceilings")
@@ -151,6 +153,7 @@ class SessionRegistry:
         planner: str = "projection",
         progress_id: str | None = None,
         camera: dict[str, Any] | None = None,
+        guided: bool = False,
     ) -> Session:
         """A new session. 422 for a bad config, model, source, fault setting, planner or camera model; 404 for an
         unknown recording.
@@ -162,6 +165,7 @@ class SessionRegistry:
         header records both, so a resume rebuilds the same map.
         progress_id: names this create for its progress and its cancellation (:attr:`creations`); cancelled,
         it raises Conflict at its next stage and leaves nothing.
+        guided: the page explains each step (journaled in the header, so a resume keeps it; the status's ``guided``).
         """
         planner_config = self.planner_config(config, seed)
         if planner not in evaluator_names():
@@ -187,6 +191,7 @@ class SessionRegistry:
                     creation,
                     camera_models,
                     slot,
+                    guided,
                 )
         finally:
             self._give_back(slot)
@@ -203,6 +208,7 @@ class SessionRegistry:
         creation: Creation,
         camera: dict[str, str] | None = None,
         slot: _Slot | None = None,
+        guided: bool = False,
     ) -> Session:
         name = model or self.settings.devices.model
         devices = session_devices(self.settings, name, seed, camera)
@@ -235,12 +241,14 @@ class SessionRegistry:
                     "planner": planner,
                     "devices": dataclasses.asdict(devices),
                     "faults": fault_config.to_dict(),
+                    "guided": guided,
                 }
                 try:
                     journal = JournalWriter.create(self.settings.data_dir, session_id, header)
                 except OSError as exc:
                     raise StorageFault(f"cannot journal the session in the data directory ({exc.strerror})") from None
             session = self._session(session_id, parts, planner_config, devices, seed, journal, planner)
+            session.record.guided = guided
             with self._lock:
                 self._register(session_id, session, slot)
         except BaseException:
@@ -379,6 +387,18 @@ class SessionRegistry:
                 if session_id in self._used:
                     self._used[session_id] = time.monotonic()  # idle from the end of its last request
                 self._changed.notify_all()
+
+    def peek(self, session_id: str) -> tuple[Session | None, dict[str, Any]]:
+        """(the live session or None, its status) without waking it: a board that watches many sessions must not
+        keep them all awake. NotFound for an unknown id."""
+        with self._lock:
+            session = self._sessions.get(session_id)
+            dormant = self._dormant.get(session_id) or self._rebuilding.get(session_id)
+        if session is not None:
+            return session, session.status()
+        if dormant is not None:
+            return None, dormant.status()
+        raise NotFound(f"session {session_id!r}: unknown")
 
     def list(self) -> list[Session]:
         with self._lock:
@@ -539,6 +559,17 @@ class SessionRegistry:
         log.info("session %s put to sleep", session_id)
         return True
 
+    def doze(self, session_id: str) -> bool:
+        """Count a session of an earlier server process as asleep, not interrupted: the next request for it wakes it
+        (a class's seats after a restart: a student's tab goes on without a resume). False when it is not such a
+        session, or its journal is damaged (that one waits for an explicit resume)."""
+        with self._lock:
+            dormant = self._dormant.get(session_id)
+            if dormant is None or dormant.damage is not None:
+                return False
+            dormant.asleep = True
+            return True
+
     def sleep_idle(self) -> None:
         """Put every session idle for longer than ``idle_sleep`` seconds to sleep (the sweeper's job)."""
         limit = time.monotonic() - self.settings.idle_sleep
@@ -553,7 +584,7 @@ class SessionRegistry:
         sleep to make room; slots reserved by creates and wakes in flight count as live, so concurrent creates
         never pass the limit. When none can sleep but creates or wakes are in flight, it waits for them (up to
         ``ROOM_WAIT`` s: their sessions may then sleep). AtCapacity when every live session is busy or held."""
-        limit = self.settings.max_live_sessions
+        limit = self.live_limit()
         deadline = time.monotonic() + ROOM_WAIT
         while True:
             with self._lock:
@@ -580,6 +611,11 @@ class SessionRegistry:
                 f"{live} sessions are live, the limit (server.max_live_sessions = {limit}), and none is idle "
                 "enough to sleep; retry when one has finished, or delete one"
             )
+
+    def live_limit(self) -> int:
+        """Sessions live at once at most: ``max_live_sessions``, raised to the seats of the classes (0: none)."""
+        limit = self.settings.max_live_sessions
+        return limit if limit <= 0 else max(limit, min(self.class_seats, self.settings.max_class_seats))
 
     def _register(self, session_id: str, session: Session, slot: _Slot | None) -> None:
         """``session`` is live from now on (caller holds the lock): its followers hear it before anyone else can

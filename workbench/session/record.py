@@ -28,6 +28,8 @@ class SessionRecord:
         self.config = config
         self.seed = seed
         self.created = created
+        self.guided = False
+        """Guided mode (the page explains each step; a class's seats): the journal header's ``guided``."""
         self.iterations: list[dict[str, Any]] = []
         self.plans: list[dict[str, Any]] = []
         self.decisions: list[dict[str, Any]] = []
@@ -40,9 +42,11 @@ class SessionRecord:
     @classmethod
     def from_header(cls, header: dict[str, Any]) -> SessionRecord:
         """An empty record for the journal whose ``session`` event is ``header``."""
-        return cls(
+        record = cls(
             str(header["id"]), str(header["model"]["name"]), header["config"], int(header["seed"]), header["time"]
         )
+        record.guided = header.get("guided") is True  # journals without it: not guided
+        return record
 
     def apply(self, event: dict[str, Any]) -> None:
         """Take one journal event ``{"seq", "time", "kind", ...}`` into the record."""

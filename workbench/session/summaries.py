@@ -115,6 +115,9 @@ class SessionStatus:
     moves: int = field(metadata=_doc("moves of the cell"))
     seed: int = field(metadata=_doc("seeds the planner's fits and the simulated noise"))
     planner: str = field(default="projection", metadata=_doc("the view evaluator this session plans with"))
+    guided: bool = field(
+        default=False, metadata=_doc("guided mode: the page explains each step (set at create, e.g. by a class)")
+    )
     progress: dict[str, Any] | None = field(default=None, metadata=_doc("the long operation running now, if any"))
     views: list[dict[str, Any]] = field(
         default_factory=list,
@@ -171,6 +174,7 @@ def session_status(
         moves=moves,
         seed=record.seed,
         planner=planner,
+        guided=bool(getattr(record, "guided", False)),
         progress=progress,
         views=[view_summary(r) for r in record.iterations],
         refused_moves=len(getattr(record, "refusals", [])),

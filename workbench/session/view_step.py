@@ -121,7 +121,12 @@ class ViewStep:
             move_seconds = float(ran.duration) if ran.timed else None
             t_capture = time.perf_counter()
             try:
-                frame = call_with_timeout(self.cell.capture, self.capture_timeout, "camera capture")
+                worker = self.worker
+                before = 0.0 if worker is None else worker.queued()
+                waited = (
+                    None if worker is None else (lambda: worker.queued() - before)
+                )  # a render's turn, not the camera's
+                frame = call_with_timeout(self.cell.capture, self.capture_timeout, "camera capture", waited=waited)
             except DeviceTimeoutError:
                 if self.worker is not None:
                     self.worker.cancel("the capture timed out", kinds=("render",))  # a render still running is killed

@@ -94,6 +94,8 @@ class SessionWorker:
         self._closed = False
         self._hurry: Any = None  # the running process's event: a job waits (its warm-up stops early)
         self._asked = False  # a job was asked of this worker: its warm-ups are cut short from then on
+        self._queued = 0.0  # seconds jobs have waited for their turn (this worker's lock, a running-job slot)
+        self._queued_since: float | None = None  # when the job waiting now began to wait
 
     @property
     def pid(self) -> int | None:
@@ -188,27 +190,48 @@ class SessionWorker:
         """Run one job; its result, or the job's own exception, or JobKilled (budget, cancel, a dead worker).
         ``on_progress`` gets what the job reports on the way (``("progress", value)`` messages)."""
         self._asking()
-        with self._job_lock:
-            if self._closed:
-                raise JobKilled(f"{what}: the session is closed")
-            with self._cancel_lock:
-                self._cancelled.clear()
-                self._reason = None
-                self._kind = kind
-            if not self.engine.acquire(self._cancelled):
+        with self._cancel_lock:
+            self._queued_since = time.monotonic()
+        try:
+            with self._job_lock:
+                if self._closed:
+                    raise JobKilled(f"{what}: the session is closed")
                 with self._cancel_lock:
-                    self._kind = None
-                raise JobKilled(f"{what}: {self._reason or 'cancelled'}")
-            self.busy = True
-            try:
-                return self._run(kind, payload, budget, what, on_progress)
-            finally:
-                with self._cancel_lock:
-                    self.busy = False
-                    self._kind = None
-                self.jobs += 1
-                self.engine.release()
-                self.engine.used(self)
+                    self._cancelled.clear()
+                    self._reason = None
+                    self._kind = kind
+                if not self.engine.acquire(self._cancelled):
+                    with self._cancel_lock:
+                        self._kind = None
+                    raise JobKilled(f"{what}: {self._reason or 'cancelled'}")
+                self._done_waiting()
+                self.busy = True
+                try:
+                    return self._run(kind, payload, budget, what, on_progress)
+                finally:
+                    with self._cancel_lock:
+                        self.busy = False
+                        self._kind = None
+                    self.jobs += 1
+                    self.engine.release()
+                    self.engine.used(self)
+        finally:
+            self._done_waiting()
+
+    def _done_waiting(self) -> None:
+        """The job that waited for its turn runs now (or gave up): its wait is counted in :meth:`queued`."""
+        with self._cancel_lock:
+            if self._queued_since is not None:
+                self._queued += time.monotonic() - self._queued_since
+                self._queued_since = None
+
+    def queued(self) -> float:
+        """Seconds this worker's jobs have waited for their turn so far (this worker's lock, a running-job slot of
+        the server, shared by every session), the wait going on now included: a device deadline does not count
+        them (``devices.timeout.call_with_timeout``'s ``waited``)."""
+        with self._cancel_lock:
+            now = 0.0 if self._queued_since is None else time.monotonic() - self._queued_since
+            return self._queued + now
 
     def _run(self, kind: str, payload: Any, budget: float, what: str, on_progress: Callable[[Any], None] | None) -> Any:
         conn, proc = self._started()
