@@ -117,6 +117,7 @@ def test_a_reach_report_of_a_seven_joint_preset_reaches_most_of_the_hemisphere()
     assert report.base == PRESETS["panda"].base
 
 
+@pytest.mark.slow
 def test_scan_takes_the_arm_from_a_config_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``nbv scan --config`` with a [devices.cell.arm] section (the layout of nbv serve) scans with that arm."""
     config = tmp_path / "lab.toml"
