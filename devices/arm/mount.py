@@ -27,8 +27,9 @@ from planner.types import BoundingBox, Candidate
 
 SEARCH_DISTANCES = (0.45, 0.55, 0.65, 0.75, 0.85, 0.95, 1.05)
 """Mount distances from the plate axis tried by the search, metres (scaled by the preset's ``cell_scale``)."""
-SEARCH_HEIGHTS = (-0.1, 0.0, 0.15, 0.3)
-"""Mount heights above the plate top tried by the search, metres (scaled by the preset's ``cell_scale``)."""
+SEARCH_HEIGHTS = (-0.05, 0.0, 0.15, 0.3)
+"""Mount heights above the plate top tried by the search, metres (scaled by the preset's ``cell_scale``; none below
+the table top, ``ArmConfig.table_height``)."""
 SEARCH_CANDIDATES = 60
 """Candidates of the coarse hemisphere each mount of the search is scored on (the best is re-scored on the full
 one)."""
@@ -172,6 +173,8 @@ def search_mount(
         if d <= cell.plate_radius:
             continue
         for h in heights:
+            if h < arm.table_height:
+                continue
             report = reach_report(arm, size, base=(-d, 0.0, h), planner=planner, cell=cell, count=SEARCH_CANDIDATES)
             tried.append((d, h, report.reachable_share))
     if not tried:
