@@ -159,7 +159,7 @@ class SessionRegistry:
         planner: the view evaluator (``planner.evaluators.evaluator_names()``), journaled in the header.
         camera: ``{"sensor": NAME, "calibration": NAME}`` (either optional; default the server's
         ``devices.camera``): the simulated sensor and calibration error (``workbench.sources.camera_models``).
-        arm: an arm preset or 'reach_sphere' (``GET /api/arms``; default the server's ``devices.cell``), recorded
+        arm: an arm preset or 'reach_sphere' (``workbench.sources.parts.arm_choices``; default the server's ``devices.cell``), recorded
         with the devices in the journal header (a journal without it resumes with the UR5).
         The planner config follows the camera (``devices.planner_noise.planner_config_for``) and the journal
         header records both, so a resume rebuilds the same map.

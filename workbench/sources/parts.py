@@ -202,7 +202,7 @@ def build_parts(
 
 
 def arm_choices() -> list[dict[str, Any]]:
-    """The arms a create request may name (``GET /api/arms``): every preset, then 'reach_sphere'."""
+    """The arms a create request may name (the arms resource lists them): every preset, then 'reach_sphere'."""
     from devices.arm.presets import DEFAULT_PRESET, PRESETS
 
     arms: list[dict[str, Any]] = [
