@@ -20,23 +20,24 @@ from planner import PlannerConfig
 from workbench.evaluation.simulate import SimScan, simulate
 
 SMALL = PlannerConfig().replace(
-    voxel={"resolution": 0.012}, candidates={"count": 48, "parallels": 4}, termination={"max_views": 5}
+    voxel={"resolution": 0.015}, candidates={"count": 24, "parallels": 3}, termination={"max_views": 5}
 )
 
 
 @pytest.fixture(scope="module", params=sorted(PRESETS))
 def scan(request: pytest.FixtureRequest) -> SimScan:
-    return simulate("l-block", SMALL, size=0.15, reachable=False, arm=request.param)
+    return simulate("mug", SMALL, size=0.15, reachable=False, arm=request.param)
 
 
 @pytest.mark.slow
 def test_a_preset_scans_five_views_each_taken_or_refused_with_a_reason(scan: SimScan) -> None:
     result = scan.result
-    assert 1 <= len(result.records) <= 5
-    assert len(result.records) == 5 or result.terminated != "max_views"
-    for refused in result.refused_moves:
-        assert str(refused.get("message", "")).startswith("unreachable") or refused.get("message")
-    assert result.records[-1].coverage is not None and result.records[-1].coverage > 0.3
+    assert len(result.records) == 5 and result.terminated == "max_views"
+    for refused in result.refused_moves:  # a refused view carries the cell's reason
+        assert str(refused.get("message", "")).strip() != ""
+    coverage = [r.coverage for r in result.records]
+    assert all(c is not None for c in coverage) and coverage[-1] > 0.5
+    assert result.robot_seconds > 0
 
 
 @pytest.mark.slow
