@@ -189,6 +189,18 @@ class CameraModelsOut(BaseModel):
     calibrations: list[str] = Field(description="calibration and motion error models, the default first")
 
 
+class ArmChoice(BaseModel):
+    name: str = Field(description="what a create's arm takes")
+    title: str = Field(description="the robot")
+    dof: int = Field(description="joints the arm moves (0: the reach sphere)")
+    default: bool = Field(description="the server's default arm")
+    note: str = Field(description="what it is, what it suits")
+
+
+class ArmsOut(BaseModel):
+    arms: list[ArmChoice] = Field(description="the arm presets, then the reach sphere")
+
+
 class SessionCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
     model: str | None = Field(
@@ -213,6 +225,12 @@ class SessionCreate(BaseModel):
         default=None,
         description='the simulated camera\'s error models, e.g. {"sensor": "realsense-d435", "calibration": '
         '"typical"} (simulated sessions only; a hardware session refuses them)',
+    )
+    arm: str | None = Field(
+        default=None,
+        max_length=40,
+        description="the simulated cell's arm: a preset (ur5, ur10, panda, xarm7, z1) or reach_sphere "
+        "(GET /api/arms lists them; default the server's)",
     )
     planner: str = Field(
         default="projection",

@@ -134,10 +134,10 @@ class CellConfig:
             v = getattr(self, name)
             require(finite(v) and v > 0, f"cell.{name}: must be > 0, got {v!r}")
         if self.kinematics == "urdf":
-            x, y, _ = self.arm.base
+            x, y, _ = self.arm.mount
             require(
                 (x * x + y * y) ** 0.5 >= self.plate_radius,
-                f"cell.arm.base: {self.arm.base} is inside the plate (radius {self.plate_radius} m); "
+                f"cell.arm.base: {self.arm.mount} is inside the plate (radius {self.plate_radius} m); "
                 "put the arm beside the turntable",
             )
         require(
@@ -182,3 +182,31 @@ class DeviceConfig:
             integer(self.seed) and self.seed >= 0,
             f"devices.seed: must be an integer >= 0, got {self.seed!r}",
         )
+
+
+ARM_CHOICES_HELP = (
+    "a preset (ur5, ur10, panda, xarm7, z1: 'nbv arms'), the path of a URDF file, 'urdf' (= ur5) or 'reach_sphere'"
+)
+"""What ``--arm`` takes, for help texts."""
+
+
+def cell_with_arm(cell: CellConfig, arm: str | None) -> CellConfig:
+    """``cell`` with the arm ``arm`` names (``--arm``): a preset name or the path of a URDF file (a URDF arm with the
+    preset's, or a file's, defaults; the other arm settings of ``cell.arm`` are kept), 'urdf' (the arm of
+    ``cell.arm``, the UR5 unless configured), 'reach_sphere' (no arm model), None (``cell`` unchanged).
+    ValueError naming ``--arm`` for a name that is neither a preset nor a file."""
+    import dataclasses
+    from pathlib import Path
+
+    from devices.arm.presets import PRESETS
+
+    if arm is None:
+        return cell
+    if arm == "reach_sphere":
+        return dataclasses.replace(cell, kinematics="reach_sphere")
+    if arm == "urdf":
+        return dataclasses.replace(cell, kinematics="urdf")
+    if arm not in PRESETS and not Path(arm).expanduser().is_file():
+        raise ValueError(f"--arm: {arm!r} is no preset ({', '.join(PRESETS)}) and no URDF file")
+    changed = cell.arm if cell.arm.urdf == arm else dataclasses.replace(cell.arm, urdf=arm)
+    return dataclasses.replace(cell, kinematics="urdf", arm=changed)

@@ -29,7 +29,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from nbv.options import CliError, add_scan_options, planner_config_from_args, seed_of
+from nbv.options import CliError, add_scan_options, cell_config_from_args, planner_config_from_args, seed_of
 from workbench.evaluation import MeshPayload, RunOutcome, RunTask, execute, one_line, run_dask, run_local
 
 DEFAULT_PLANNERS = "projection,raycast-apora,raycast-oa,random"
@@ -66,6 +66,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--planners", default=DEFAULT_PLANNERS, help="comma-separated view evaluators (default %(default)s)"
+    )
+    parser.add_argument(
+        "--arms",
+        default=None,
+        help="comma-separated arms to sweep like planners (presets or URDF files, e.g. ur5,panda,xarm7): every run "
+        "once per arm, the planner column reads planner@arm, results.csv's arm column names it (default: --arm)",
     )
     parser.add_argument("--seeds", type=int, default=1, help="runs per (model, planner): seeds --seed, --seed+1, ...")
     parser.add_argument(
@@ -111,6 +117,30 @@ def parse_planners(text: str) -> list[str]:
         if name in names[:i]:
             raise CliError(f"--planners: {name!r} is listed twice")
     return names
+
+
+def parse_arms(text: str | None) -> list[str]:
+    """Arm names from ``--arms`` ([] when not given); CliError for an empty list, a duplicate or an unknown arm."""
+    if text is None:
+        return []
+    from nbv.options import arm_name
+
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    if not names:
+        raise CliError("--arms: give at least one arm")
+    for i, name in enumerate(names):
+        try:
+            arm_name(name)
+        except argparse.ArgumentTypeError as exc:
+            raise CliError(f"--arms: {exc}") from None
+        if name in names[:i]:
+            raise CliError(f"--arms: {name!r} is listed twice")
+    return names
+
+
+def run_planners(planners: Sequence[str], arms: Sequence[str]) -> list[str]:
+    """The planners' names in the outputs: ``planner@arm`` for every arm of a sweep, else the planners."""
+    return [f"{p}@{a}" for a in arms for p in planners] if arms else list(planners)
 
 
 def resolve_models(specs: Sequence[str], up: str, size: float) -> list[tuple[str, str, Any]]:
@@ -166,6 +196,8 @@ def check_args(args: argparse.Namespace) -> tuple[list[str], list[float]]:
     if args.depth_noise < 0 or args.pose_noise < 0:
         raise CliError("--depth-noise and --pose-noise: must be >= 0")
     planners = parse_planners(args.planners)
+    if parse_arms(getattr(args, "arms", None)) and args.arm is not None:
+        raise CliError("--arms: give either --arm or --arms")
     if args.reference is not None and args.reference not in planners:
         raise CliError(f"--reference: {args.reference!r} is not among --planners ({', '.join(planners)})")
     return planners, parse_yaws(args.yaws, args.yaw)
@@ -182,6 +214,8 @@ def make_tasks(args: argparse.Namespace, models: Sequence[tuple[str, str, Any]] 
     """Validate the arguments and list the runs; CliError on bad input."""
     planners, yaws = check_args(args)
     base = planner_config_from_args(args)
+    cell = cell_config_from_args(args)
+    arms = parse_arms(getattr(args, "arms", None))
     if models is None:
         models = resolve_models(args.models, args.up, args.size)
     parallel = args.workers if args.executor == "dask" else args.jobs
@@ -191,7 +225,7 @@ def make_tasks(args: argparse.Namespace, models: Sequence[tuple[str, str, Any]] 
         for yaw in yaws:
             for seed in range(seed_of(args), seed_of(args) + args.seeds):
                 config = base.replace(cluster={"seed": seed})
-                for name in planners:
+                for arm, name in [(a, p) for a in (arms or [None]) for p in planners]:
                     tasks.append(
                         RunTask(
                             spec,
@@ -205,7 +239,9 @@ def make_tasks(args: argparse.Namespace, models: Sequence[tuple[str, str, Any]] 
                             depth_noise=args.depth_noise,
                             pose_noise=args.pose_noise,
                             threads=threads,
-                            arm=args.arm,
+                            arm=arm,
+                            cell=cell,
+                            arm_label=arm or "",
                             turn_while_moving=args.turn_while_moving,
                             sensor=args.sensor,
                             calibration=args.calibration,
@@ -218,7 +254,7 @@ def compute_ceilings(
     models: Sequence[tuple[str, str, Any]], yaws: Sequence[float], args: argparse.Namespace, say: Any
 ) -> tuple[dict[tuple[str, float], float], list[str]]:
     """((label, yaw) -> ceiling, one-line errors): one ceiling per model and placement, shared by all runs."""
-    from devices.config import CameraConfig, CellConfig
+    from devices.config import CameraConfig, cell_with_arm
     from devices.mesh import turned_about_plate_axis
     from devices.sim import make_sim_cell
     from workbench.evaluation import cached_ceiling
@@ -227,18 +263,22 @@ def compute_ceilings(
     camera = CameraConfig()
     out: dict[tuple[str, float], float] = {}
     errors: list[str] = []
-    for _, label, mesh in models:
-        for yaw in yaws:
-            try:
-                placed = turned_about_plate_axis(mesh, yaw) if yaw % 360.0 != 0.0 else mesh
-                cell = make_sim_cell(placed, camera, CellConfig(kinematics=args.arm))
-                ceiling = cached_ceiling(placed, cell, camera, config, args.ceiling_cache)
-            except Exception as exc:  # the runs are still worth doing
-                errors.append(f"ceiling of {label} / yaw {yaw:g}: {one_line(exc)}")
-                continue
-            out[(label, yaw)] = ceiling.coverage
-            how = "cached" if ceiling.cached else f"{ceiling.seconds:.2f} s"
-            say(f"ceiling {label} / yaw {yaw:g}: {ceiling.coverage:.4f} ({ceiling.views} reachable views, {how})")
+    cell_config = cell_config_from_args(args)
+    arms: list[str | None] = list(parse_arms(getattr(args, "arms", None))) or [None]
+    for _, model_label, mesh in models:
+        for arm in arms:
+            label = model_label if arm is None else f"{model_label}@{arm}"
+            for yaw in yaws:
+                try:
+                    placed = turned_about_plate_axis(mesh, yaw) if yaw % 360.0 != 0.0 else mesh
+                    cell = make_sim_cell(placed, camera, cell_with_arm(cell_config, arm))
+                    ceiling = cached_ceiling(placed, cell, camera, config, args.ceiling_cache)
+                except Exception as exc:  # the runs are still worth doing
+                    errors.append(f"ceiling of {label} / yaw {yaw:g}: {one_line(exc)}")
+                    continue
+                out[(label, yaw)] = ceiling.coverage
+                how = "cached" if ceiling.cached else f"{ceiling.seconds:.2f} s"
+                say(f"ceiling {label} / yaw {yaw:g}: {ceiling.coverage:.4f} ({ceiling.views} reachable views, {how})")
     return out, errors
 
 
@@ -259,6 +299,7 @@ def run(args: argparse.Namespace) -> int:
     from nbv import bench_report as report
 
     planners, yaws = check_args(args)
+    arms = parse_arms(getattr(args, "arms", None))
     models = resolve_models(args.models, args.up, args.size)
     tasks = make_tasks(args, models)
     out: Path = args.out
@@ -296,8 +337,9 @@ def run(args: argparse.Namespace) -> int:
     config = tasks[0].config
     meta = {
         "models": [label for _, label, _ in models],
-        "planners": planners,
-        "reference": reference_of(args, planners),
+        "planners": run_planners(planners, arms),
+        "reference": run_planners([reference_of(args, planners)], arms[:1])[0],
+        "arms": arms,
         "seeds": list(range(seed_of(args), seed_of(args) + args.seeds)),
         "yaws": yaws,
         "views": views,
@@ -331,7 +373,7 @@ def _describe(o: RunOutcome, ceilings: dict[tuple[str, float], float]) -> str:
         return f"[red]failed[/red] {head}: {escape(o.error)}"
     cov = o.rows[-1]["coverage"] if o.rows else None
     text = f"done {head}: {len(o.rows)} views, coverage {cov:.4f}" if cov is not None else f"done {head}"
-    ceiling = ceilings.get((o.label, o.yaw))
+    ceiling = ceilings.get(o.ceiling_key)
     if cov is not None and ceiling:
         text += f" ({cov / ceiling:.1%} of the ceiling)"
     text += f", plan {sum(r['plan_seconds'] for r in o.rows):.2f} s, wall {o.seconds:.1f} s"

@@ -50,6 +50,7 @@ from workbench.evaluation import ACCURACY_COLUMNS, TIME_THRESHOLDS, RunOutcome
 COLUMNS = (
     "model",
     "planner",
+    "arm",
     "seed",
     "yaw",
     "iteration",
@@ -87,7 +88,7 @@ def result_rows(outcomes: Sequence[RunOutcome], ceilings: Ceilings, views: int) 
     metrics = run_metrics_of(outcomes, ceilings, views)
     rows: list[Row] = []
     for o in outcomes:
-        ceiling = ceilings.get((o.label, o.yaw))
+        ceiling = ceilings.get(o.ceiling_key)
         m = metrics.get((o.label, o.planner, o.seed, o.yaw))
         extra: Row = {"reachable_coverage": ceiling}
         if m is not None:
@@ -132,7 +133,7 @@ def write_results(out: Path, outcomes: Sequence[RunOutcome], ceilings: Ceilings 
     for row in result_rows(outcomes, ceilings, views):
         writer.writerow({k: "" if row.get(k) is None else row[k] for k in COLUMNS})
     _atomic_write(out / "results.csv", "".join(lines))
-    runs = [{**o.to_json(), "reachable_coverage": ceilings.get((o.label, o.yaw))} for o in outcomes]
+    runs = [{**o.to_json(), "reachable_coverage": ceilings.get(o.ceiling_key)} for o in outcomes]
     _atomic_write(out / "runs.json", json.dumps(runs, indent=1))
 
 
@@ -242,7 +243,7 @@ def _robot_panel(
     """One planner's runs of ``model``: coverage / ceiling against the cumulative robot seconds, a line per run."""
     first = True
     for o in outcomes:
-        ceiling = ceilings.get((o.label, o.yaw))
+        ceiling = ceilings.get(o.ceiling_key)
         if o.error is not None or o.label != model or o.planner != planner or not ceiling:
             continue
         xs, ys, total = [], [], 0.0
@@ -263,7 +264,7 @@ def _ratio_panel(
 
     curves = []
     for o in outcomes:
-        ceiling = ceilings.get((o.label, o.yaw))
+        ceiling = ceilings.get(o.ceiling_key)
         coverage = [r["coverage"] for r in o.rows if r["coverage"] is not None]
         if o.error is None and o.label == model and o.planner == planner and ceiling and coverage:
             curves.append(ratio_curve(coverage, ceiling, views))

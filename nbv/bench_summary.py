@@ -37,7 +37,7 @@ def run_metrics_of(
     """The ceiling-normalised metrics of every finished run whose (model, yaw) has a ceiling > 0."""
     out: dict[RunKey, RunMetrics] = {}
     for o in outcomes:
-        ceiling = ceilings.get((o.label, o.yaw))
+        ceiling = ceilings.get(o.ceiling_key)
         rows = [r for r in o.rows if r["coverage"] is not None]
         coverage = [r["coverage"] for r in rows]
         seconds = [r.get("robot_seconds") for r in rows]

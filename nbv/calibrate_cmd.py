@@ -17,7 +17,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from nbv.options import CliError
+from devices.config import ARM_CHOICES_HELP
+from nbv.options import CliError, arm_name
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -33,8 +34,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--angle-sigma-deg", type=float, default=0.1, help="plate angle error per move, deg (0: exact)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument(
+        "--arm",
+        type=arm_name,
+        default=None,
+        help=f"the arm model: {ARM_CHOICES_HELP} (default ur5; a real cell's mount and hand-eye come from its file)",
+    )
+    p.add_argument(
         "--plate-angles", default=None, help="plate angles of the poses, degrees, comma-separated (default 6: 0,60,...)"
     )
+
+
+def _cell(args: argparse.Namespace) -> Any:
+    """The default cell with ``--arm`` (a ``devices.config.CellConfig``)."""
+    from devices.config import CellConfig, cell_with_arm
+
+    return cell_with_arm(CellConfig(), getattr(args, "arm", None))
 
 
 def _plate_angles(text: str | None) -> dict[str, Any]:
@@ -119,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
             if args.write:
                 raise CliError("--write needs --cell (the simulated cell has no file)")
             if args.dry_run:
-                cell = calibration_sim_cell(args.sensor, args.calibration, args.seed)
+                cell = calibration_sim_cell(args.sensor, args.calibration, args.seed, cell_config=_cell(args))
                 return _dry_run(Calibration(cell, **_plate_angles(args.plate_angles)))
             out = calibrate_sim(
                 args.sensor,
@@ -127,6 +141,7 @@ def run(args: argparse.Namespace) -> int:
                 args.seed,
                 args.angle_sigma_deg,
                 progress=_progress(args.json),
+                cell_config=_cell(args),
                 **_plate_angles(args.plate_angles),
             )
             if args.json:
@@ -148,17 +163,17 @@ def run(args: argparse.Namespace) -> int:
 def _run_cell(args: argparse.Namespace, Calibration: Any) -> int:
     from devices.calibration import DEFAULT_TARGET, write_calibration
     from devices.cellfile import load_cell_file
-    from devices.config import CameraConfig, CellConfig
+    from devices.config import CameraConfig
     from devices.hwcell import arm_cell_config, hardware_cell
     from devices.rig import open_rig
     from devices.sim import make_sim_cell
 
     cellfile = load_cell_file(args.cell)
     if args.dry_run:
-        rehearsal = make_sim_cell(DEFAULT_TARGET.mesh(), CameraConfig(), arm_cell_config(cellfile, CellConfig()))
+        rehearsal = make_sim_cell(DEFAULT_TARGET.mesh(), CameraConfig(), arm_cell_config(cellfile, _cell(args)))
         return _dry_run(Calibration(rehearsal, **_plate_angles(args.plate_angles)))
     with open_rig(cellfile) as rig:
-        routine = Calibration(hardware_cell(rig, CellConfig()), **_plate_angles(args.plate_angles))
+        routine = Calibration(hardware_cell(rig, _cell(args)), **_plate_angles(args.plate_angles))
         print(
             f"{len(routine.poses)} poses (the target: {DEFAULT_TARGET.count} spheres of "
             f"{DEFAULT_TARGET.radius * 2000:.0f} mm on the plate):"

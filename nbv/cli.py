@@ -8,7 +8,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from nbv import calibrate_cmd, devices_cmd
+from nbv import arms_cmd, calibrate_cmd, devices_cmd
 from nbv.options import EXIT_BAD_INPUT, CliError, add_scan_options
 from planner.config import PlannerConfig
 
@@ -101,6 +101,10 @@ def build_parser() -> argparse.ArgumentParser:
         )
         serve.add_arguments(p)
         p.set_defaults(func=serve.run)
+
+    p = sub.add_parser("arms", help="the arm presets; nbv arms check NAME: where to mount it, what it reaches")
+    arms_cmd.add_arguments(p)
+    p.set_defaults(func=arms_cmd.run)
 
     p = sub.add_parser("devices", help="real hardware: nbv devices check --config cell.toml")
     devices_cmd.add_arguments(p)

@@ -4,12 +4,15 @@ import it and not each other."""
 from __future__ import annotations
 
 import argparse
+import tomllib
 from pathlib import Path
+from typing import Any
 
 from devices.calibration_error import CALIBRATIONS, calibration_named
+from devices.config import ARM_CHOICES_HELP, CellConfig, cell_with_arm
 from devices.sensors.presets import SENSORS, sensor_named
 from nbv.flags import add_config_flags, apply_flags, config_fields
-from planner.config import PlannerConfig
+from planner.config import PlannerConfig, merge
 
 EXIT_BAD_INPUT = 2
 
@@ -79,17 +82,23 @@ def add_scan_options(p: argparse.ArgumentParser, *, model_required: bool = True,
         default="none",
         help=f"the cell's calibration and motion error: {', '.join(CALIBRATIONS)} (default %(default)s)",
     )
-    p.add_argument("--config", type=Path, default=None, help="a TOML file with planner settings")
+    p.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        help="a TOML file with planner settings (sections as in the planner config, or under [planner]) and the "
+        "cell's ([devices.cell], e.g. [devices.cell.arm], as for nbv serve)",
+    )
     p.add_argument(
         "--arm",
-        choices=["urdf", "reach_sphere"],
-        default="urdf",
-        help="the cell's arm: the UR5 model with IK, collisions and trajectories (default) or the reach sphere",
+        type=arm_name,
+        default=None,
+        help=f"the cell's arm: {ARM_CHOICES_HELP} (default: the --config file's [devices.cell.arm], else ur5)",
     )
     p.add_argument(
         "--turn-while-moving",
         action="store_true",
-        help="the UR5 cell turns the plate while the arm moves when the arm's path stays clear of the turning "
+        help="the arm cell turns the plate while the arm moves when the arm's path stays clear of the turning "
         "object (arm.turn_while_moving; default: the turn, then the arm)",
     )
 
@@ -110,6 +119,48 @@ def calibration_name(value: str) -> str:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def arm_name(value: str) -> str:
+    """argparse type of ``--arm``: a preset, a URDF file, 'urdf' or 'reach_sphere' (the error lists the presets)."""
+    try:
+        cell_with_arm(CellConfig(), value)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("--arm: ")) from None
+    return value
+
+
+def read_config_file(path: Path) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(planner settings, cell settings) of a ``--config`` TOML file: the planner's sections at the top level or
+    under ``[planner]``, the cell's under ``[devices.cell]`` (the layout of ``nbv serve --config``; ``[cell]``
+    too). ValueError for invalid TOML or devices settings other than the cell's."""
+    with open(path, "rb") as fh:
+        try:
+            data = tomllib.load(fh)
+        except tomllib.TOMLDecodeError as exc:
+            raise ValueError(f"{path}: invalid TOML ({exc})") from None
+    planner = dict(data.pop("planner", {}))
+    cell = dict(data.pop("cell", {}))
+    devices = data.pop("devices", {})
+    if not isinstance(devices, dict):
+        raise ValueError("devices: expected a table")
+    other = sorted(set(devices) - {"cell"})
+    if other:
+        raise ValueError(f"devices.{other[0]}: not a setting of this command (only [devices.cell] is read)")
+    cell.update(devices.get("cell", {}))
+    planner.update(data)
+    return planner, cell
+
+
+def cell_config_from_args(args: argparse.Namespace) -> CellConfig:
+    """The cell of a simulated run: the ``--config`` file's ``[devices.cell]``, then ``--arm``. ValueError naming
+    the field on bad values."""
+    path = getattr(args, "config", None)
+    cell = CellConfig()
+    if path:
+        _, data = read_config_file(path)
+        cell = merge(cell, data, "devices.cell.")
+    return cell_with_arm(cell, getattr(args, "arm", None))
+
+
 def seed_of(args: argparse.Namespace) -> int:
     """``--seed``, 0 when not given."""
     return 0 if getattr(args, "seed", None) is None else int(args.seed)
@@ -118,7 +169,9 @@ def seed_of(args: argparse.Namespace) -> int:
 def planner_config_from_args(args: argparse.Namespace) -> PlannerConfig:
     """PlannerConfig from --config, then ``--seed`` (the fits' seed), then the config flags (flags win).
     ValueError on bad values."""
-    config = PlannerConfig.from_toml(args.config) if getattr(args, "config", None) else PlannerConfig()
+    config = (
+        PlannerConfig.from_dict(read_config_file(args.config)[0]) if getattr(args, "config", None) else PlannerConfig()
+    )
     seed = getattr(args, "seed", None)
     if seed is not None:
         config = config.replace(cluster={"seed": seed})

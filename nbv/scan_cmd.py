@@ -12,7 +12,7 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
-from nbv.options import planner_config_from_args, seed_of
+from nbv.options import cell_config_from_args, planner_config_from_args, seed_of
 from workbench.evaluation import (
     STAGES,
     TIME_THRESHOLDS,
@@ -54,6 +54,7 @@ def metrics_json(scan: SimScan, planner_name: str) -> dict[str, Any]:
         "config": scan.config.to_dict(),
         "reachable_coverage": scan.reachable_coverage,
         "arm": scan.cell.config.kinematics,
+        "arm_model": None if scan.cell.config.kinematics == "reach_sphere" else scan.cell.config.arm.urdf,
         "sensor": scan.cell.camera.config.sensor,
         "calibration": scan.cell.camera.config.calibration,
         "calibration_error": None if scan.cell.errors is None else scan.cell.errors.summary(),
@@ -170,7 +171,8 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
         keep_plans=profile and args.fidelity,
         on_start=start,
         on_iteration=lambda record, plan: console.print(_row(record), highlight=False),
-        arm=args.arm,
+        arm=None,
+        cell=cell_config_from_args(args),
         turn_while_moving=args.turn_while_moving,
         on_frame=per_view.add,
         sensor=args.sensor,

@@ -6,13 +6,14 @@ Used by ``nbv.cli`` as ``serve.add_arguments(parser)`` and ``serve.run(args) -> 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 from pathlib import Path
 
 from app.settings import AppSettings, check_exposure, load_settings, settings_from_dict
-from devices.config import DeviceConfig
+from devices.config import ARM_CHOICES_HELP, DeviceConfig, cell_with_arm
 from nbv.flags import ConfigField, add_config_flags, flag_overrides
-from nbv.options import calibration_name, sensor_name
+from nbv.options import arm_name, calibration_name, sensor_name
 from planner.config import PlannerConfig
 
 TOKEN_ENV = "NBV_TOKEN"
@@ -70,6 +71,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="allow this origin (CORS): adds to --server.cors_origins; repeatable",
     )
     parser.add_argument("--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"])
+    parser.add_argument(
+        "--arm",
+        type=arm_name,
+        default=None,
+        help=f"the simulated cell's arm: {ARM_CHOICES_HELP} (default: [devices.cell.arm], else ur5; a session may "
+        "pick another on the page)",
+    )
     parser.set_defaults(config_fields=_server_fields(parser))
 
 
@@ -94,6 +102,10 @@ def settings_from_flags(args: argparse.Namespace) -> AppSettings:
         del data["server"]
     if data:
         settings = settings_from_dict(data, settings)
+    arm = getattr(args, "arm", None)
+    if arm is not None:
+        cell = cell_with_arm(settings.devices.cell, arm)
+        settings = dataclasses.replace(settings, devices=dataclasses.replace(settings.devices, cell=cell))
     return settings
 
 

@@ -36,7 +36,7 @@ from workbench.session.values import SceneData, SessionEvent
 from workbench.settings import WorkbenchSettings
 from workbench.sources.camera_models import camera_models
 from workbench.sources.catalog import list_models, save_upload
-from workbench.sources.parts import list_recorded, list_recordings
+from workbench.sources.parts import arm_choices, list_recorded, list_recordings
 
 __all__ = [
     "BUSY",
@@ -67,6 +67,7 @@ __all__ = [
     "Unreachable",
     "WorkbenchError",
     "WorkbenchSettings",
+    "arm_choices",
     "best_of",
     "camera_models",
     "jsonable",

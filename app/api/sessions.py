@@ -9,6 +9,7 @@ from fastapi.responses import JSONResponse
 
 from app.api.deps import Registry, SessionDep, Settings
 from app.schemas import (
+    ArmsOut,
     CameraModelsOut,
     DiscardOut,
     ExportOut,
@@ -21,12 +22,13 @@ from app.schemas import (
     SessionOut,
 )
 from app.serialize import SafeJSONResponse
-from workbench import Conflict, Invalid, NotFound, camera_models
+from workbench import Conflict, Invalid, NotFound, arm_choices, camera_models
 
 router = APIRouter(prefix="/sessions", tags=["sessions"])
 creations_router = APIRouter(prefix="/creations", tags=["sessions"])
 planners_router = APIRouter(prefix="/planners", tags=["sessions"])
 sensors_router = APIRouter(prefix="/sensors", tags=["sessions"])
+arms_router = APIRouter(prefix="/arms", tags=["sessions"])
 
 
 @router.post("", status_code=201, response_model=SessionCreated)
@@ -49,6 +51,7 @@ def create_session(
         progress_id=body.progress_id,
         camera=None if body.camera is None else body.camera.model_dump(exclude_none=True),
         guided=body.guided,
+        arm=body.arm,
     )
     return {"id": session.id}
 
@@ -187,4 +190,11 @@ def sensors() -> dict[str, list[str]]:
     return camera_models()
 
 
-routers = [router, creations_router, planners_router, sensors_router]
+@arms_router.get("", response_model=ArmsOut)
+def arms() -> dict[str, list[dict[str, Any]]]:
+    """The arms a create's ``arm`` may name: the presets (``nbv arms``), then the reach sphere; ``default`` marks
+    the server's default arm (the UR5)."""
+    return {"arms": arm_choices()}
+
+
+routers = [router, creations_router, planners_router, sensors_router, arms_router]

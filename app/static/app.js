@@ -128,7 +128,7 @@ async function action(label, fn, errorBox) {
 
 // ------------------------------------------------------------------ form (restored on reload)
 
-const FORM_IDS = ["model", "planner", "sensor", "calibration", "p-resolution", "p-parallels", "p-count", "p-sectors", "p-revisit", "p-gamma",
+const FORM_IDS = ["model", "planner", "arm-preset", "sensor", "calibration", "p-resolution", "p-parallels", "p-count", "p-sectors", "p-revisit", "p-gamma",
   "p-dc", "p-tmin", "p-tmax", "p-views", "p-seed", "auto-count"];
 
 function saveForm() {
@@ -219,6 +219,16 @@ async function loadSensors() {
       list.map((n) => `<option value="${P.esc(n)}">${P.esc(n)}</option>`).join("");
     sel.value = list.includes(saved[id]) ? saved[id] : "";
   }
+}
+
+// The arms a session may use (GET /api/arms): the presets, then the reach sphere; "" asks for the server's default.
+async function loadArms() {
+  const { arms } = await api("GET", "/api/arms");
+  const saved = JSON.parse(localStorage.getItem(FORM_KEY) || "{}")["arm-preset"];
+  const sel = $("arm-preset");
+  sel.innerHTML = '<option value="">(server default)</option>' + arms.map((a) =>
+    `<option value="${P.esc(a.name)}" title="${P.esc(a.note)}">${P.esc(a.title)}${a.dof ? ` (${a.dof} joints)` : ""}</option>`).join("");
+  sel.value = arms.some((a) => a.name === saved) ? saved : "";
 }
 
 async function loadSessions() {
@@ -544,7 +554,7 @@ function wire() {
     const camera = { sensor: $("sensor").value || null, calibration: $("calibration").value || null };
     const body = { ...objectChoice($("model").value), planner: $("planner").value, config: paramConfig(),
       seed: Number($("p-seed").value), progress_id: progressId,
-      camera: camera.sensor || camera.calibration ? camera : null };
+      camera: camera.sensor || camera.calibration ? camera : null, arm: $("arm-preset").value || null };
     const follow = await followCreate(progressId);
     try {
       const r = await api("POST", "/api/sessions", body);
@@ -1024,7 +1034,7 @@ async function init() {
   P.renderHelp();
   wire();
   restoreForm();
-  await Promise.all([loadModels(), loadPlanners(), loadSensors()]);
+  await Promise.all([loadModels(), loadPlanners(), loadSensors(), loadArms()]);
   await loadSessions();
   const compare = QUERY.get("compare");
   $("calibrate-open").href = pageUrl({ calibrate: "new" });

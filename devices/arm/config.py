@@ -13,15 +13,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from devices.arm.presets import DEFAULT_T_FLANGE_CAMERA, FILE_DEFAULTS, ArmPreset, preset_of
 from planner.validate import finite, integer, require
 
-DEFAULT_T_FLANGE_CAMERA: tuple[tuple[float, ...], ...] = (
-    (1.0, 0.0, 0.0, 0.0),
-    (0.0, 1.0, 0.0, 0.0),
-    (0.0, 0.0, 1.0, 0.05),
-    (0.0, 0.0, 0.0, 1.0),
-)
-"""The camera 5 cm in front of the flange, looking along the flange's +z (OpenCV +z forward)."""
+__all__ = ["DEFAULT_T_FLANGE_CAMERA", "ArmConfig", "rigid_matrix"]
 
 
 def rigid_matrix(name: str, value: object) -> NDArray[np.float64]:
@@ -47,26 +42,37 @@ class ArmConfig:
     """A robot arm from a URDF with a depth camera on its flange; its mount is ``CellConfig.arm_base``."""
 
     urdf: str = "ur5"
-    """'ur5' = the UR5 of the ``example-robot-data`` package (its SRDF too), or the path of a URDF file."""
+    """An arm preset ('ur5', 'ur10', 'panda', 'xarm7', 'z1': ``devices/arm/presets.py``, ``nbv arms``) or the path
+    of a URDF file. A preset brings its SRDF, flange frame, locked joints, home, mount and camera mount: the
+    fields below left at their defaults take the preset's."""
     srdf: str = ""
-    """SRDF whose ``disable_collisions`` pairs are not checked ('' = the UR5's for 'ur5', none otherwise).
+    """SRDF whose ``disable_collisions`` pairs are not checked ('' = the preset's; none for a URDF file).
     Geometries of adjacent links are never checked against each other."""
     package_dirs: tuple[str, ...] = ()
     """Where ``package://`` mesh paths of the URDF are looked up (the URDF's folder and its parents are added)."""
-    flange_frame: str = "tool0"
-    """The URDF frame the camera is mounted on."""
+    flange_frame: str = ""
+    """The URDF frame the camera is mounted on ('' = the preset's; 'tool0' for a URDF file)."""
     T_flange_camera: tuple[tuple[float, ...], ...] = DEFAULT_T_FLANGE_CAMERA
-    """Hand-eye calibration: the camera pose (OpenCV axes) in the flange frame, a 4x4 rigid transform (metres)."""
+    """Hand-eye calibration: the camera pose (OpenCV axes) in the flange frame, a 4x4 rigid transform (metres).
+    The default (5 cm in front of the flange) stands for the preset's camera mount."""
     camera_size: tuple[float, float, float] = (0.09, 0.03, 0.03)
     """The camera body, a box behind the optical centre (x, y, z extents in the camera frame), metres;
     checked for collisions like the links."""
-    base: tuple[float, float, float] = (-0.85, 0.0, 0.0)
-    """Position of the arm's mount (URDF root) in the cell's base frame, metres: beside the turntable, so that
-    the paper's hemisphere at the default working distance is mostly but not entirely reachable (with the
-    UR5, the two top parallels are out of reach). The reach-sphere cell uses ``cell.arm_base`` instead."""
-    home_deg: tuple[float, ...] = (0.0, -90.0, 90.0, -90.0, -90.0, 0.0)
-    """Configuration the arm starts from, degrees, one per joint (() or a wrong length = all zeros, clipped
-    to the limits). The default is the UR5's elbow-up pose with the flange looking down."""
+    base: tuple[float, ...] = ()
+    """Position of the arm's mount (URDF root) in the cell's base frame, metres, 3 numbers (() = the preset's
+    mount; (-0.85, 0, 0) for a URDF file): beside the turntable. The UR5's (-0.85, 0, 0) reaches most but not
+    all of the paper's hemisphere at the default working distance (the two top parallels are out of reach);
+    ``nbv arms check NAME`` searches a mount. The reach-sphere cell uses ``cell.arm_base`` instead."""
+    home_deg: tuple[float, ...] = ()
+    """Configuration the arm starts from, degrees, one per (unlocked) joint (() = the preset's collision-free
+    home, all zeros for a URDF file; a wrong length = all zeros; clipped to the limits). The UR5's is its
+    elbow-up pose with the flange looking down."""
+    locked_joints: tuple[str, ...] = ()
+    """Joints of the URDF that are not the arm's (grippers, fingers): removed from the model at
+    ``locked_positions``, never planned for, never moved (() = the preset's; none for a URDF file)."""
+    locked_positions: tuple[float, ...] = ()
+    """The value of each of ``locked_joints``, in the URDF's unit (radians, or metres for a prismatic joint);
+    () = each joint's value in the middle of its limits (or 0 inside them)."""
     base_yaw_deg: float = 0.0
     """Rotation of the arm's mount about the vertical axis, degrees."""
     joint_lower_deg: tuple[float, ...] = ()
@@ -111,9 +117,24 @@ class ArmConfig:
         require(isinstance(self.urdf, str) and self.urdf.strip() != "", f"arm.urdf: 'ur5' or a path, got {self.urdf!r}")
         require(isinstance(self.srdf, str), f"arm.srdf: must be a path or '', got {self.srdf!r}")
         require(
-            isinstance(self.flange_frame, str) and self.flange_frame != "",
-            f"arm.flange_frame: must be a frame name, got {self.flange_frame!r}",
+            isinstance(self.flange_frame, str), f"arm.flange_frame: must be a frame name, got {self.flange_frame!r}"
         )
+        locked = self.locked_joints
+        require(
+            isinstance(locked, list | tuple) and all(isinstance(j, str) and j for j in locked),
+            f"arm.locked_joints: must be a list of joint names, got {locked!r}",
+        )
+        object.__setattr__(self, "locked_joints", tuple(locked))
+        values = self.locked_positions
+        require(
+            isinstance(values, list | tuple) and finite(*values),
+            f"arm.locked_positions: must be a list of finite numbers, got {values!r}",
+        )
+        require(
+            len(values) in (0, len(self.locked_joints)),
+            f"arm.locked_positions: need one value per locked joint ({len(self.locked_joints)}), got {len(values)}",
+        )
+        object.__setattr__(self, "locked_positions", tuple(float(v) for v in values))
         dirs = self.package_dirs
         require(
             isinstance(dirs, list | tuple) and all(isinstance(d, str) for d in dirs),
@@ -139,7 +160,7 @@ class ArmConfig:
             base = tuple(float(v) for v in self.base)
         except (TypeError, ValueError):
             raise ValueError(f"arm.base: must be 3 numbers, got {self.base!r}") from None
-        require(len(base) == 3 and finite(*base), f"arm.base: must be 3 finite numbers, got {self.base!r}")
+        require(len(base) in (0, 3) and finite(*base), f"arm.base: must be 3 finite numbers, got {self.base!r}")
         object.__setattr__(self, "base", base)
         require(
             isinstance(self.home_deg, list | tuple) and finite(*self.home_deg),
@@ -174,6 +195,44 @@ class ArmConfig:
             require(integer(v) and v >= 1, f"arm.{name}: must be an integer >= 1, got {v!r}")
 
     @property
+    def preset(self) -> ArmPreset | None:
+        """The preset ``urdf`` names, or None for a URDF file."""
+        return preset_of(self.urdf)
+
+    @property
+    def defaults(self) -> ArmPreset:
+        """Where the fields left at their defaults come from: the preset, or :data:`FILE_DEFAULTS` for a file."""
+        return self.preset or FILE_DEFAULTS
+
+    @property
+    def flange(self) -> str:
+        """The flange frame: ``flange_frame``, else the preset's."""
+        return self.flange_frame or self.defaults.flange_frame
+
+    @property
+    def mount(self) -> tuple[float, float, float]:
+        """The arm's mount in the cell's base frame, metres: ``base``, else the preset's."""
+        x, y, z = self.base or self.defaults.base
+        return (x, y, z)
+
+    @property
+    def home(self) -> tuple[float, ...]:
+        """The start configuration, degrees: ``home_deg``, else the preset's."""
+        return self.home_deg or self.defaults.home_deg
+
+    @property
+    def locks(self) -> tuple[tuple[str, float | None], ...]:
+        """(joint, value or None = the middle of its limits) of every locked joint: ``locked_joints``, else the
+        preset's."""
+        if not self.locked_joints:
+            return tuple(self.defaults.locked_joints)
+        values: tuple[float | None, ...] = self.locked_positions or (None,) * len(self.locked_joints)
+        return tuple(zip(self.locked_joints, values, strict=True))
+
+    @property
     def T_flange_camera_matrix(self) -> NDArray[np.float64]:
-        """(4, 4) float64 the hand-eye transform."""
+        """(4, 4) float64 the hand-eye transform (the preset's camera mount when ``T_flange_camera`` is the
+        default)."""
+        if self.T_flange_camera == DEFAULT_T_FLANGE_CAMERA:
+            return np.array(self.defaults.T_flange_camera, dtype=np.float64)
         return np.array(self.T_flange_camera, dtype=np.float64)

@@ -27,38 +27,84 @@ STALL_RATIO = 0.9
 """... to at most this fraction of what it was, or the seed is given up."""
 MAX_STEP = 0.5
 """Largest joint step of one iteration, radians (keeps the iteration from jumping between branches)."""
+NULL_GAIN = 0.5
+"""A redundant arm (more than 6 joints): gain of the secondary task in the Jacobian's null space, which pulls the
+joints towards the reference configuration (the current joints on a move) ..."""
+LIMIT_GAIN = 0.01
+"""... and away from the joint limits (the gradient of ``sum(((q - mid) / range)^2)``, strongest near a limit)."""
+NULL_ITERATIONS = 10
+"""A redundant arm: iterations of the secondary task after the pose is reached (the self-motion that brings the
+solution nearer the reference and away from the limits while the camera stays put)."""
+SELF_MOTION_DONE = 1e-3
+"""Radians: a self-motion step smaller than this (every joint) ends it."""
+LIMIT_MARGIN = 0.05
+"""Fraction of a joint's range kept clear of each limit by the limit term (where it can be, for a redundant arm)."""
 
 
 def dls(
-    arm: ArmModel, data: Any, M_target: Any, q0: NDArray[np.float64], iterations: int, tolerance: float
+    arm: ArmModel,
+    data: Any,
+    M_target: Any,
+    q0: NDArray[np.float64],
+    iterations: int,
+    tolerance: float,
+    reference: NDArray[np.float64] | None = None,
 ) -> NDArray[np.float64] | None:
     """(n,) a configuration putting the camera at ``M_target`` (``pinocchio.SE3``, base frame) from seed ``q0``,
-    or None if damped least squares does not converge in ``iterations`` steps. No joint limits here."""
+    or None if damped least squares does not converge in ``iterations`` steps. No joint limits here.
+
+    A redundant arm (more than 6 joints) uses its redundancy: once the pose is reached, up to
+    :data:`NULL_ITERATIONS` steps of self-motion follow, in the Jacobian's null space (the camera stays put): a pull
+    towards ``reference`` (``q0`` when None) and a push away from the joint limits (:data:`NULL_GAIN`,
+    :data:`LIMIT_GAIN`), each followed by the correction of the pose (the last configuration within the tolerance
+    is returned)."""
     import pinocchio as pin  # pyright: ignore[reportMissingImports]  (under cmeel.prefix)
 
     model, frame = arm.model, arm.camera_frame
     q = np.array(q0, dtype=np.float64)
     eye6 = np.eye(6)
+    redundant = model.nv > 6
+    ref = np.array(q0 if reference is None else reference, dtype=np.float64)
+    mid, span = 0.5 * (arm.lower + arm.upper), np.maximum(arm.upper - arm.lower, 1e-6)
     history: list[float] = []
-    for i in range(iterations):
+    solved: NDArray[np.float64] | None = None
+    extra = 0
+    for i in range(iterations + 2 * NULL_ITERATIONS):
         pin.forwardKinematics(model, data, q)
         M = pin.updateFramePlacement(model, data, frame)
         iMd = M.actInv(M_target)
         err = pin.log6(iMd).vector
         position, rotation = math.sqrt(err[:3] @ err[:3]), math.sqrt(err[3:] @ err[3:])
-        if position < tolerance and rotation < 10 * tolerance:
-            return q
-        history.append(position + 0.1 * rotation)
-        if i >= STALL_WINDOW and history[-1] > STALL_RATIO * history[-1 - STALL_WINDOW]:
-            return None  # stalled: out of reach from this seed (a singular or limit-bound configuration)
+        on_pose = position < tolerance and rotation < 10 * tolerance
+        if on_pose:
+            if not redundant or extra >= NULL_ITERATIONS:
+                return q
+            solved = q
+            extra += 1
+        elif solved is not None:
+            pass  # the self-motion left the pose by its linearisation error: this step corrects it
+        elif i >= iterations:
+            return None
+        else:
+            history.append(position + 0.1 * rotation)
+            if i >= STALL_WINDOW and history[-1] > STALL_RATIO * history[-1 - STALL_WINDOW]:
+                return None  # stalled: out of reach from this seed (a singular or limit-bound configuration)
         pin.computeJointJacobians(model, data)  # from the placements just computed (no second FK)
         J = -pin.Jlog6(iMd.inverse()) @ pin.getFrameJacobian(model, data, frame, pin.LOCAL)
-        v = -J.T @ np.linalg.solve(J @ J.T + DAMPING * eye6, err)
+        JJt = J @ J.T + DAMPING * eye6
+        v = -J.T @ np.linalg.solve(JJt, err)
+        if on_pose:  # self-motion: the secondary task projected into the null space
+            centred = (q - mid) / span
+            z = NULL_GAIN * (ref - q) - LIMIT_GAIN * centred / np.maximum(0.5 - np.abs(centred), LIMIT_MARGIN) ** 2
+            step = z - J.T @ np.linalg.solve(JJt, J @ z)
+            if float(np.max(np.abs(step))) < SELF_MOTION_DONE:
+                return q
+            v = v + step
         largest = float(np.max(np.abs(v)))
         if largest > MAX_STEP:
             v *= MAX_STEP / largest
         q = q + v
-    return None
+    return solved
 
 
 def fit_limits(
@@ -116,7 +162,7 @@ def solve_ik(
     solutions: list[NDArray[np.float64]] = []
     converged = False
     for seed in seeds:
-        q = dls(arm, data, M_target, seed, cfg.ik_iterations, cfg.ik_tolerance)
+        q = dls(arm, data, M_target, seed, cfg.ik_iterations, cfg.ik_tolerance, reference)
         if q is None:
             continue
         converged = True

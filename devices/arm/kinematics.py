@@ -72,16 +72,16 @@ class ArmKinematics:
     """config: the arm. plate_radius, plate_thickness: the turntable (``CellConfig``), metres."""
 
     def __init__(self, config: ArmConfig, plate_radius: float, plate_thickness: float) -> None:
-        if math.hypot(config.base[0], config.base[1]) < plate_radius:
+        if math.hypot(config.mount[0], config.mount[1]) < plate_radius:
             raise ValueError(
-                f"arm.base: {config.base} is inside the plate (radius {plate_radius} m about the origin); "
+                f"arm.base: {config.mount} is inside the plate (radius {plate_radius} m about the origin); "
                 "put the arm beside the turntable"
             )
         self.config = config
         # the model (cached per config) does not depend on how the cell times its moves: one model for both
-        self.model: ArmModel = load_arm(dataclasses.replace(config, turn_while_moving=False), config.base)
+        self.model: ArmModel = load_arm(dataclasses.replace(config, turn_while_moving=False), config.mount)
         self.world = CollisionWorld(self.model, plate_radius, plate_thickness)
-        home = np.radians(config.home_deg) if len(config.home_deg) == self.model.nq else np.zeros(self.model.nq)
+        home = np.radians(config.home) if len(config.home) == self.model.nq else np.zeros(self.model.nq)
         self.home: NDArray[np.float64] = np.clip(home, self.model.lower, self.model.upper)
         self.reach = ArmReach(self.model, self.world, self.home, turn_while_moving=config.turn_while_moving)
         self._turn_hits: dict[tuple[bytes, float], str | None] = {}

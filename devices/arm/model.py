@@ -11,6 +11,7 @@ The mount is baked into the Pinocchio model, so its forward kinematics give ``T_
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import importlib.metadata
 import math
@@ -31,23 +32,33 @@ def example_robot_data_share() -> Path:
         dist = importlib.metadata.distribution("example-robot-data")
     except importlib.metadata.PackageNotFoundError:
         raise ValueError(
-            "arm.urdf: 'ur5' needs the example-robot-data package (pip install example-robot-data)"
+            "arm.urdf: the arm presets need the example-robot-data package (pip install example-robot-data)"
         ) from None
     return Path(str(dist.locate_file("cmeel.prefix/share")))
 
 
 def resolve_urdf(config: ArmConfig) -> tuple[Path, Path | None, list[str]]:
-    """(URDF path, SRDF path or None, package dirs) for ``config``; ValueError naming the field if missing."""
-    if config.urdf == "ur5":
+    """(URDF path, SRDF path or None, package dirs) for ``config``; ValueError naming the field if missing.
+
+    A preset's files come from the installed ``example-robot-data``, whose ``package://example-robot-data/...``
+    mesh paths resolve from its ``cmeel.prefix/share`` (added to the package dirs). A URDF file gets its folder
+    and three parents, and the installed ``share`` folder too (a copy of a preset's URDF still finds its meshes).
+    """
+    preset = config.preset
+    if preset is not None:
         share = example_robot_data_share()
-        robots = share / "example-robot-data" / "robots" / "ur_description"
-        urdf = robots / "urdf" / "ur5_robot.urdf"
-        srdf: Path | None = Path(config.srdf) if config.srdf else robots / "srdf" / "ur5.srdf"
+        robots = share / "example-robot-data" / "robots"
+        urdf = robots / preset.urdf
+        srdf: Path | None = (
+            Path(config.srdf).expanduser() if config.srdf else (robots / preset.srdf if preset.srdf else None)
+        )
         dirs = [str(share)]
     else:
         urdf = Path(config.urdf).expanduser()
         srdf = Path(config.srdf).expanduser() if config.srdf else None
         dirs = [str(urdf.parent), *(str(p) for p in urdf.parents[:3])]
+        with contextlib.suppress(ValueError):
+            dirs.append(str(example_robot_data_share()))
     if not urdf.is_file():
         raise ValueError(f"arm.urdf: no such file {str(urdf)!r}")
     if srdf is not None and not srdf.is_file():
@@ -76,6 +87,8 @@ class ArmModel:
     urdf_path: Path
     srdf_path: Path | None
     package_dirs: tuple[str, ...]
+    locked: tuple[tuple[str, float], ...] = ()
+    """The joints removed from the model (not the arm's: grippers, fingers) and the value each is fixed at."""
 
     @property
     def joint_names(self) -> tuple[str, ...]:
@@ -143,13 +156,15 @@ def load_arm(config: ArmConfig, arm_base: tuple[float, float, float]) -> ArmMode
         raise ValueError(f"arm.urdf: {urdf.name} has no movable joint")
     if model.nq != model.nv or any(model.joints[i].nq != 1 for i in range(1, model.njoints)):
         raise ValueError(f"arm.urdf: {urdf.name} has continuous or multi-axis joints (only 1-DoF joints with limits)")
-    if not model.existFrame(config.flange_frame):
+    flange_frame = config.flange
+    if not model.existFrame(flange_frame):
         frames = [f.name for f in model.frames][-4:]
-        raise ValueError(f"arm.flange_frame: no frame {config.flange_frame!r} in {urdf.name} (last frames: {frames})")
+        raise ValueError(f"arm.flange_frame: no frame {flange_frame!r} in {urdf.name} (last frames: {frames})")
     try:
         geometry = pin.buildGeomFromUrdf(model, str(urdf), pin.GeometryType.COLLISION, package_dirs=dirs)
     except Exception as exc:
         raise ValueError(f"arm.urdf: cannot load the collision meshes of {urdf.name} ({_first_line(exc)})") from None
+    model, geometry, locked = _lock_joints(pin, config, model, geometry, urdf.name)
 
     lower, upper = _limits(config, model)
     T_base_mount = mount_pose(arm_base, config.base_yaw_deg)
@@ -166,12 +181,11 @@ def load_arm(config: ArmConfig, arm_base: tuple[float, float, float]) -> ArmMode
         if geometry.geometryObjects[i].parentJoint == 0:
             geometry.geometryObjects[i].placement = M_mount * geometry.geometryObjects[i].placement
 
-    flange = model.frames[model.getFrameId(config.flange_frame)]
+    flange_id = _frame_id(pin, model, flange_frame)
+    flange = model.frames[flange_id]
     T_fc = config.T_flange_camera_matrix
     M_joint_camera = flange.placement * pin.SE3(T_fc[:3, :3], T_fc[:3, 3])
-    camera_frame = model.addFrame(
-        pin.Frame("camera", flange.parentJoint, model.getFrameId(config.flange_frame), M_joint_camera, pin.OP_FRAME)
-    )
+    camera_frame = model.addFrame(pin.Frame("camera", flange.parentJoint, flange_id, M_joint_camera, pin.OP_FRAME))
     sx, sy, sz = config.camera_size
     if sx > 0 and sy > 0 and sz > 0:  # the body lies behind the optical centre
         M_box = M_joint_camera * pin.SE3(np.eye(3), np.array([0.0, 0.0, -0.5 * sz]))
@@ -195,7 +209,40 @@ def load_arm(config: ArmConfig, arm_base: tuple[float, float, float]) -> ArmMode
         urdf_path=urdf,
         srdf_path=srdf,
         package_dirs=tuple(dirs),
+        locked=locked,
     )
+
+
+def _lock_joints(
+    pin: Any, config: ArmConfig, model: Any, geometry: Any, urdf_name: str
+) -> tuple[Any, Any, tuple[tuple[str, float], ...]]:
+    """(model, geometry, ((joint, value), ...)) with the locked joints of ``config`` (:attr:`ArmConfig.locks`)
+    removed at their values (``pinocchio.buildReducedModel``); ValueError naming the field for an unknown joint or
+    a value outside its limits."""
+    locks = config.locks
+    if not locks:
+        return model, geometry, ()
+    q_ref = pin.neutral(model)
+    ids, values = [], []
+    for name, value in locks:
+        if not model.existJointName(name):
+            known = [model.names[i] for i in range(1, model.njoints)]
+            raise ValueError(f"arm.locked_joints: no joint {name!r} in {urdf_name} (joints: {known})")
+        jid = model.getJointId(name)
+        iq = model.joints[jid].idx_q
+        lo, hi = float(model.lowerPositionLimit[iq]), float(model.upperPositionLimit[iq])
+        if value is None:
+            value = 0.5 * (lo + hi) if math.isfinite(lo) and math.isfinite(hi) and not lo <= 0.0 <= hi else 0.0
+            value = min(max(value, lo), hi) if math.isfinite(lo) and math.isfinite(hi) else value
+        if math.isfinite(lo) and math.isfinite(hi) and not lo - 1e-9 <= value <= hi + 1e-9:
+            raise ValueError(f"arm.locked_positions: {name} = {value} is outside its limits [{lo}, {hi}]")
+        q_ref[iq] = value
+        ids.append(jid)
+        values.append((name, float(value)))
+    if len(ids) >= model.nq:
+        raise ValueError(f"arm.locked_joints: every joint of {urdf_name} is locked")
+    reduced, reduced_geometry = pin.buildReducedModel(model, geometry, ids, q_ref)
+    return reduced, reduced_geometry, tuple(values)
 
 
 def _limits(config: ArmConfig, model: Any) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -222,6 +269,13 @@ def _limits(config: ArmConfig, model: Any) -> tuple[NDArray[np.float64], NDArray
     return lower, upper
 
 
+def _frame_id(pin: Any, model: Any, name: str) -> int:
+    """The id of frame ``name``: the link's (BODY) frame when a joint and a link share the name (Unitree's Z1)."""
+    if model.existFrame(name, pin.FrameType.BODY):
+        return int(model.getFrameId(name, pin.FrameType.BODY))
+    return int(model.getFrameId(name))
+
+
 def _first_line(exc: BaseException) -> str:
     text = str(exc).strip().splitlines()
     return text[0] if text else type(exc).__name__
@@ -231,4 +285,4 @@ def check_arm(config: ArmConfig) -> None:
     """Load the arm of ``config`` once (cached) so a bad URDF, SRDF or flange frame fails at start-up with its
     one-line ``ValueError`` naming the field, not when the first session is made. Call it with
     ``CellConfig.arm`` when ``CellConfig.kinematics`` is 'urdf'."""
-    load_arm(config, config.base)
+    load_arm(config, config.mount)

@@ -84,7 +84,7 @@ class Calibration:
         assert self.cell.kinematics is not None
         kinematics = self.cell.kinematics
         q = self.cell.arm.joint_positions()
-        T_base_flange = kinematics.model.frame_pose(kinematics.config.flange_frame, q)
+        T_base_flange = kinematics.model.frame_pose(kinematics.config.flange, q)
         angle = float(self.cell.turntable.angle)
         T_camera_table = (T_base_flange @ self.T_flange_camera_nominal).inverse() @ rz(angle)
         predicted = T_camera_table.apply(self.target.centres_table)

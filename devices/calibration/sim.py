@@ -85,16 +85,17 @@ def calibrate_sim(
     angle_sigma_deg: float = 0.1,
     progress: Callable[[int, CalibrationPose, Capture | None], None] | None = None,
     plate_angles_deg: tuple[float, ...] = PLATE_ANGLES_DEG,
+    cell_config: CellConfig | None = None,
 ) -> dict[str, Any]:
     """Run the whole routine on a simulated cell and compare with its truth: :func:`compare`'s dict plus the
     seed, sensor, calibration, the drawn errors, captures, skipped poses and seconds. progress: as in
-    :meth:`Calibration.run`."""
+    :meth:`Calibration.run`. cell_config: the cell (its arm), default the default cell."""
     import time
 
     from devices.calibration.routine import Calibration
 
     t0 = time.perf_counter()
-    cell = calibration_sim_cell(sensor, calibration, seed)
+    cell = calibration_sim_cell(sensor, calibration, seed, cell_config=cell_config)
     routine = Calibration(cell, plate_angles_deg=plate_angles_deg)
     result = routine.run(progress, angle_sigma_deg)
     out = {

@@ -144,7 +144,7 @@ def test_base_inside_the_plate_is_refused() -> None:
         ({"ik_seeds": 0}, "arm.ik_seeds"),
         ({"camera_size": (0.1, 0.1)}, "arm.camera_size"),
         ({"base": (0.0, float("inf"), 0.0)}, "arm.base"),
-        ({"flange_frame": ""}, "arm.flange_frame"),
+        ({"flange_frame": 3}, "arm.flange_frame"),
     ],
 )
 def test_bad_arm_settings_name_the_field(kwargs, field: str) -> None:

@@ -16,7 +16,7 @@ from devices.arm.model import ArmModel, example_robot_data_share, load_arm, reso
 from planner.types import Pose
 from tests.helpers import orbit_view
 
-BASE = ArmConfig().base
+BASE = ArmConfig().mount
 TARGET = np.array([0.0, 0.0, 0.1])
 
 

@@ -49,6 +49,10 @@ OTHER: dict[str, Any] = {
     "devices.cell.arm.srdf": "robot.srdf",
     "devices.cell.arm.flange_frame": "tool1",
     "devices.cell.arm.package_dirs": ("meshes",),
+    "devices.cell.arm.base": (-0.7, 0.1, 0.02),
+    "devices.cell.arm.home_deg": (0.0, -80.0, 80.0, -90.0, -90.0, 0.0),
+    "devices.cell.arm.locked_joints": ("finger_joint",),
+    "devices.cell.arm.locked_positions": (0.01,),
     "devices.cell.arm.joint_lower_deg": (-350.0, -350.0, -170.0, -350.0, -350.0, -350.0),
     "devices.cell.arm.joint_upper_deg": (350.0, 350.0, 170.0, 350.0, 350.0, 350.0),
     "devices.cell.arm.T_flange_camera": tuple(

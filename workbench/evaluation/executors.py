@@ -89,20 +89,26 @@ def _execute(task: RunTask, mesh: MeshPayload | None, t0: float) -> RunOutcome:
         pose_noise=task.pose_noise,
         reachable=False,
         arm=task.arm,
+        cell=task.cell,
         turn_while_moving=task.turn_while_moving,
         mesh=None if mesh is None else mesh.to_trimesh(),
         sensor=task.sensor,
         calibration=task.calibration,
         on_frame=surface.integrate,
     )
-    outcome = RunOutcome(task.label, task.planner, task.seed, task.yaw_deg, terminated=scan.result.terminated)
+    outcome = RunOutcome(
+        task.label, task.run_planner, task.seed, task.yaw_deg, terminated=scan.result.terminated, arm=task.arm_label
+    )
+    cell_config = scan.cell.config
+    arm_name = "reach_sphere" if cell_config.kinematics == "reach_sphere" else cell_config.arm.urdf
     outcome.refused_moves = scan.result.refused_moves
     outcome.icp_rejected = icp_rejections(scan.result.records)
     for r in scan.result.records:
         outcome.rows.append(
             {
                 "model": task.label,
-                "planner": task.planner,
+                "planner": task.run_planner,
+                "arm": arm_name,
                 "seed": task.seed,
                 "yaw": task.yaw_deg,
                 "iteration": r.index,

@@ -67,8 +67,15 @@ class RunTask:
     pose_noise: float = 0.0
     threads: int | None = None
     """BLAS/OpenMP threads of the worker (None: library default)."""
-    arm: str = "urdf"
-    """The cell's arm (``--arm``): 'urdf' (the UR5) or 'reach_sphere'."""
+    arm: str | None = "urdf"
+    """The cell's arm (``--arm``): a preset name or URDF file, 'urdf' (the arm of ``cell``, the UR5 by default),
+    'reach_sphere', or None (``cell`` as it is)."""
+    cell: Any = None
+    """The cell's settings (``devices.config.CellConfig``, the ``--config`` file's ``[devices.cell]``); None: the
+    default cell."""
+    arm_label: str = ""
+    """The arm's name in the outputs when a bench sweeps arms (``--arms``): the run's planner reads
+    ``planner@arm`` and its rows carry it in the ``arm`` column ('' = no sweep)."""
     turn_while_moving: bool = False
     """The UR5 cell turns the plate while the arm moves when it may (``--turn-while-moving``,
     ``ArmConfig.turn_while_moving``)."""
@@ -76,6 +83,11 @@ class RunTask:
     """The depth sensor's model (``--sensor``)."""
     calibration: str = "none"
     """The cell's calibration error (``--calibration``)."""
+
+    @property
+    def run_planner(self) -> str:
+        """The planner's name in the outputs: ``planner@arm`` in an arm sweep."""
+        return f"{self.planner}@{self.arm_label}" if self.arm_label else self.planner
 
 
 @dataclass
@@ -93,6 +105,8 @@ class RunOutcome:
     terminated: str | None = None
     seconds: float = 0.0
     error: str | None = None
+    arm: str = ""
+    """The arm's name when the bench sweeps arms ('' otherwise): its ceiling is the arm's own."""
     refused_moves: list[dict[str, Any]] = field(default_factory=list)
     icp_rejected: list[dict[str, Any]] = field(default_factory=list)
 
@@ -101,14 +115,20 @@ class RunOutcome:
         """(model, seed, yaw): what pairs runs of different planners."""
         return (self.label, self.seed, self.yaw)
 
+    @property
+    def ceiling_key(self) -> tuple[str, float]:
+        """The key of this run's reachable-coverage ceiling: (model, yaw), or (model@arm, yaw) in an arm sweep."""
+        return (f"{self.label}@{self.arm}" if self.arm else self.label, self.yaw)
+
     @staticmethod
     def failed(task: RunTask, error: str) -> RunOutcome:
-        return RunOutcome(task.label, task.planner, task.seed, task.yaw_deg, error=error)
+        return RunOutcome(task.label, task.run_planner, task.seed, task.yaw_deg, error=error, arm=task.arm_label)
 
     def to_json(self) -> dict[str, Any]:
         return {
             "model": self.label,
             "planner": self.planner,
+            "arm": self.arm or None,
             "seed": self.seed,
             "yaw": self.yaw,
             "views": len(self.rows),

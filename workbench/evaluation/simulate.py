@@ -4,6 +4,7 @@ coverage and, optionally, the reachable-coverage ceiling."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable
@@ -50,11 +51,12 @@ def simulate(
     on_start: Callable[[str], None] | None = None,
     on_iteration: Callable[[IterationRecord, PlanResult], None] | None = None,
     mesh: Any = None,
-    arm: str = "urdf",
+    arm: str | None = "urdf",
     on_frame: Callable[[DepthFrame], None] | None = None,
     sensor: str = "ideal",
     calibration: str = "none",
     turn_while_moving: bool = False,
+    cell: Any = None,
 ) -> SimScan:
     """Load ``model``, build the simulated cell, run Algorithm 1, measure coverage.
 
@@ -64,8 +66,10 @@ def simulate(
     applied again). ``reachable``: also compute the reachable-coverage ceiling of the object
     and placement (:func:`workbench.evaluation.object_ceiling.object_ceiling`, independent of the run).
     ``on_start``: told the model's display name before the scan; ``on_iteration``: called after every
-    iteration with its record and plan. ``arm``: 'urdf' (the UR5 with IK, collision checks and joint trajectories) or 'reach_sphere'
-    (``CellConfig.kinematics``). ``on_frame``: hears each frame with its registered pose (``run_scan``).
+    iteration with its record and plan. ``arm``: an arm preset ('ur5', 'panda', ...: ``devices/arm/presets.py``) or the
+    path of a URDF file (IK, collision checks and joint trajectories), 'urdf' (the arm of ``cell``, the UR5 by
+    default) or 'reach_sphere' (``devices.config.cell_with_arm``). ``cell``: the cell's settings
+    (``devices.config.CellConfig``, e.g. a config file's ``[devices.cell]``; default the default cell). ``on_frame``: hears each frame with its registered pose (``run_scan``).
     ``turn_while_moving``: the UR5 cell turns the plate while the arm moves when the arm's path stays clear of the
     turning object (``ArmConfig.turn_while_moving``).
     ``sensor``, ``calibration``: the camera's sensor model and the cell's calibration error by name
@@ -73,9 +77,8 @@ def simulate(
     (``devices.planner_noise.planner_config_for``). Accuracy per view against the mesh is in
     ``IterationRecord.accuracy``.
     """
-    from devices.arm.config import ArmConfig
     from devices.builtins import resolve_model
-    from devices.config import CameraConfig, CellConfig
+    from devices.config import CameraConfig, CellConfig, cell_with_arm
     from devices.mesh import sample_surface, turned_about_plate_axis
     from devices.planner_noise import planner_config_for
     from devices.sim import make_sim_cell
@@ -97,9 +100,10 @@ def simulate(
         depth_noise_std=depth_noise, pose_noise_translation=pose_noise, sensor=sensor, calibration=calibration
     )
     config = planner_config_for(config, camera)
-    if arm not in ("urdf", "reach_sphere"):
-        raise ValueError(f"--arm: 'urdf' or 'reach_sphere', got {arm!r}")
-    cell_config = CellConfig(kinematics=arm, arm=ArmConfig(turn_while_moving=turn_while_moving))  # type: ignore[arg-type]
+    base_cell: CellConfig = cell if cell is not None else CellConfig()
+    cell_config = cell_with_arm(base_cell, arm)
+    if turn_while_moving:
+        cell_config = dataclasses.replace(cell_config, arm=dataclasses.replace(cell_config.arm, turn_while_moving=True))
     cell = make_sim_cell(mesh, camera, cell_config, seed=seed)
     samples = sample_surface(mesh, 10_000, seed=seed)
     planner = Planner(config, evaluator=planner_name)

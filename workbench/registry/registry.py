@@ -33,7 +33,7 @@ from workbench.session.values import SessionEvent
 from workbench.settings import WorkbenchSettings
 from workbench.sources.camera_models import check_camera_models
 from workbench.sources.limits import check_config
-from workbench.sources.parts import SURFACE_SAMPLES, SessionParts, build_parts, session_devices
+from workbench.sources.parts import SURFACE_SAMPLES, SessionParts, build_parts, check_arm_name, session_devices
 from workbench.workers.client import JobKilled, offload_rendering, render_spec, truth_spec
 from workbench.workers.pool import Engine
 
@@ -154,6 +154,7 @@ class SessionRegistry:
         progress_id: str | None = None,
         camera: dict[str, Any] | None = None,
         guided: bool = False,
+        arm: str | None = None,
     ) -> Session:
         """A new session. 422 for a bad config, model, source, fault setting, planner or camera model; 404 for an
         unknown recording.
@@ -161,6 +162,8 @@ class SessionRegistry:
         planner: the view evaluator (``planner.evaluators.evaluator_names()``), journaled in the header.
         camera: ``{"sensor": NAME, "calibration": NAME}`` (either optional; default the server's
         ``devices.camera``): the simulated sensor and calibration error (``workbench.sources.camera_models``).
+        arm: an arm preset or 'reach_sphere' (``workbench.sources.parts.arm_choices``; default the server's ``devices.cell``), recorded
+        with the devices in the journal header (a journal without it resumes with the UR5).
         The planner config follows the camera (``devices.planner_noise.planner_config_for``) and the journal
         header records both, so a resume rebuilds the same map.
         progress_id: names this create for its progress and its cancellation (:attr:`creations`); cancelled,
@@ -177,6 +180,7 @@ class SessionRegistry:
         if progress_id is not None and progress_id.startswith(resume_id("")):
             raise Invalid(f"progress_id: {progress_id!r} starts with 'resume-', which resumes use")
         camera_models = check_camera_models(camera)
+        arm = check_arm_name(arm)
         slot = self._make_room()
         try:
             with self.creations.run(progress_id) as creation:
@@ -192,6 +196,7 @@ class SessionRegistry:
                     camera_models,
                     slot,
                     guided,
+                    arm,
                 )
         finally:
             self._give_back(slot)
@@ -209,9 +214,10 @@ class SessionRegistry:
         camera: dict[str, str] | None = None,
         slot: _Slot | None = None,
         guided: bool = False,
+        arm: str | None = None,
     ) -> Session:
         name = model or self.settings.devices.model
-        devices = session_devices(self.settings, name, seed, camera)
+        devices = session_devices(self.settings, name, seed, camera, arm)
         parts = build_parts(
             self.settings, name, source, seed, devices, fault_config, creation.stage, faults_asked, bool(camera)
         )
@@ -224,7 +230,7 @@ class SessionRegistry:
         except Conflict:
             _release(parts)
             raise
-        devices = session_devices(self.settings, parts.model, seed, camera)
+        devices = session_devices(self.settings, parts.model, seed, camera, arm)
         planner_config = planner_config_for(planner_config, devices.camera)  # also what the header records
         with self._lock:
             session_id = self._new_id()

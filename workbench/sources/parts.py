@@ -279,12 +279,45 @@ def build_parts(
     return SessionParts(name, model_kind, mesh, cell, samples, source, injector)
 
 
+def arm_choices() -> list[dict[str, Any]]:
+    """The arms a create request may name (the arms resource lists them): every preset, then 'reach_sphere'."""
+    from devices.arm.presets import DEFAULT_PRESET, PRESETS
+
+    arms: list[dict[str, Any]] = [
+        {"name": p.name, "title": p.title, "dof": p.dof, "default": p.name == DEFAULT_PRESET, "note": p.note}
+        for p in PRESETS.values()
+    ]
+    arms.append({"name": "reach_sphere", "title": "reach sphere (no arm model)", "dof": 0, "default": False,
+                 "note": "the camera goes wherever it is within the reach sphere"})  # fmt: skip
+    return arms
+
+
+def check_arm_name(arm: str | None) -> str | None:
+    """A create request's ``arm``: None, a preset or 'reach_sphere' (not a file: a client names no server path);
+    Invalid listing them otherwise."""
+    if arm is None:
+        return None
+    known = [a["name"] for a in arm_choices()]
+    if arm not in known:
+        raise Invalid(f"arm: unknown arm {arm!r} (known: {', '.join(known)})")
+    return arm
+
+
 def session_devices(
-    settings: WorkbenchSettings, model: str, seed: int, camera: dict[str, str] | None = None
+    settings: WorkbenchSettings,
+    model: str,
+    seed: int,
+    camera: dict[str, str] | None = None,
+    arm: str | None = None,
 ) -> DeviceConfig:
-    """The server's device config for one session: its model and seed, and the ``camera`` models it asked for
-    (``{"sensor", "calibration"}``, checked by ``workbench.sources.camera_models.check_camera_models``)."""
+    """The server's device config for one session: its model and seed, the ``camera`` models it asked for
+    (``{"sensor", "calibration"}``, checked by ``workbench.sources.camera_models.check_camera_models``) and the
+    ``arm`` (a preset or 'reach_sphere', :func:`check_arm_name`; None = the server's)."""
+    from devices.config import cell_with_arm
+
     devices = dataclasses.replace(settings.devices, model=model, seed=seed)
+    if arm is not None:
+        devices = dataclasses.replace(devices, cell=cell_with_arm(devices.cell, arm))
     if camera:
         devices = dataclasses.replace(devices, camera=dataclasses.replace(devices.camera, **camera))
     return devices
