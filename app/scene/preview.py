@@ -9,9 +9,9 @@ with the key :data:`PREVIEW_KEY`); when it connects, :class:`PreviewViews` (one 
 - ``/robot/arm/...`` (app/scene/robot.py): the arm where the demo's cell builds it (at its first view's pose,
   the pose nearest its home), the plate turned as it will be.
 
-No session is created and nothing is journaled. The geometry (the placed mesh, the cell's arm model, joints and
-plate angle) is computed once per server, on the first preview, and shared by every tab; a tab costs only the
-messages of its own scene. Opening a session loads the session's page, whose viewer replaces this one.
+No session is created and nothing is journaled. The geometry (the placed mesh, simplified to
+:data:`PREVIEW_TRIANGLES`; the cell's arm model, joints and plate angle) is computed once per server, on the first
+preview, and shared by every tab; a tab costs only the messages of its own scene. Opening a session loads the session's page, whose viewer replaces this one.
 """
 
 from __future__ import annotations
@@ -38,6 +38,9 @@ log = logging.getLogger(__name__)
 
 PREVIEW_KEY = "preview"
 """The key a preview viewer's ticket carries (never a session's id: those are 8 hex digits)."""
+PREVIEW_TRIANGLES = 15_000
+"""The object's triangle budget in the preview (quadric decimation, once per server): a 70 000-triangle scan sent
+whole is 1.3 MB per tab, 40 MB for a class of 30; at this budget about 0.3 MB."""
 INITIAL_EYE = np.asarray(framing(None)[0], dtype=float)
 """Where viser's client puts a new camera (the server's initial camera, app/scene/controller.py)."""
 
@@ -47,7 +50,7 @@ class PreviewGeometry:
     """What every preview tab draws, computed once.
 
     model: the default model's name; vertices (V, 3) float32 and faces (F, 3) uint32: its mesh placed on the
-    plate (table frame, metres); plate_radius: metres; arm: the cell's arm model (None for a cell without one);
+    plate (table frame, metres; at most :data:`PREVIEW_TRIANGLES` faces); plate_radius: metres; arm: the cell's arm model (None for a cell without one);
     q: (n,) its joints, angle: the plate's angle (rad), mount_xy: the arm's mount in the view's frame (metres)."""
 
     model: str
@@ -65,6 +68,7 @@ def build_geometry(settings: WorkbenchSettings) -> PreviewGeometry:
     its camera and cell; seed 0). NotFound / Invalid for a default model that does not load."""
     from devices.sim import make_sim_cell
     from workbench.sources.catalog import load_model
+    from workbench.surface import SurfaceMesh, simplify
 
     name = settings.devices.model
     mesh = load_model(settings, name)
@@ -77,10 +81,11 @@ def build_geometry(settings: WorkbenchSettings) -> PreviewGeometry:
         t = np.asarray(arm.T_base_mount.translation, dtype=float)
         c, s = math.cos(-angle), math.sin(-angle)
         mount_xy = (c * t[0] - s * t[1], s * t[0] + c * t[1])
+    shown = simplify(SurfaceMesh.canonical(np.asarray(mesh.vertices), np.asarray(mesh.faces)), PREVIEW_TRIANGLES)
     return PreviewGeometry(
         model=name,
-        vertices=np.asarray(mesh.vertices, dtype=np.float32),
-        faces=np.asarray(mesh.faces, dtype=np.uint32),
+        vertices=np.asarray(shown.vertices, dtype=np.float32),
+        faces=np.asarray(shown.faces, dtype=np.uint32),
         plate_radius=float(settings.devices.cell.plate_radius),
         arm=arm,
         q=q,
