@@ -33,6 +33,7 @@ from app.docs_ui import install_docs
 from app.errors import status_of
 from app.scene.calibration import CalibrationViews
 from app.scene.controller import SceneController
+from app.scene.preview import PreviewViews
 from app.schemas import document_error_bodies
 from app.security import SecurityMiddleware, install_log_redaction, openapi_security
 from app.serialize import SafeJSONResponse
@@ -82,6 +83,7 @@ def create_app(settings: AppSettings | None = None) -> FastAPI:
         app.state.scene = scene
         app.state.calibrations = calibrations = Calibrations(settings)  # calibrate mode: app/api/calibration.py
         app.state.calibration_views = None if scene is None else CalibrationViews(scene, calibrations)
+        app.state.preview_views = None if scene is None else PreviewViews(scene, settings)  # the first screen's
         try:
             yield
         finally:

@@ -75,7 +75,7 @@ def main() -> None:
         arm = dataclasses.replace(
             base.arm,
             T_flange_camera=tuple(tuple(float(v) for v in row) for row in X_est.matrix),
-            base=tuple(float(v) for v in np.asarray(base.arm.base) - centre),
+            base=tuple(float(v) for v in np.asarray(base.arm.mount) - centre),
         )
 
         corrected = functools.partial(_same_physical_cell, X_est=X_est, X_true=X_true, centre=centre)

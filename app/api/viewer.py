@@ -9,6 +9,7 @@ from fastapi import APIRouter, Request
 from app.api.deps import Registry, Scene, Settings
 from app.scene.controller import SceneController
 from app.scene.guard import viewer_url
+from app.scene.preview import PREVIEW_KEY
 from app.schemas import HealthOut, ViewerOut, ViewerRequest, ViewerTicketOut
 from app.settings import AppSettings, is_loopback, viewer_host
 from workbench import Conflict
@@ -52,6 +53,14 @@ def open_viewer(
     """A viewer of ``session`` for one tab: its URL carries a single-use, short-lived ticket that binds the
     viewer's websocket to this session (the viewer's Origin is checked too)."""
     return viewer_ticket(request, settings, scene, registry.get(body.session).id)
+
+
+@router.post("/preview", response_model=ViewerTicketOut, status_code=201)
+def open_preview(request: Request, settings: Settings, scene: Scene) -> dict[str, Any]:
+    """A viewer of no session, for a tab that has none open (the first screen): the simulated cell and the server's
+    default object as a demo scan would start from (app/scene/preview.py). Its ``session`` is ``"preview"``;
+    nothing is created or journaled."""
+    return viewer_ticket(request, settings, scene, PREVIEW_KEY)
 
 
 def viewer_ticket(

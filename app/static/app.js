@@ -286,6 +286,18 @@ async function openViewer() {
   }
 }
 
+// The first screen (no session open in this tab): a viewer of no session shows the simulated cell and the server's
+// default object as a demo scan would start (POST /api/viewer/preview); opening a session loads its own page.
+async function openPreview() {
+  try {
+    const v = await api("POST", "/api/viewer/preview");
+    $("viewer").src = v.url;
+    $("viewer").hidden = false;
+  } catch (e) {
+    $("viewer").hidden = true; // a server without the 3D view: the first screen without it
+  }
+}
+
 function connectEvents(delay) {
   const ws = eventSocket("session", S.session);
   S.events = ws;
@@ -1060,11 +1072,12 @@ async function init() {
     await openViewer();
     if (QUERY.get("demo")) runDemo();
   } else {
+    document.body.classList.add("first-screen"); // no empty panels: the 3D view of the cell beside the welcome
     $("picker").hidden = false;
-    $("viewer").hidden = true;
     $("legend").hidden = true;
     $("health").textContent = "choose a session";
     $("create-box").open = true;
+    openPreview();
   }
   Guide.render();
   updateButtons();

@@ -211,6 +211,7 @@ function renderPicker(list, hrefOf) {
     tbody.appendChild(tr);
   }
   $("picker-empty").hidden = list.length > 0;
+  $("picker-sessions").hidden = list.length === 0; // nothing to open: no empty list on the first screen
 }
 
 const PALETTE = ["#2e63d8", "#d0312d", "#15894a", "#8a4fd8", "#e08a00", "#0a8ea0"];

@@ -1,8 +1,9 @@
 """Take the getting-started screenshots of the first screen and the guided mode:
 ``python -m tests.e2e.screenshot_first_screen docs [--model NAME]``.
 
-Saves ``first-screen.png`` (the page with no session, 1024x700), ``guided-mode.png`` (the demo scan after one
-click, the guide on, 1366x768) and ``workbench-1024.png`` (the page at 1024x700 after the first approved view).
+Saves ``first-screen.png`` (the page with no session, 1024x700: the cell and the default object in 3D),
+``guided-mode.png`` (the demo scan after one click, the guide on, 1366x768) and ``workbench-1024.png`` (the page
+at 1024x700 after the first approved view).
 The demo uses the server's default object (``--model`` sets the server's models directory's first choice: the
 shared bunny when ``../shared/models`` exists).
 """
@@ -31,7 +32,8 @@ def main(out_dir: str = "docs") -> None:
             page = browser.new_page(viewport={"width": 1024, "height": 700}, device_scale_factor=1)
             page.goto(f"{server.url}/")
             expect(page.get_by_test_id("demo")).to_be_visible()
-            save_screenshot(page, str(out / "first-screen.png"), 300)
+            page.wait_for_timeout(8000)  # the 3D view of the cell drawn (and viser's headless notice up, closed next)
+            save_screenshot(page, str(out / "first-screen.png"), 1000)
             page.set_viewport_size({"width": 1366, "height": 768})
             page.get_by_test_id("demo").click()  # one click: a session, its first view and a plan
             expect(page.locator("#state")).to_have_text("planned", timeout=240_000)

@@ -2,6 +2,8 @@
 approved view (two clicks), the guided mode, and the frictions a newcomer met, each checked where it showed:
 
 - a primary button keeps its colour and a readable contrast on hover; a disabled one is grey;
+- the first screen shows the cell in 3D before any session (the default object a minimum share of the view, the
+  arm drawn; pixels) and none of a session's empty panels, nothing primary cut off at 1024x700 and 1366x768;
 - the object fills a minimum share of the 3D view with the default camera (pixels), its mesh shown before the first
   picture;
 - Capture, Plan, Approve, Preview motion, Discard and Run auto above the fold at 1024x700 and 1366x768;
@@ -108,6 +110,17 @@ def object_share(png: bytes) -> float:
     return float(box / (rgb.shape[0] * rgb.shape[1]))
 
 
+def dark_share(png: bytes) -> float:
+    """The share of the image in the arm's dark grey (every channel under 110, nearly unsaturated: the plate, the
+    object and the background are light; the label's and the viewer's status text a speck)."""
+    import numpy as np
+    from PIL import Image
+
+    rgb = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.int32)
+    dark = (rgb.max(axis=-1) < 110) & (rgb.max(axis=-1) - rgb.min(axis=-1) < 30)
+    return float(dark.mean())
+
+
 def test_a_first_time_user_reaches_an_approved_view_in_two_clicks(server: LiveServer, context: Any) -> None:
     from playwright.sync_api import expect
 
@@ -123,6 +136,31 @@ def test_a_first_time_user_reaches_an_approved_view_in_two_clicks(server: LiveSe
     page.goto(f"{server.url}/")
     expect(page.get_by_test_id("welcome")).to_be_visible()
     assert above_fold(page, ("demo",)) == []
+
+    # ... no empty panel of a session, nothing primary cut off (the New session form open, its Create button)
+    for empty in ("#status-box", "#right", "#charts-box", "#timeline", "#layers", "#legend", "#picker-sessions"):
+        expect(page.locator(empty)).to_be_hidden()
+    expect(page.get_by_test_id("create")).to_be_visible()
+    for size in ({"width": 1366, "height": 768}, {"width": 1024, "height": 700}):
+        page.set_viewport_size(size)
+        assert above_fold(page, ("demo", "create", "model", "planner", "viewer")) == [], size
+
+    # ... and the 3D view of the cell before any session: the default object a minimum share of it, the arm drawn
+    expect(page.get_by_test_id("viewer")).to_be_visible()
+    share = dark = 0.0
+    for _ in range(40):
+        close = page.frame_locator("#viewer").locator("button.mantine-Notification-closeButton")
+        if close.count():  # headless only: "software WebGL" (its orange bar is no object)
+            close.first.dispatch_event("click")
+        draw_viewer(page)
+        shot = page.locator("#viewer").screenshot()
+        share, dark = object_share(shot), dark_share(shot)
+        if share >= 0.02 and dark >= 0.003:
+            break
+        page.wait_for_timeout(500)
+    draw_viewer(page, False)
+    assert share >= 0.02 and dark >= 0.003, (share, dark)  # the arm ~0.7 %; without it ~0.07 % (text)
+    assert api.get("/api/sessions").json() == []  # the view made no session
     page.get_by_test_id("demo").hover()
     hovered = page.get_by_test_id("demo").evaluate(CONTRAST)
     assert hovered["ratio"] >= 4.5 and hovered["bg"][2] > hovered["bg"][0] + 60, hovered  # still blue, readable

@@ -202,7 +202,7 @@ def _joint_names(devices: DeviceConfig | None, count: int) -> list[str]:
         try:
             from devices.arm.model import load_arm
 
-            names = list(load_arm(devices.cell.arm, devices.cell.arm.base).joint_names)
+            names = list(load_arm(devices.cell.arm, devices.cell.arm.mount).joint_names)
             if len(names) == count:
                 return names
         except Exception:  # a name is a label: any failure falls back to numbered joints
@@ -300,7 +300,7 @@ def export_bag(
             put(c_scan, stamps[0], store.types["std_msgs/msg/String"](data=json.dumps(scan)))
             base = Pose.identity()
             if devices is not None:
-                base_xyz = devices.cell.arm.base if devices.cell.kinematics == "urdf" else devices.cell.arm_base
+                base_xyz = devices.cell.arm.mount if devices.cell.kinematics == "urdf" else devices.cell.arm_base
                 base = Pose.from_wxyz([1.0, 0.0, 0.0, 0.0], list(base_xyz))
             put(c_static, stamps[0], m.tf([m.transform(stamps[0], WORLD_FRAME, ARM_BASE_FRAME, base)]))
             for stamp, frame, arm in zip(stamps, frames, arms, strict=True):
