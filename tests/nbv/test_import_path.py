@@ -8,6 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 import nbv
 from nbv.import_path import holds_ours, plan_fix
 
@@ -79,23 +81,27 @@ import nbv  # first, as the console script and python -m nbv do
 import app, planner
 
 if __name__ == "__main__":
-    context = multiprocessing.get_context("forkserver")
-    context.set_forkserver_preload(["planner"])  # as the bench and the session workers preload ours
-    with context.Pool(1) as pool:
+    method = sys.argv[1]
+    context = multiprocessing.get_context(method)
+    if method == "forkserver":
+        context.set_forkserver_preload(["planner"])  # as the bench and the session workers preload ours
+    with context.Pool(1) as pool:  # spawn: as Dask's LocalCluster starts its workers
         child = pool.apply(eval, ("__import__('planner').__file__",))
     print(app.__file__, planner.__file__, child, os.environ.get("PYTHONSAFEPATH"), os.environ.get("PYTHONPATH"))
 """
 
 
-def test_a_forkserver_worker_started_from_a_lab_folder_imports_ours(tmp_path: Path) -> None:
-    """The trap: a forkserver imports its preloads with its own path, the working folder and PYTHONPATH first."""
+@pytest.mark.parametrize("method", ["forkserver", "spawn"])
+def test_a_worker_started_from_a_lab_folder_imports_ours(tmp_path: Path, method: str) -> None:
+    """The trap: a forkserver imports its preloads with its own path, the working folder and PYTHONPATH first; a
+    spawned child (a Dask worker of ``nbv bench --executor dask``) must follow the parent's fixed path."""
     lab = package(package(tmp_path / "lab", "app", "NAME = 'the lab app'\n"), "planner", "NAME = 'the lab planner'\n")
     script = tmp_path / "start_a_worker.py"
     script.write_text(CHILD)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(lab), str(REPO)])}
     env.pop("PYTHONSAFEPATH", None)
     done = subprocess.run(
-        [sys.executable, str(script)], cwd=lab, env=env, capture_output=True, text=True, timeout=120, check=True
+        [sys.executable, str(script), method], cwd=lab, env=env, capture_output=True, text=True, timeout=120, check=True
     )
     app_file, parent, child, safe, python_path = done.stdout.split()
     assert Path(app_file) == REPO / "app" / "__init__.py"
