@@ -35,7 +35,7 @@ from workbench.session.summaries import SessionStatus, best_of, plan_summary
 from workbench.session.values import SceneData, SessionEvent
 from workbench.settings import WorkbenchSettings
 from workbench.sources.camera_models import camera_models
-from workbench.sources.catalog import list_models, save_upload
+from workbench.sources.catalog import list_models, load_model, save_upload
 from workbench.sources.parts import arm_choices, list_recorded, list_recordings
 
 __all__ = [
@@ -74,6 +74,7 @@ __all__ = [
     "list_models",
     "list_recorded",
     "list_recordings",
+    "load_model",
     "plan_summary",
     "resume_id",
     "save_upload",

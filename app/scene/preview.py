@@ -31,8 +31,7 @@ from app.scene.camera import FRAMING_FOV_DEG, framing
 from app.scene.geometry import COLORS
 from app.scene.robot import RobotScene
 from devices.arm.model import ArmModel
-from workbench import WorkbenchError
-from workbench.settings import WorkbenchSettings
+from workbench import WorkbenchError, WorkbenchSettings
 
 log = logging.getLogger(__name__)
 
@@ -67,7 +66,7 @@ def build_geometry(settings: WorkbenchSettings) -> PreviewGeometry:
     """The default model placed on the plate and the cell the demo scan builds for it (``settings.devices``:
     its camera and cell; seed 0). NotFound / Invalid for a default model that does not load."""
     from devices.sim import make_sim_cell
-    from workbench.sources.catalog import load_model
+    from workbench import load_model
     from workbench.surface import SurfaceMesh, simplify
 
     name = settings.devices.model

@@ -8,6 +8,7 @@ message naming the cause, the journal keeps every capture taken before, and the 
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -146,12 +147,15 @@ def test_each_device_fault_ends_in_error_and_the_session_goes_on(tmp_path: Path,
             fresh.command("reset")
         # silent joint states when planning: the plan cannot start from the arm's joints; error, nothing changed
         fresh.command("silent_joints")
+        arm = c.app.state.registry.get(sid).cell.rig.arm  # type: ignore[attr-defined]
+        deadline = time.monotonic() + 10.0  # the last joint state heard must be older than the arm's limit
+        while (arm.states.age() or 0.0) <= arm.config.state_timeout_s and time.monotonic() < deadline:
+            time.sleep(0.02)
         r = c.post(f"/api/sessions/{sid}/plan")
         assert r.status_code == 503 and "joint states silent" in r.json()["detail"], r.text
         status = c.get(f"/api/sessions/{sid}").json()
         assert status["state"] == "error" and "joint states silent" in status["error"], status
         fresh.command("reset")
-        arm = c.app.state.registry.get(sid).cell.rig.arm  # type: ignore[attr-defined]
         heard = arm.states.count
         assert arm.states.wait(lambda m: arm.states.count > heard, 3.0) is not None  # the joints speak again
         # the devices are well again: a new plan from where the arm is now, and the scan goes on
