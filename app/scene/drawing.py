@@ -179,7 +179,7 @@ class SessionDrawing:
             if reach is None or len(reach.positions) == 0:
                 return
             self._put("/reach/points", self.scene.add_point_cloud(
-                "/reach/points", reach.positions, reach.colors, point_size=0.35 * reach.spacing,
+                "/reach/points", reach.positions, reach.colors, point_size=0.1 * reach.spacing,
                 precision="float32", point_shape="circle", point_shading="flat",
             ))  # fmt: skip
 
