@@ -7,8 +7,9 @@ model and the plate's turn the planner uses, with the cell's reachability cache)
 verdicts, never those of a second model. A reach-sphere cell answers ``reach`` for a view outside its sphere.
 
 The answers are computed once per plan (or per box before a plan) and per session, on a thread of their own (the
-page's request and the session's events never wait for them), and only while some tab shows the layer: a plan in
-a session no tab shows the layer of costs nothing more.
+page's request and the session's events never wait for them), a chunk at a time under the session's lock while it
+rests (never beside an action using the cell), and only while some tab shows the layer: a plan in a session no tab
+shows the layer of costs nothing more.
 """
 
 from __future__ import annotations
@@ -28,6 +29,10 @@ from planner.types import BoundingBox
 from workbench import BUSY
 
 log = logging.getLogger(__name__)
+
+CHUNK = 25
+"""Views asked of the cell per hold of the session's lock (a status read waits for one chunk at most: about 0.1 s
+for the UR5 on a loaded 2-core machine, none for a plan's views, which the cell has cached)."""
 
 REACH_CLASSES: dict[str, tuple[str, tuple[int, int, int]]] = {
     "reachable": ("reachable", (0, 170, 70)),
@@ -128,23 +133,33 @@ def hemisphere_of(session: Any) -> tuple[Any, tuple[Any, ...], BoundingBox, floa
 
 
 def compute_reach_map(session: Any) -> ReachMap | None:
-    """The reach map of ``session`` now, from its cell's answers (None while the session is busy: its cell is the
-    session's then)."""
-    if session.state in BUSY:
-        return None
-    key, candidates, box, radius = hemisphere_of(session)
+    """The reach map of ``session`` now, from its cell's answers; None when the session is busy or its hemisphere
+    changed before all were in.
+
+    The cell is asked :data:`CHUNK` views at a time under the session's lock, the session resting: no action claims
+    the session (and its cell) meanwhile, and an action between two chunks (a busy state, or a new plan, view or
+    box) ends the computation (the next plan or view asks again)."""
+    with session.lock:
+        if session.state in BUSY:
+            return None
+        key, candidates, box, radius = hemisphere_of(session)
+        stamp = (len(session.scene_data().views), key)
     poses = [c.T_world_camera for c in candidates]
-    if not isinstance(key, tuple):  # a plan: the cell keeps the box the plan set
-        answers = session.cell.reachability_many(poses)
-    elif session.planner.voxel_map.bbox is not None:  # between plans: the box the next plan sets
-        session.cell.set_object_box(box)
-        answers = session.cell.reachability_many(poses)
-    else:  # before the first view no plan set a box: the cell has none again afterwards
-        session.cell.set_object_box(box)
-        try:
-            answers = session.cell.reachability_many(poses)
-        finally:
-            session.cell.set_object_box(None)
+    answers: list[tuple[bool, str | None]] = []
+    for start in range(0, len(poses), CHUNK):
+        with session.lock:
+            data = session.scene_data()
+            if session.state in BUSY or not _same_stamp((len(data.views), hemisphere_key(session, data.plan)), stamp):
+                return None
+            chunk = poses[start : start + CHUNK]
+            if data.plan is not None:  # the cell keeps the box the plan set
+                answers += session.cell.reachability_many(chunk)
+            else:  # before the first plan no box is set: the first plan's, for these answers only
+                session.cell.set_object_box(box)
+                try:
+                    answers += session.cell.reachability_many(chunk)
+                finally:
+                    session.cell.set_object_box(None)
     n = len(candidates)
     positions = (
         np.stack([c.position for c in candidates]).astype(np.float32) if n else np.zeros((0, 3), dtype=np.float32)
@@ -204,6 +219,10 @@ class ReachMaps:
         with self._lock:
             self._maps[session.id] = m
         self._on_ready(session.id, m)
+
+
+def _same_stamp(a: tuple[int, Any], b: tuple[int, Any]) -> bool:
+    return a[0] == b[0] and _same_key(a[1], b[1])
 
 
 def _same_key(a: Any, b: Any) -> bool:

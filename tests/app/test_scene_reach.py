@@ -122,3 +122,42 @@ def test_before_a_plan_the_default_hemisphere_and_a_reach_sphere_cell(settings: 
             assert any(inside)
         finally:
             raw.close()
+
+
+def test_a_busy_session_gives_no_map(
+    scene_client: TestClient, planned_session, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The cell is not asked beside an action: a busy session gives no map, and an action that claims the session
+    between two chunks of views ends the computation without a map of mixed answers."""
+    from app.scene import reachlayer
+    from workbench import BUSY, State
+
+    sid, _ = planned_session(scene_client, config=SMALL_HEMISPHERE)
+    session = scene_client.app.state.registry.get(sid)  # type: ignore[attr-defined]
+    assert reachlayer.compute_reach_map(session) is not None
+    moving = next(iter(BUSY))
+    with session.lock:
+        session._set_state(moving)
+    try:
+        assert reachlayer.compute_reach_map(session) is None
+    finally:
+        with session.lock:
+            session._set_state(State.PLANNED)
+    calls = {"n": 0}
+    real = session.cell.reachability_many
+
+    def claimed_after_first_chunk(poses: Any) -> Any:
+        calls["n"] += 1
+        if calls["n"] == 1:  # an action claims the session once this chunk has let go of the lock
+            session._set_state(moving)
+        return real(poses)
+
+    session.cell.reachability_many = claimed_after_first_chunk
+    monkeypatch.setattr(reachlayer, "CHUNK", 10)  # three chunks of the 24 views
+    try:
+        assert reachlayer.compute_reach_map(session) is None
+    finally:
+        del session.cell.reachability_many
+        with session.lock:
+            session._set_state(State.PLANNED)
+    assert calls["n"] == 1
