@@ -596,6 +596,17 @@ class TimelineRequest(BaseModel):
     view: Annotated[StrictInt, Field(ge=1)] | None
 
 
+class ReachClassOut(BaseModel):
+    """A class of the reach layer (reachable, or why not) and its colour."""
+
+    class_: str = Field(alias="class", description="reachable, no_ik, joint_limit, collision, turn, reach, other")
+    label: str
+    color: list[int]
+    count: int | None = Field(None, description="views of the drawn map in this class (legend only)")
+
+    model_config = ConfigDict(populate_by_name=True, serialize_by_alias=True)
+
+
 class SceneInfoOut(BaseModel):
     viewer: str
     session: str
@@ -607,6 +618,12 @@ class SceneInfoOut(BaseModel):
     colors: dict[str, list[float]]
     scale: str
     timeline: TimelineStepOut | None = Field(None, description="the timeline's step shown, None: the session now")
+    reach_classes: list[ReachClassOut] = Field(
+        default_factory=list, description="the reach layer's classes, in legend order (class, label, colour)"
+    )
+    reach: list[ReachClassOut] | None = Field(
+        None, description="the reach layer's classes present with their numbers of views; None: not drawn (yet)"
+    )
 
 
 class ClientsOut(BaseModel):

@@ -33,6 +33,7 @@ from app.scene.fit_view import FitViews, viewer_message
 from app.scene.geometry import COLORS, DEFAULT_LAYERS, SCALE_PERCENTILES, VIRIDIS, candidate_colors, outward_camera
 from app.scene.guard import install_guard
 from app.scene.lighting import configure_lighting
+from app.scene.reachlayer import REACH_CLASSES, ReachMaps
 from app.scene.robot import RobotScene
 from app.scene.tickets import Ticket, TicketBook
 from planner import Pose
@@ -109,6 +110,8 @@ class SceneController:
         one woken from sleep is a new object)."""
         self._arms: dict[str, SessionArm] = {}
         self.fit = FitViews(self)
+        self.reach = ReachMaps(self._reach_ready)
+        """The ``reach`` layer's maps (app/scene/reachlayer.py), computed only for sessions a tab shows it of."""
         """The Fit panel's actions (app/scene/fit_view.py)."""
         self.viewer_listeners: list[Callable[[str, dict[str, Any]], None]] = []
         """Called with (session id, ``viewer_message``) after a viewer's layers, focus or refit changed."""
@@ -173,6 +176,7 @@ class SceneController:
             data = session.scene_data()
             v.drawing.update(data)
         self._frame(v, session)
+        self._sync_reach(session, data.plan)
 
         @client.camera.on_update
         def _(camera: Any) -> None:  # viser's client puts its camera at the server's initial one when it first draws
@@ -230,6 +234,7 @@ class SceneController:
             for v in self._viewers.values():
                 if v.session_id == session.id and v.drawing is not None and v.step is None:
                     v.drawing.update(data)  # a viewer on the timeline keeps showing the past
+        self._sync_reach(session, data.plan)
         arm = self.arm_of(session)
         robots = self._robots_of(session.id, live_only=True)
         if arm is None or not robots:
@@ -283,6 +288,7 @@ class SceneController:
         with self._lock:
             self._watched.discard(session.id)
             self._arms.pop(session.id, None)
+            self.reach.forget(session.id)
             for v in [v for v in self._viewers.values() if v.session_id == session.id]:
                 if v.drawing is not None:
                     v.drawing.clear()
@@ -405,8 +411,45 @@ class SceneController:
             else:
                 v.layers.update(changes)
             layers = dict(v.layers)
+        if changes.get("reach") and v.step is None:
+            try:
+                session = self.registry.get(v.session_id)
+            except WorkbenchError:
+                session = None
+            if session is not None:
+                self._sync_reach(session, session.scene_data().plan)
         self.notify(v)
         return layers
+
+    # ------------------------------------------------------------------ the reach layer
+
+    def _reach_viewers(self, session_id: str) -> list[Viewer]:
+        """The viewers of ``session_id`` showing the session now with the ``reach`` layer on (caller holds the lock)."""
+        return [
+            v
+            for v in self._viewers.values()
+            if v.session_id == session_id and v.drawing is not None and v.step is None and v.layers.get("reach")
+        ]
+
+    def _sync_reach(self, session: Session, plan: Any) -> None:
+        """Draw ``session``'s reach map (its current ``plan``'s, else its box's) in the viewers that show the layer:
+        the map if it is ready, else nothing while it is computed (``_reach_ready`` draws it then)."""
+        with self._lock:
+            if not self._reach_viewers(session.id):
+                return  # no tab shows the layer: nothing is computed
+        reach = self.reach.request(session, plan)
+        with self._lock:
+            reach = reach or self.reach.current(session, plan)  # a map finished meanwhile: drawn, not cleared
+            for v in self._reach_viewers(session.id):
+                assert v.drawing is not None
+                v.drawing.draw_reach(reach)
+
+    def _reach_ready(self, session_id: str, _reach: Any) -> None:
+        try:
+            session = self.registry.get(session_id)
+        except WorkbenchError:
+            return
+        self._sync_reach(session, session.scene_data().plan)  # a map of a plan since replaced starts the next one
 
     @property
     def lock(self) -> AbstractContextManager[Any]:
@@ -450,6 +493,10 @@ class SceneController:
                 },
                 "scale": f"F of eligible candidates, {SCALE_PERCENTILES[0]:g}th to {SCALE_PERCENTILES[1]:g}th percentile",
                 "timeline": None if step is None else step.summary(),
+                "reach_classes": [
+                    {"class": k, "label": lab, "color": list(c)} for k, (lab, c) in REACH_CLASSES.items()
+                ],
+                "reach": None if d is None or d.reach_map is None else d.reach_map.legend(),
             }
 
     # ------------------------------------------------------------------ camera

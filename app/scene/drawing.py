@@ -15,6 +15,7 @@ Node names (stable, per client)::
     /surface                                                 the reconstructed surface (simplified, one mesh)
     /override/gizmo (+ /override/gizmo/frustum)              custom-pose transform gizmo
     /clusters/...                                            voxels by GMM cluster, ellipsoids named (app/scene/clusters.py)
+    /reach/points                                            the hemisphere coloured by reachability (app/scene/reachlayer.py)
 
 What is re-sent: the plan's layers when the plan changes, only the views and cloud points that are new after
 a capture, the selection when it changes. Hidden heavy layers (``LAZY``: empty / unknown voxels, GMM
@@ -46,6 +47,7 @@ from app.scene.geometry import (
     sector_label_positions,
     sector_segments,
 )
+from app.scene.reachlayer import ReachMap
 from planner import PlanResult, Pose
 from workbench import SceneData
 from workbench.surface import SurfaceMesh
@@ -88,6 +90,8 @@ class SessionDrawing:
         self._selection_key: tuple[Any, ...] | None = None
         self._context = False
         self._surface: SurfaceMesh | None = None  # the surface drawn now
+        self.reach_map: ReachMap | None = None
+        """The reach map drawn under /reach (None: none drawn)."""
         self.surface_sends = 0
         """How many times the surface was sent (it is re-sent only when it changed)."""
         for name, layer in GROUPS.items():
@@ -137,6 +141,7 @@ class SessionDrawing:
             self._selection_key = None
             self._context = False
             self._surface = None
+            self.reach_map = None
 
     def set_layers(self, changes: dict[str, bool]) -> None:
         """Show / hide layers (names checked by the caller); a lazy layer shown for the first time is sent now."""
@@ -163,6 +168,20 @@ class SessionDrawing:
                 self._drawn_lazy.add("clusters")
             else:
                 self._drawn_lazy.discard("clusters")
+
+    def draw_reach(self, reach: ReachMap | None) -> None:
+        """Draw ``reach`` under /reach/points (one point per view, its class's colour); None: remove it."""
+        if reach is self.reach_map:
+            return
+        with self.client.atomic():
+            self._drop("/reach")
+            self.reach_map = reach
+            if reach is None or len(reach.positions) == 0:
+                return
+            self._put("/reach/points", self.scene.add_point_cloud(
+                "/reach/points", reach.positions, reach.colors, point_size=0.1 * reach.spacing,
+                precision="float32", point_shape="circle", point_shading="flat",
+            ))  # fmt: skip
 
     def candidate_at(self, event: viser.SceneNodePointerEvent) -> int | None:
         """The candidate index a click on /candidates hit (the instance, else the marker nearest the ray)."""

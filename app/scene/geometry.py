@@ -43,6 +43,7 @@ DEFAULT_LAYERS: dict[str, bool] = {
     "surface": False,
     "clusters": False,
     "gizmo": False,
+    "reach": False,
 }
 LAYER_NODES: dict[str, tuple[str, ...]] = {
     "occupied": ("/map/occupied",),
@@ -62,6 +63,7 @@ LAYER_NODES: dict[str, tuple[str, ...]] = {
     "surface": ("/surface",),
     "clusters": ("/clusters",),
     "gizmo": ("/override",),
+    "reach": ("/reach",),
 }
 GROUPS: dict[str, str | None] = {
     "/map": None,
@@ -74,6 +76,7 @@ GROUPS: dict[str, str | None] = {
     "/override": "gizmo",
     "/clusters": "clusters",
     "/tour": "nbv",
+    "/reach": "reach",
 }
 """Group nodes (empty frames) and the layer that hides them (None: always shown)."""
 

@@ -537,7 +537,16 @@ function toggleLayer(name, on) {
     S.layers = layers;
     sessionStorage.setItem(layerKey(), JSON.stringify(layers));
     P.renderLayers(layers, toggleLayer);
+    if (name === "reach" && on) refreshReachLegend(20);
   }).catch((e) => showError(e.message));
+}
+
+// The reach map is computed off the request: the legend asks again until it has the counts (or the layer is off).
+async function refreshReachLegend(tries) {
+  if (!S.viewer || !S.layers || !S.layers.reach) return;
+  const scene = await api("GET", `/api/scene/${S.viewer}`);
+  P.renderLegend(scene);
+  if (!scene.reach && tries > 1) setTimeout(() => refreshReachLegend(tries - 1), 1000);
 }
 
 function approveShown() {

@@ -144,11 +144,33 @@ function renderLegend(scene) {
   sec.title = SECTOR_HELP;
   sec.textContent = "sectors (?)";
   box.appendChild(sec);
+  renderReachLegend(scene);
+}
+
+// The reach layer's legend: each class's colour, with its number of views once the map is computed.
+function renderReachLegend(scene) {
+  const box = $("reach-legend");
+  if (!box || !scene.reach_classes) return;
+  const counts = Object.fromEntries((scene.reach || []).map((r) => [r.class, r.count]));
+  box.innerHTML = "<b>reach:</b>";
+  box.title = "the hemisphere's views coloured by what the session's arm reaches (IK, joint limits, collisions, " +
+    "the plate's turn), as the planner judges them";
+  for (const r of scene.reach_classes) {
+    if (scene.reach && !(r.class in counts)) continue;
+    const s = document.createElement("span");
+    s.dataset.reachClass = r.class;
+    s.innerHTML = `<i class="swatch" style="background:rgb(${r.color.join(",")})"></i>${r.label}` +
+      (r.class in counts ? ` (${counts[r.class]})` : "");
+    box.appendChild(s);
+  }
+  if (!scene.reach) box.append(" computing…");
 }
 
 function renderLayers(layers, onToggle) {
   const box = $("layers");
   box.innerHTML = "";
+  const reach = $("reach-legend");
+  if (reach) reach.hidden = !layers.reach;
   let k = 0;
   for (const [name, on] of Object.entries(layers)) {
     if (name === "gizmo") { $("gizmo").checked = on; continue; }

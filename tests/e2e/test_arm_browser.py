@@ -1,15 +1,20 @@
 """The arm in the workbench page (real Chromium, live server, the UR5 sim cell): the tab's viewer receives the arm
 and the ghost of the planner's choice under /robot (decoded viser frames), the page says where the move goes
 and why unreachable candidates are unreachable, Preview motion plays the move on the ghost (the real arm stays),
-Approve executes it and the arm's joints animate in the view."""
+Approve executes it and the arm's joints animate in the view; the reach layer draws the hemisphere coloured by what
+the arm reaches (the reachable colour in the view's pixels) with its legend."""
 
 from __future__ import annotations
+
+import io
 
 import httpx
 import numpy as np
 import pytest
 from playwright.sync_api import BrowserContext, expect
 
+from app.scene.reachlayer import REACH_CLASSES
+from tests.e2e.conftest import draw_viewer
 from tests.e2e.test_workbench_browser import Tab, _state
 from tests.helpers import SMALL
 from tests.servers import LiveServer
@@ -26,6 +31,15 @@ def _updates(tab: Tab, prefix: str, start: int) -> int:
         for m in tab.messages(start)
         if str(m.get("name", "")).startswith(prefix) and m.get("type", "").startswith(("SetPosition", "SetOrientation"))
     )
+
+
+def _reachable_pixels(png: bytes) -> int:
+    """Pixels of ``png`` near the reach layer's reachable colour (no viridis stop of the candidates is near it)."""
+    from PIL import Image
+
+    rgb = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.int32)
+    green = np.array(REACH_CLASSES["reachable"][1])
+    return int(np.sum(np.max(np.abs(rgb - green), axis=2) <= 35))
 
 
 def test_arm_preview_and_approve(live_server: LiveServer, browser_context: BrowserContext) -> None:
@@ -75,3 +89,23 @@ def test_arm_preview_and_approve(live_server: LiveServer, browser_context: Brows
     q1 = api.get(f"/api/sessions/{sid}/arm").json()["joints"]
     np.testing.assert_allclose(q1, arm["target"]["joints"], atol=1e-6)
     assert not np.allclose(q1, q0)
+
+    # the reach layer from the layer bar: the hemisphere coloured by what the arm reaches, drawn only when shown
+    viewer = tab.page.evaluate("S.viewer")
+    assert "/reach/points" not in api.get(f"/api/scene/{viewer}").json()["nodes"]
+    shown = ("turntable", "reach")  # only the plate under the points: no other layer's colours in the picture
+    api.put(f"/api/scene/{viewer}/layers", json={k: False for k in tab.page.evaluate("Object.keys(S.layers)")})
+    draw_viewer(tab.page)
+    tab.page.wait_for_timeout(1500)  # SwiftShader: the hidden layers rendered away
+    before = _reachable_pixels(tab.page.locator("#viewer").screenshot())
+    tab.page.locator("#layers input[data-layer='turntable']").check()
+    tab.page.locator("#layers input[data-layer='reach']").check(timeout=60_000)
+    tab.wait(lambda: "/reach/points" in api.get(f"/api/scene/{viewer}").json()["nodes"], timeout_ms=60_000)
+    assert all(api.get(f"/api/scene/{viewer}").json()["layers"][k] for k in shown)
+    legend = tab.page.get_by_test_id("reach-legend")
+    expect(legend).to_be_visible()
+    expect(legend.locator("[data-reach-class='reachable']")).to_contain_text("reachable (", timeout=30_000)
+    tab.page.wait_for_timeout(1500)  # SwiftShader: the points rendered
+    after = _reachable_pixels(tab.page.locator("#viewer").screenshot())
+    assert before < 20 and after > 200, (before, after)
+    draw_viewer(tab.page, on=False)
