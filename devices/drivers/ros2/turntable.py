@@ -138,6 +138,14 @@ class Ros2Turntable:
         target = self._joint(angle)
         turn = abs(target - start)
         duration = max(math.degrees(turn) / c.speed_deg, 0.05)
+        waited = time.monotonic() + c.state_timeout_s
+        while not self.writer.get_matched_subscriptions():  # a command sent before discovery matched is lost
+            if time.monotonic() > waited:
+                raise DeviceError(
+                    f"turntable: nothing subscribes to {c.command_topic} (is its controller loaded and active?); "
+                    "nothing was sent"
+                )
+            time.sleep(0.02)
         self._stop.clear()
         if c.command == "float64":
             self.writer.write(Float64(data=target))
