@@ -1,4 +1,5 @@
-"""Robot time to coverage: the ``tour`` planner against the greedy ones, from finished ``nbv bench`` runs (issue 25).
+"""Robot time to coverage: the ``tour`` planner against the greedy ones, from finished ``nbv bench`` runs
+(docs/experiments/tour.md).
 
 Reads the results.csv and runs.json of one or more bench directories (e.g. one with ``projection,tour`` on every
 mesh and one with ``raycast-apora`` on fewer), pairs the runs by (model, seed, placement), and prints for every
@@ -16,7 +17,7 @@ Repetitions: a run (model, planner, seed, placement) found in several directorie
 mean over its repetitions (``reps`` in the header). The runs are deterministic in what the robot does but not in
 the plan's and the simulated capture's wall seconds, which change with the machine's speed and the other bench job
 on the cores: the same code measured an hour apart moved the robot seconds to 95 % of `projection` by 0.1-0.3 s
-(issue 25's ninth round), so a comparison at the edge of a goal should pool benches of both planners run at
+(docs/experiments/tour.md), so a comparison at the edge of a goal should pool benches of both planners run at
 several times.
 
     nbv bench --models ../shared/models/*.{obj,ply} ../shared/models/extra/*.{obj,off} \\

@@ -1,4 +1,4 @@
-"""How far below `projection`'s robot motion a planner that *knew the object* could get (issue 25's bound).
+"""How far below `projection`'s robot motion a planner that *knew the object* could get (the bound in docs/experiments/tour.md).
 
 For each mesh and placement: `projection`'s scan in the UR5 cell (``--sensor``, 10 views), its moves to 95 % of the
 ceiling; then an oracle that knows the true mesh: every candidate view about the object's *true* box rendered and

@@ -157,7 +157,7 @@ def test_a_journaled_session_replays_as_a_source(settings: AppSettings, mode: st
 
 
 def test_views_taken_after_a_resume_survive_the_next_restart(settings: AppSettings) -> None:
-    """Issue 21: a resumed session journals its new views (its view step once held the journal of before the
+    """A resumed session journals its new views (its view step once held the journal of before the
     resume, None, and wrote no frame), so a second restart brings back all of them."""
     with server(settings) as a:
         sid = a.post("/api/sessions", json={"model": "mug", "config": SMALL, "seed": 3}).json()["id"]

@@ -176,7 +176,7 @@ def test_a_simulated_session_reports_its_reachable_ceiling(registry: SessionRegi
     ceiling = wait_until(lambda: session.metrics()["ceiling"], timeout=240, what="the ceiling")
     coverage = session.status()["coverage"]
     assert 0 < coverage < ceiling <= 1
-    metrics = session.metrics()  # the ceiling-normalised metrics of the views so far (issue 14)
+    metrics = session.metrics()  # the ceiling-normalised metrics of the views so far
     assert metrics["coverage_ratio"] == [coverage / ceiling]
     assert metrics["auc"] == coverage / ceiling and metrics["views_to_90"] == (1 if coverage / ceiling >= 0.9 else 2)
     cached = list((registry.settings.data_dir / "ceilings").glob("*.json"))
