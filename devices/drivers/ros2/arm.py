@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from devices.drivers.common import ArmFaultError
-from devices.drivers.ros2.dds import DdsConfig, Subscription, acquire, release
+from devices.drivers.ros2.dds import DdsConfig, Subscription, acquire, await_subscriber, release
 from devices.protocols import DeviceError
 from devices.trajectory import JointTrajectory
 from planner.validate import finite, require
@@ -212,14 +212,12 @@ class Ros2Arm:
                 f"arm: the trajectory starts {math.degrees(gap):.2f} deg from the arm's joints "
                 f"(at most {c.start_tolerance_deg:g})"
             )
-        waited = time.monotonic() + c.state_timeout_s
-        while not self.writer.get_matched_subscriptions():
-            if time.monotonic() > waited:
-                raise DeviceError(
-                    f"arm: no controller subscribes to {c.command_topic} (is the joint trajectory controller "
-                    "loaded and active?); nothing was sent"
-                )
-            time.sleep(0.02)
+        await_subscriber(
+            self.writer,
+            c.state_timeout_s,
+            f"arm: no controller subscribes to {c.command_topic} (is the joint trajectory controller loaded and "
+            "active?); nothing was sent",
+        )
         self._stop.clear()
         dense = _dense(trajectory)
         end = trajectory.end

@@ -84,6 +84,16 @@ def command_qos() -> Any:
     )
 
 
+def await_subscriber(writer: Any, timeout_s: float, refusal: str) -> None:
+    """Wait until something subscribes to ``writer``'s topic (a controller's command subscription): a command
+    written before discovery matched a reader is lost. DeviceError ``refusal`` after ``timeout_s`` seconds."""
+    waited = time.monotonic() + timeout_s
+    while not writer.get_matched_subscriptions():
+        if time.monotonic() > waited:
+            raise DeviceError(refusal)
+        time.sleep(0.02)
+
+
 class Subscription:
     """A ROS 2 topic read in the background: the latest sample, arrival times for the rate, and waiting.
 

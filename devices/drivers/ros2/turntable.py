@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from devices.drivers.plate import check_angle
-from devices.drivers.ros2.dds import DdsConfig, Subscription, acquire, release
+from devices.drivers.ros2.dds import DdsConfig, Subscription, acquire, await_subscriber, release
 from devices.protocols import DeviceError
 from planner.validate import finite, require
 
@@ -138,14 +138,12 @@ class Ros2Turntable:
         target = self._joint(angle)
         turn = abs(target - start)
         duration = max(math.degrees(turn) / c.speed_deg, 0.05)
-        waited = time.monotonic() + c.state_timeout_s
-        while not self.writer.get_matched_subscriptions():  # a command sent before discovery matched is lost
-            if time.monotonic() > waited:
-                raise DeviceError(
-                    f"turntable: nothing subscribes to {c.command_topic} (is its controller loaded and active?); "
-                    "nothing was sent"
-                )
-            time.sleep(0.02)
+        await_subscriber(
+            self.writer,
+            c.state_timeout_s,
+            f"turntable: nothing subscribes to {c.command_topic} (is its controller loaded and active?); nothing was "
+            "sent",
+        )
         self._stop.clear()
         if c.command == "float64":
             self.writer.write(Float64(data=target))
