@@ -43,6 +43,7 @@ from devices.config import CellConfig
 from devices.motion import Motion, rz
 from devices.protocols import Arm, Camera, JointArm, Turntable
 from devices.trajectory import JointTrajectory
+from planner.config import PlannerConfig
 from planner.types import BoundingBox, DepthFrame, Intrinsics, Pose
 
 if TYPE_CHECKING:
@@ -99,6 +100,11 @@ class ScanCell(Protocol):
     def candidate_poses(self) -> Sequence[Pose] | None:
         """The views the planner must choose among (``T_table_camera`` each: a recorded set's views), None: the
         planner proposes its own (the paper's hemisphere)."""
+        ...
+
+    def planner_config(self, config: PlannerConfig) -> PlannerConfig:
+        """``config`` with what this cell's world implies for the planner (a recorded set seen from under the plate
+        top has no floor); unchanged for a cell with a plate."""
         ...
 
     def set_object_box(self, bbox: BoundingBox | None) -> None:
@@ -255,6 +261,10 @@ class Cell:
     def candidate_poses(self) -> Sequence[Pose] | None:
         """None: the planner proposes its candidates (a recorded set's cell gives its views instead)."""
         return None
+
+    def planner_config(self, config: PlannerConfig) -> PlannerConfig:
+        """``config`` unchanged: the plate hides what lies under its top (``voxel.floor``) as the config says."""
+        return config
 
     def set_object_box(self, bbox: BoundingBox | None) -> None:
         """The object's box B (table frame) the arm keeps clear of (padded by ``arm.object_padding``); None = none.

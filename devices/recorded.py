@@ -43,16 +43,19 @@ from devices.cellreach import SphereReach
 from devices.config import CellConfig
 from devices.protocols import CaptureError, UnreachableError
 from devices.sim import SimulatedArm, SimulatedTurntable
+from planner.config import PlannerConfig
 from planner.types import DepthFrame, Intrinsics, Pose
 
 __all__ = [
     "RecordedCell",
     "RecordedSet",
     "RecordedView",
+    "planner_config_for_set",
     "read_recorded",
     "read_stanford",
     "read_view_folder",
     "scanner_direction",
+    "sees_from_below",
     "write_view_folder",
 ]
 
@@ -561,6 +564,28 @@ def read_recorded(path: str | Path, reference: str | Path | None = None, edge_tr
 # ---------------------------------------------------------------------- the cell
 
 
+def sees_from_below(recorded: RecordedSet, floor_height: float = 0.0) -> bool:
+    """True when some view's camera stands below ``floor_height`` (metres, table frame): the set was recorded
+    without a plate hiding the object's underside (the Stanford bunny's chin and ear_back scans, from a platform
+    that held the bunny differently), so that underside is something a view can see."""
+    return any(float(v.T_world_sensor.translation[2]) < floor_height for v in recorded.views)
+
+
+def planner_config_for_set(config: PlannerConfig, recorded: RecordedSet) -> PlannerConfig:
+    """``config`` for planning among ``recorded``'s views: ``voxel.floor`` off when :func:`sees_from_below` at the
+    config's floor height, unchanged otherwise.
+
+    The floor keeps B (and so the unknown and frontier voxels) above the plate top because in a cell with a plate
+    nothing under it can be seen. A set with views from below has no such plate: with the floor on, the voxels under
+    the object's base do not exist, its underside never becomes frontier, and no score can ask for the views that
+    see it (on the bunny, 8.5 % of its surface, which only the chin scan sees, needed for 95 % of the ceiling)."""
+    from dataclasses import replace
+
+    if config.voxel.floor and sees_from_below(recorded, config.voxel.floor_height):
+        return replace(config, voxel=replace(config.voxel, floor=False))
+    return config
+
+
 class RecordedCamera:
     """Returns the recorded view the cell stands at (CaptureError between views)."""
 
@@ -609,6 +634,10 @@ class RecordedCell(Cell):
 
     def candidate_poses(self) -> list[Pose]:
         return self.recorded.poses
+
+    def planner_config(self, config: PlannerConfig) -> PlannerConfig:
+        """:func:`planner_config_for_set`: no voxel floor when a view was taken from under the plate's top."""
+        return planner_config_for_set(config, self.recorded)
 
     def initial_pose(self) -> Pose:
         return self.recorded.views[0].T_world_sensor

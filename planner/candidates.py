@@ -162,21 +162,54 @@ def _proposed(
     return tuple(candidates), center, radius
 
 
+LOOK_POINT_MIN_SPREAD = 0.05
+"""The given views' optical axes must span at least this (the smallest eigenvalue of ``sum(I - d d^T)`` per view,
+about sin^2 of the angle between near-parallel axes) for the point they pass nearest to be their centre."""
+
+
+def look_point(poses: Sequence[Pose]) -> NDArray[np.float64] | None:
+    """(3,) the point the optical axes of ``poses`` pass nearest (least squares), None when the axes are about
+    parallel (no such point, or one far off: :data:`LOOK_POINT_MIN_SPREAD`).
+
+    Each axis is the line through the camera along its +z; the squared distance of x from it is
+    ``|(I - d d^T)(x - t)|^2``, so the point minimising the sum solves ``sum(I - d d^T) x = sum(I - d d^T) t``.
+    """
+    A = np.zeros((3, 3))
+    b = np.zeros(3)
+    for pose in poses:
+        d = pose.rotation[:, 2]
+        M = np.eye(3) - np.outer(d, d)
+        A += M
+        b += M @ pose.translation
+    if len(poses) < 2 or np.linalg.eigvalsh(A)[0] < LOOK_POINT_MIN_SPREAD:
+        return None
+    return np.asarray(np.linalg.solve(A, b), dtype=np.float64)
+
+
 def candidates_from_poses(
     poses: Sequence[Pose], bbox: BoundingBox, partitions: PartitionConfig
 ) -> tuple[tuple[Candidate, ...], NDArray[np.float64], float]:
-    """Given views as candidates (a recorded set's, in the order given), described about ``bbox``'s centre like the
-    hemisphere's: (candidates, centre (3,), radius = the mean distance of the views from the centre). Each
-    candidate's ``parallel`` is 0 (given views lie on no parallel); its sector is that of its azimuth.
+    """Given views as candidates (a recorded set's, in the order given), described about the point they look at
+    like the hemisphere's about its centre: (candidates, centre (3,), radius = the mean distance of the views from
+    the centre). Each candidate's ``parallel`` is 0 (given views lie on no parallel); its sector is that of its
+    azimuth.
+
+    The centre is :func:`look_point` of the views (the object they surround), ``bbox``'s centre only when their
+    axes are about parallel. Not B's centre, as for the hemisphere: after the first frame B has grown along that
+    view (paper §III-C) and its centre lies behind the object (16 cm behind the Stanford bunny), and azimuths
+    about it put a view a quarter turn round the object into the first view's own sector.
+    The hemisphere is built about B's centre, so its azimuths are consistent with it; given views are not.
     ValueError for no poses."""
     if not poses:
         raise ValueError("candidate poses: none given")
-    center = np.array(bbox.center, dtype=np.float64)
-    out = []
-    distances = []
     for i, pose in enumerate(poses):
         if not isinstance(pose, Pose):
             raise ValueError(f"candidate poses[{i}]: expected a Pose, got {type(pose).__name__}")
+    looked_at = look_point(poses)
+    center = np.array(bbox.center if looked_at is None else looked_at, dtype=np.float64)
+    out = []
+    distances = []
+    for i, pose in enumerate(poses):
         d = pose.translation - center
         distance = float(np.linalg.norm(d))
         distances.append(distance)

@@ -268,8 +268,32 @@ def test_given_candidate_poses_keep_their_order_and_sectors() -> None:
     assert [c.index for c in candidates] == [0, 1, 2, 3]
     assert [c.sector for c in candidates] == [0, 1, 2, 3]
     assert all(c.T_world_camera is p for c, p in zip(candidates, poses, strict=True))
-    np.testing.assert_allclose(centre, [0, 0, 0.05])
+    np.testing.assert_allclose(centre, [0, 0, 0.05], atol=1e-12)
     assert radius == pytest.approx(0.45)
     assert math.degrees(candidates[0].elevation) == pytest.approx(20)
     with pytest.raises(ValueError, match="none given"):
         candidates_from_poses([], box, PartitionConfig())
+
+
+def test_given_views_take_their_sectors_about_the_point_they_look_at_not_about_a_shifted_box() -> None:
+    from planner.candidates import candidates_from_poses, look_point
+    from planner.config import PartitionConfig
+    from planner.partitions import azimuth_of, sector_of
+    from planner.types import BoundingBox, Pose
+
+    # B grown along the first view (from azimuth 280) lies behind the object: its centre 0.16 m off the axis
+    box = BoundingBox(np.array([-0.1, 0.0, 0.0]), np.array([0.1, 0.33, 0.1]))
+    poses = [orbit_view((0, 0, 0.05), 10, a) for a in (280, 10, 100, 190)]
+    np.testing.assert_allclose(look_point(poses), [0, 0, 0.05], atol=1e-9)
+    candidates, centre, radius = candidates_from_poses(poses, box, PartitionConfig())
+    np.testing.assert_allclose(centre, [0, 0, 0.05], atol=1e-9)
+    assert [c.sector for c in candidates] == [3, 0, 1, 2]  # a quarter turn apart: four sectors
+    assert radius == pytest.approx(0.45)
+    # about the box's centre the view a quarter turn on (azimuth 10) would fall into the first view's sector
+    about_box = [sector_of(azimuth_of(p.translation, box.center), PartitionConfig()) for p in poses]
+    assert about_box[:2] == [3, 3]
+    # parallel axes meet nowhere: the box's centre is used
+    parallel = [Pose(np.eye(3), np.array([x, 0.0, 0.0])) for x in (0.0, 0.1, 0.2)]
+    assert look_point(parallel) is None
+    _, centre, _ = candidates_from_poses(parallel, box, PartitionConfig())
+    np.testing.assert_allclose(centre, box.center)

@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import KDTree
 
-from devices.recorded import RecordedCell, RecordedSet
+from devices.recorded import RecordedCell, RecordedSet, planner_config_for_set
 from planner import Planner, Pose
 from planner.config import PlannerConfig
 from workbench.evaluation.accuracy import GroundTruth, accuracy
@@ -175,7 +175,7 @@ def run_recorded(
     from workbench.surface import SurfaceIntegrator, surface_accuracy
 
     views = len(recorded.views)
-    cfg = recorded_config(config, views, seed)
+    cfg = planner_config_for_set(recorded_config(config, views, seed), recorded)
     integrator = SurfaceIntegrator() if surface else None
     coverage: list[float] = []
     precision: list[float] = []

@@ -232,6 +232,7 @@ class SessionRegistry:
             raise
         devices = session_devices(self.settings, parts.model, seed, camera, arm)
         planner_config = planner_config_for(planner_config, devices.camera)  # also what the header records
+        planner_config = parts.cell.planner_config(planner_config)  # e.g. no floor under a set seen from below
         with self._lock:
             session_id = self._new_id()
             self._resuming.add(session_id)  # reserved while the journal is created outside the lock
