@@ -127,3 +127,69 @@ def test_a_recorded_set_is_a_source_whose_views_are_the_only_candidates(
     bad = {"config": SMALL, "source": {"kind": "recorded", "recorded": "nope"}}
     assert client.post("/api/sessions", json=bad).status_code == 404
     assert client.post("/api/sessions", json={"source": {"kind": "recorded"}}).status_code == 422
+
+
+def recorded_boxes(settings: AppSettings) -> list[Pose]:
+    """A recorded set ``data_dir/recorded/boxes``: four views of two boxes in our folder format, the last one's pose
+    put under the plate top (as the Stanford bunny's chin scan is: the set has no plate); returns their poses."""
+    from devices.config import CellConfig
+    from devices.recorded import write_view_folder
+
+    mesh = make_builtin("two-boxes", 0.2)
+    cell = make_sim_cell(mesh, cell_config=CellConfig(kinematics="reach_sphere"))
+    frames = []
+    for a in (0.3, 2.4, -1.9, 1.2):
+        cell.move_to(Pose.look_at([0.5 * np.cos(a), 0.5 * np.sin(a), 0.3], [0.0, 0.0, 0.08]))
+        frames.append(cell.capture())
+    below = frames[-1].T_world_camera
+    frames[-1] = frames[-1].with_pose(Pose(below.rotation, below.translation - np.array([0.0, 0.0, 0.4])))
+    write_view_folder(settings.data_dir / "recorded" / "boxes", frames, reference=mesh)
+    return [f.T_world_camera for f in frames]
+
+
+@pytest.mark.slow
+def test_a_resumed_recorded_session_has_the_same_views_map_and_plan_and_goes_on(settings: AppSettings) -> None:
+    from apphelpers import BASE_URL
+
+    from app.main import create_app
+
+    poses = recorded_boxes(settings)
+    body = {"config": SMALL, "seed": 3, "source": {"kind": "recorded", "recorded": "boxes"}}
+
+    def state(client: TestClient, sid: str) -> dict[str, object]:
+        st = client.get(f"/api/sessions/{sid}").json()
+        export = client.get(f"/api/sessions/{sid}/export").json()
+        return {
+            "iteration": st["iteration"],
+            "points": st["points"],
+            "voxels": st["voxels"],
+            "coverage": st["coverage"],
+            "best": st["pending_plan"]["best"],
+            "scores": [
+                (c["index"], c["score"], c["eligible"]) for c in client.get(f"/api/sessions/{sid}/candidates").json()
+            ],
+            "views": [it["pose"]["position"] for it in export["iterations"]],
+            "floor": export["config"]["voxel"]["floor"],
+            "cloud": client.get(f"/api/sessions/{sid}/cloud.ply").content,
+        }
+
+    with TestClient(create_app(settings), base_url=BASE_URL) as a:
+        sid = a.post("/api/sessions", json=body).json()["id"]
+        a.post(f"/api/sessions/{sid}/capture")
+        plan = a.post(f"/api/sessions/{sid}/plan").json()
+        a.post(f"/api/sessions/{sid}/approve", json={"plan_id": plan["plan_id"], "index": plan["best"]["index"]})
+        plan = a.post(f"/api/sessions/{sid}/plan").json()
+        before = state(a, sid)
+    assert before["iteration"] == 2 and len(before["scores"]) == len(poses)  # the recorded views only
+    assert before["floor"] is False  # a view from under the plate top: no floor (devices.recorded.sees_from_below)
+    recorded = np.array([p.translation for p in poses])
+    assert all(np.min(np.linalg.norm(recorded - v, axis=1)) < 0.01 for v in before["views"])  # (ICP-refined)
+    with TestClient(create_app(settings), base_url=BASE_URL) as b:
+        r = b.post(f"/api/sessions/{sid}/resume")
+        assert r.status_code == 200, r.text
+        assert (r.json()["verified"], r.json()["mismatches"]) == (True, [])
+        assert state(b, sid) == before  # the same views, voxels, cloud, coverage, plan, every score, config
+        st = b.post(f"/api/sessions/{sid}/approve", json={"plan_id": plan["plan_id"], "index": plan["best"]["index"]})
+        assert st.status_code == 200 and st.json()["iteration"] == 3
+        got = b.get(f"/api/sessions/{sid}/export").json()["iterations"][2]["pose"]["position"]
+        assert np.linalg.norm(recorded[plan["best"]["index"]] - got) < 0.01  # the planned recorded view
