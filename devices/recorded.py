@@ -39,12 +39,12 @@ from scipy.spatial.transform import Rotation
 
 from devices.angles import wrap_angle
 from devices.cell import Cell, Motion, rz
-from devices.cellreach import SphereReach
+from devices.cellreach import SphereReach, UrdfArm
 from devices.config import CellConfig
 from devices.protocols import CaptureError, UnreachableError
 from devices.sim import SimulatedArm, SimulatedTurntable
 from planner.config import PlannerConfig
-from planner.types import DepthFrame, Intrinsics, Pose
+from planner.types import BoundingBox, DepthFrame, Intrinsics, Pose
 
 __all__ = [
     "RecordedCell",
@@ -66,6 +66,8 @@ STANFORD_DISTANCE = 0.40
 STANFORD_INTRINSICS = Intrinsics(width=640, height=480, fx=700.0, fy=700.0, cx=319.5, cy=239.5)
 """The virtual camera the Stanford scans are imaged with: 0.57 mm pixels at 0.40 m, about the scans' own 0.5 mm
 spacing, and 0.37 x 0.27 m in view there (the bunny is 0.16 m)."""
+STRAIGHT_SPEED = 0.25
+"""Metres per second of the camera's straight travel: the move times to and from a view no arm of the cell takes."""
 POSE_MATCH = 1e-6
 """Metres and radians: a pose this close to a recorded view's is that view."""
 Y_TO_Z_UP = Pose(np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]), np.zeros(3))
@@ -612,20 +614,38 @@ class RecordedCamera:
 
 class RecordedCell(Cell):
     """A cell whose candidate views are a recorded set's views (:meth:`candidate_poses`): a move goes to a recorded
-    view only (UnreachableError otherwise), turning the plate to the angle the view implies; a capture returns that
-    view's recorded data with its recorded pose. Moves are not timed (the views were taken already)."""
+    view only (UnreachableError otherwise); a capture returns that view's recorded data with its recorded pose.
+
+    Robot time: with a URDF arm in ``config`` (the UR5 by default) a move is timed as that arm would make it in this
+    cell (:class:`devices.cellreach.UrdfArm`: the plate angle and IK branch with the shortest move, a collision-free
+    timed trajectory from where the arm last stood), and the tour's move times between views are that arm's. A
+    recorded view the arm cannot take in this cell (from under the plate top, out of reach, in collision: the
+    Stanford bunny's chin, ear_back and top views are such) is still delivered, as recorded, untimed
+    (``Motion.timed`` False, no robot time), its plate angle the one the view implies; its move times are the camera's
+    straight travel at :data:`STRAIGHT_SPEED`, and the arm stays where it last stood. With ``kinematics =
+    "reach_sphere"`` no move is timed and the move times are straight travel."""
 
     def __init__(self, recorded: RecordedSet, config: CellConfig | None = None) -> None:
         from dataclasses import replace
 
-        # no arm to plan for: the views were taken already (the reach sphere only keeps the cell's state)
-        config = replace(config if config is not None else CellConfig(), kinematics="reach_sphere")
+        asked = config if config is not None else CellConfig()
+        # the cell's own state: the camera stands exactly at a recorded view (a reach sphere holds that pose)
+        config = replace(asked, kinematics="reach_sphere")
         arm = SimulatedArm()
         turntable = SimulatedTurntable()
         camera = RecordedCamera(recorded, pose_source=lambda: self.pose)
         super().__init__(camera, arm, turntable, config, reach=SphereReach(config, arm, turntable))
         self.recorded = recorded
         self._at: int | None = None
+        self.timing: UrdfArm | None = None
+        """The arm model that times the moves (its own simulated arm and plate), None without a URDF arm."""
+        if asked.kinematics == "urdf":
+            from devices.arm.kinematics import ArmKinematics
+            from devices.sim import SimulatedJointArm
+
+            kinematics = ArmKinematics(asked.arm, asked.plate_radius, asked.plate_thickness)
+            joint_arm = SimulatedJointArm(kinematics.joint_names, kinematics.home, pose_of=kinematics.camera_pose)
+            self.timing = UrdfArm(kinematics, joint_arm, SimulatedTurntable())
 
     @property
     def reach_of_config(self) -> bool:
@@ -646,21 +666,44 @@ class RecordedCell(Cell):
         return self.recorded.index_of(T_table_camera) is not None
 
     def move_costs(self, candidates: Sequence[Any], eligible: NDArray[np.bool_]) -> NDArray[np.float64]:
-        """Zero for every eligible view: a recorded set has no move times."""
+        """Zero for every eligible view: the selection does not trade F against moves on a recorded set."""
         return np.where(np.asarray(eligible, dtype=bool), 0.0, math.inf)
+
+    def set_object_box(self, bbox: BoundingBox | None) -> None:
+        """The box the timing arm keeps clear of (class docstring)."""
+        if self.timing is not None:
+            self.timing.set_object_box(bbox)
 
     def move_times(
         self, candidates: Sequence[Any], indices: Sequence[int], *, exact: bool = False
     ) -> NDArray[np.float64]:
-        """The camera's straight travel between the views at 0.25 m/s (a recorded set has no arm to time)."""
-        points = [self.pose.translation] + [candidates[i].T_world_camera.translation for i in indices]
-        p = np.asarray(points)
-        return np.linalg.norm(p[:, None] - p[None], axis=2) / 0.25
+        """(K + 1, K + 1) seconds between the current state and the views ``indices``: the timing arm's estimates
+        (:meth:`UrdfArm.move_times`) between views it can take, the camera's straight travel at
+        :data:`STRAIGHT_SPEED` to and from the others (and everywhere without a URDF arm)."""
+        poses = [candidates[int(i)].T_world_camera for i in indices]
+        p = np.asarray([self.pose.translation] + [pose.translation for pose in poses])
+        straight = np.linalg.norm(p[:, None] - p[None], axis=2) / STRAIGHT_SPEED
+        if self.timing is None:
+            return straight
+        times, ok = self.timing.move_times(poses, exact)
+        times = np.array(times, dtype=np.float64)
+        times[~ok, :] = straight[~ok, :]
+        times[:, ~ok] = straight[:, ~ok]
+        np.fill_diagonal(times, 0.0)
+        return times
 
     def plan_motion(self, T_table_camera: Pose, plate_angle: float | None = None, then: Sequence[Pose] = ()) -> Motion:
+        """The timing arm's motion to the recorded view (timed), or, when it cannot take it (or there is none), the
+        plate turned to the angle the view implies (untimed). UnreachableError for a pose that is no recorded
+        view."""
         index = self.recorded.index_of(T_table_camera)
         if index is None:
             raise UnreachableError("unreachable: not a recorded view of this set")
+        if self.timing is not None:
+            try:
+                return self.timing.plan(T_table_camera, plate_angle, then)
+            except UnreachableError:
+                pass
         angle = float(self.recorded.plate_angles[index]) if plate_angle is None else plate_angle
         return Motion(angle, rz(angle) @ T_table_camera, timed=False)
 
@@ -671,11 +714,34 @@ class RecordedCell(Cell):
         then: Sequence[Pose] = (),
         motion: Motion | None = None,
     ) -> Motion:
+        """Put the camera at the recorded view (to the bit: a capture finds its view by the pose) with the plate at
+        the motion's angle; the timing arm moves on to the motion's joints when it took one."""
         done = motion if motion is not None else self.plan_motion(T_table_camera, plate_angle, then)
+        if self.recorded.index_of(T_table_camera) is None:
+            raise UnreachableError("unreachable: not a recorded view of this set")
         self.turntable.rotate_to(done.angle)
-        self.arm.move_to(done.T_base_camera)
+        self.arm.move_to(rz(done.angle) @ T_table_camera)
+        if self.timing is not None and done.q is not None:
+            self.timing.restore_arm({"q": [float(v) for v in done.q], "angle": float(done.angle)})
         self.last_motion = done
         return done
+
+    def device_state(self) -> dict[str, Any]:
+        """The cell's state plus the timing arm's joints and plate angle (a resume times its moves from there)."""
+        state = super().device_state()
+        if self.timing is not None:
+            state["timing_arm"] = self.timing.arm_state()
+        return state
+
+    def restore_device_state(self, state: dict[str, Any]) -> None:
+        """Undo :meth:`device_state`; ValueError if malformed."""
+        super().restore_device_state(state)
+        timing = state.get("timing_arm")
+        if self.timing is not None and timing is not None:
+            try:
+                self.timing.restore_arm(timing)
+            except (TypeError, KeyError, ValueError) as exc:
+                raise ValueError(f"device state: cannot restore the timing arm ({exc})") from None
 
     def capture(self) -> DepthFrame:
         return self.camera.capture()

@@ -297,3 +297,45 @@ def test_given_views_take_their_sectors_about_the_point_they_look_at_not_about_a
     assert look_point(parallel) is None
     _, centre, _ = candidates_from_poses(parallel, box, PartitionConfig())
     np.testing.assert_allclose(centre, box.center)
+
+
+def test_a_recorded_cell_times_its_moves_with_the_cells_arm_and_leaves_untimed_the_views_no_arm_takes() -> None:
+    from types import SimpleNamespace
+
+    from devices.recorded import STRAIGHT_SPEED, RecordedSet, RecordedView, planner_config_for_set, sees_from_below
+
+    target = (0.0, 0.0, 0.08)
+    poses = [orbit_view(target, 30, 10), orbit_view(target, 35, 80), orbit_view(target, -50, 200)]
+    points = np.array([[0.0, 0.0, 0.45], [0.01, 0.0, 0.45], [0.0, 0.01, 0.45]])
+    recorded = RecordedSet("three", tuple(RecordedView(f"v{i}", points, p) for i, p in enumerate(poses)), SMALL)
+    cell = RecordedCell(recorded)  # the default cell: the UR5
+    assert cell.timing is not None
+    first = cell.move_to(poses[0])
+    second = cell.move_to(poses[1])
+    assert first.timed and second.timed and second.trajectory is not None
+    assert 0.2 < second.duration < 20  # the UR5's move between two views 70 degrees apart on the plate
+    assert np.allclose(cell.pose.matrix, poses[1].matrix, atol=1e-12)  # the camera is at the recorded view
+    state = cell.device_state()
+    below = cell.move_to(poses[2])  # under the plate top: no arm of the cell takes it, the data is still there
+    assert not below.timed and below.q is None
+    assert np.allclose(cell.capture().T_world_camera.matrix, poses[2].matrix)
+    cands = [SimpleNamespace(T_world_camera=p) for p in poses]
+    times = cell.move_times(cands, [0, 1, 2])
+    # between arm views the arm's own estimate, to and from the view under the plate the straight travel
+    d = np.linalg.norm(poses[0].translation - poses[2].translation)
+    assert times[1, 3] == pytest.approx(d / STRAIGHT_SPEED) and times[3, 1] == pytest.approx(d / STRAIGHT_SPEED)
+    assert np.isfinite(times[1, 2]) and times[1, 2] != pytest.approx(
+        np.linalg.norm(poses[0].translation - poses[1].translation) / STRAIGHT_SPEED
+    )
+    # a resume puts the timing arm back where it stood: the same move is planned again
+    other = RecordedCell(recorded)
+    other.restore_device_state(state)
+    assert other.timing is not None and cell.timing is not None
+    np.testing.assert_allclose(other.timing.arm.joint_positions(), cell.timing.arm.joint_positions())
+    # without a URDF arm nothing is timed
+    sphere = RecordedCell(recorded, CellConfig(kinematics="reach_sphere"))
+    assert sphere.timing is None and not sphere.move_to(poses[1]).timed
+    # a view from under the plate top: the planner's voxel floor goes
+    assert sees_from_below(recorded) and not planner_config_for_set(PlannerConfig(), recorded).voxel.floor
+    above = RecordedSet("two", recorded.views[:2], SMALL)
+    assert not sees_from_below(above) and planner_config_for_set(PlannerConfig(), above).voxel.floor
