@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from typing import Any
 
 import numpy as np
 import pytest
@@ -156,7 +157,7 @@ def test_a_resumed_recorded_session_has_the_same_views_map_and_plan_and_goes_on(
     poses = recorded_boxes(settings)
     body = {"config": SMALL, "seed": 3, "source": {"kind": "recorded", "recorded": "boxes"}}
 
-    def state(client: TestClient, sid: str) -> dict[str, object]:
+    def state(client: TestClient, sid: str) -> dict[str, Any]:
         st = client.get(f"/api/sessions/{sid}").json()
         export = client.get(f"/api/sessions/{sid}/export").json()
         return {

@@ -284,7 +284,9 @@ def test_given_views_take_their_sectors_about_the_point_they_look_at_not_about_a
     # B grown along the first view (from azimuth 280) lies behind the object: its centre 0.16 m off the axis
     box = BoundingBox(np.array([-0.1, 0.0, 0.0]), np.array([0.1, 0.33, 0.1]))
     poses = [orbit_view((0, 0, 0.05), 10, a) for a in (280, 10, 100, 190)]
-    np.testing.assert_allclose(look_point(poses), [0, 0, 0.05], atol=1e-9)
+    looked_at = look_point(poses)
+    assert looked_at is not None
+    np.testing.assert_allclose(looked_at, [0, 0, 0.05], atol=1e-9)
     candidates, centre, radius = candidates_from_poses(poses, box, PartitionConfig())
     np.testing.assert_allclose(centre, [0, 0, 0.05], atol=1e-9)
     assert [c.sector for c in candidates] == [3, 0, 1, 2]  # a quarter turn apart: four sectors
