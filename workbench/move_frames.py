@@ -17,6 +17,7 @@ started). :func:`integrate_move_frames` takes them in stamp order through ``Plan
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -28,6 +29,7 @@ import numpy as np
 from devices.config import CellConfig
 from devices.move_capture import MoveFrame
 from planner import DepthFrame, Planner, Pose, VoxelClass
+from planner.planner import IntegrationReport
 
 NEW_SHARE_STRIDE = 4
 """:func:`new_share` looks at every this-many-th pixel in both directions (1/16 of a frame's points)."""
@@ -168,3 +170,18 @@ def integrate_move_frames(
         out.integration_seconds += cost
     out.wait_seconds = max(0.0, finish - move_seconds) if math.isfinite(finish) else 0.0
     return out
+
+
+def integrate_step(
+    planner: Planner, frame: DepthFrame, moving: tuple[list[MoveFrame], float, KeepRule] | None
+) -> tuple[IntegrationReport, Planner, MoveIntegration | None]:
+    """Integrate one view into ``planner`` (the session's, or a worker's copy): first the frames of the move to it
+    (``moving``: the frames, the move's modelled seconds, the keep rule; :func:`integrate_move_frames`), then the
+    view. Atomic: with move frames the work is done on a copy, so a ValueError of the view leaves ``planner`` as it
+    was. Returns (report, the planner after the view, what became of the frames)."""
+    if moving is None:
+        return planner.integrate(frame), planner, None
+    frames, move_seconds, rule = moving
+    work = copy.deepcopy(planner)
+    moves = integrate_move_frames(work, frames, move_seconds, rule)
+    return work.integrate(frame), work, moves
