@@ -3,7 +3,7 @@ coverage, F@5mm of the cloud and the surface) and what they cost (render, integr
 move's modelled duration), at a few rates and keep rules. docs/experiments/move-capture.md reports its numbers.
 
 Run: ``PYTHONPATH=. .venv/bin/python benchmarks/bench_move_capture.py [--model ../shared/models/bunny.obj]
-[--views 10] [--rates 0,2.5,5] [--sensors ideal,realsense-d435] [--min-new 0.02] [--repeat 1]``.
+[--views 10] [--rates 0,2.5,5] [--sensors ideal,realsense-d435] [--min-new 0.02] [--repeat 1] [--cost N]``.
 
 One simulated scan (the UR5 cell, the ``projection`` planner) per (sensor, rate); a realistic sensor scans with the
 ``typical`` calibration. Per scan one line: robot seconds to 90 and 95 % of the reachable-coverage ceiling (each
@@ -11,6 +11,7 @@ move frame counted at its time within its move), the final coverage and F@5mm (c
 taken / kept, and per move the integration seconds against the move's duration (median and max of their ratio,
 the largest modelled wait), plus the mean render seconds of one move frame. ``--repeat`` repeats each scan: the
 coverage numbers repeat exactly, the seconds vary with the machine's load (``uptime`` is printed).
+``--cost N``: only the wall and CPU milliseconds of one move frame (render, integrate), the median of N.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import dataclasses
 import os
 import statistics
 import time
+from typing import Any
 
 from devices.config import CameraConfig, CellConfig
 from devices.move_capture import SimulatedMoveCapture
@@ -31,7 +33,7 @@ from workbench.surface.integrator import SurfaceIntegrator
 from workbench.surface.report import surface_block
 
 
-def one_scan(model: str, views: int, sensor: str, hz: float, min_new: float, wait: float) -> dict[str, object]:
+def one_scan(model: str, views: int, sensor: str, hz: float, min_new: float, wait: float) -> dict[str, Any]:
     calibration = "none" if sensor == "ideal" else "typical"
     config = dataclasses.replace(
         PlannerConfig(), termination=dataclasses.replace(PlannerConfig().termination, max_views=views)
@@ -92,8 +94,51 @@ def one_scan(model: str, views: int, sensor: str, hz: float, min_new: float, wai
     }
 
 
+def frame_cost(model: str, sensor: str, frames: int) -> dict[str, float]:
+    """Wall and CPU milliseconds of one move frame (rendered along a move from the first view, then integrated into
+    the map: preprocessing, ICP, voxel map), the median over ``frames`` frames."""
+    from devices.builtins import resolve_model
+    from devices.move_capture import MovePath, capture_times
+    from devices.sim import make_sim_cell
+    from planner import Planner
+    from tests.helpers import orbit_view
+
+    calibration = "none" if sensor == "ideal" else "typical"
+    _, mesh = resolve_model(model, up="y", size=0.2)
+    cell = make_sim_cell(mesh, CameraConfig(sensor=sensor, calibration=calibration), CellConfig(), seed=0)
+    planner = Planner(PlannerConfig())
+    planner.integrate(cell.capture())
+    motion = cell.plan_motion(orbit_view([0.0, 0.0, 0.08], 30, 60, 0.45))
+    path = MovePath.of(cell, motion)
+    assert cell.move_capture is not None
+    out: dict[str, list[float]] = {
+        "render_wall": [],
+        "render_cpu": [],
+        "integrate_wall": [],
+        "integrate_cpu": [],
+        "preprocess": [],
+        "register": [],
+        "map": [],
+    }
+    for t in capture_times(path.duration, frames / path.duration)[:frames]:
+        w, c = time.perf_counter(), time.process_time()
+        frame = cell.move_capture.render(path, float(t))
+        out["render_wall"].append(time.perf_counter() - w)
+        out["render_cpu"].append(time.process_time() - c)
+        w, c = time.perf_counter(), time.process_time()
+        try:
+            timings = planner.integrate(frame, move_frame=True).timings
+        except ValueError:
+            timings = {}
+        out["integrate_wall"].append(time.perf_counter() - w)
+        out["integrate_cpu"].append(time.process_time() - c)
+        for key, stage in (("preprocess", "preprocess"), ("register", "register"), ("map", "integrate")):
+            out[key].append(timings.get(stage, 0.0))
+    return {k: 1000 * statistics.median(v) for k, v in out.items()}
+
+
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     parser.add_argument("--model", default="../shared/models/bunny.obj")
     parser.add_argument("--views", type=int, default=10)
     parser.add_argument("--rates", default="0,2.5,5")
@@ -101,7 +146,21 @@ def main() -> None:
     parser.add_argument("--min-new", type=float, default=CellConfig().move_capture_min_new)
     parser.add_argument("--wait", type=float, default=CellConfig().move_capture_wait)
     parser.add_argument("--repeat", type=int, default=1)
+    parser.add_argument("--cost", type=int, default=0, help="only the cost of N move frames per sensor")
     args = parser.parse_args()
+    if args.cost:
+        print(
+            f"load: {os.getloadavg()}  one move frame, median of {args.cost} (ms): render wall/CPU, integrate wall/CPU"
+        )
+        for sensor in args.sensors.split(","):
+            c = frame_cost(args.model, sensor, args.cost)
+            print(
+                f"{sensor:<15} render {c['render_wall']:6.1f} / {c['render_cpu']:6.1f}   "
+                f"integrate {c['integrate_wall']:6.1f} / {c['integrate_cpu']:6.1f}   (wall: preprocess "
+                f"{c['preprocess']:5.1f}, ICP {c['register']:5.1f}, voxel map {c['map']:5.1f})"
+            )
+        print(f"load: {os.getloadavg()}")
+        return
     print(f"load: {os.getloadavg()}  model {args.model}, {args.views} views, min_new {args.min_new}, wait {args.wait}")
     head = "sensor          Hz    t90    t95  cover  ratio  F5cld  F5srf  taken kept  move_s integ_s med%  max%  wait  ms/kept ms/render"
     print(head)
