@@ -26,11 +26,8 @@ from typing import Any
 from devices.config import CameraConfig, CellConfig
 from devices.move_capture import SimulatedMoveCapture
 from planner import PlannerConfig
-from workbench.evaluation.curves import TIME_THRESHOLDS, time_to_reach
-from workbench.evaluation.simulate import simulate
-from workbench.surface.config import surface_config_for
-from workbench.surface.integrator import SurfaceIntegrator
-from workbench.surface.report import surface_block
+from workbench.evaluation import TIME_THRESHOLDS, simulate, time_to_reach
+from workbench.surface import SurfaceIntegrator, surface_block, surface_config_for
 
 
 def one_scan(model: str, views: int, sensor: str, hz: float, min_new: float, wait: float) -> dict[str, Any]:
