@@ -46,10 +46,12 @@ class KeepRule:
 
     min_new: float = 0.02
     wait: float = 0.1
+    registered: bool = False
+    """Keep a frame only when ICP accepted its pose (a frame ICP cannot confirm counts as rejected)."""
 
     @classmethod
     def of(cls, cell: CellConfig) -> KeepRule:
-        return cls(cell.move_capture_min_new, cell.move_capture_wait)
+        return cls(cell.move_capture_min_new, cell.move_capture_wait, cell.move_capture_registered)
 
 
 def new_share(planner: Planner, frame: DepthFrame, stride: int = NEW_SHARE_STRIDE) -> float:
@@ -157,7 +159,7 @@ def integrate_move_frames(
             out.seen += 1
         else:
             try:
-                report = planner.integrate(mf.frame, move_frame=True)
+                report = planner.integrate(mf.frame, move_frame=True, registered=rule.registered)
             except ValueError:
                 out.rejected += 1
             else:
