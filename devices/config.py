@@ -112,6 +112,10 @@ class CellConfig:
     move_capture_min_new: float = 0.02
     """Capture during moves: a move frame is integrated only when at least this share of its points on the object
     lies farther than one voxel from the map's occupied voxels (0: every frame)."""
+    move_capture_max_speed: float = 0.0
+    """Capture during moves: integrate a move frame only when the view moved slower than this at its stamp, m/s (the
+    camera's speed plus its turn rate times 0.4 m; a stamp error of dt misplaces the frame by about speed * dt);
+    0: any speed."""
     move_capture_registered: bool = False
     """Capture during moves: integrate a move frame only when ICP accepted its pose (a frame taken at speed carries
     the stamp's timing error)."""
@@ -171,6 +175,10 @@ class CellConfig:
         require(
             finite(self.move_capture_min_new) and 0 <= self.move_capture_min_new <= 1,
             f"cell.move_capture_min_new: must be in [0, 1], got {self.move_capture_min_new!r}",
+        )
+        require(
+            finite(self.move_capture_max_speed) and self.move_capture_max_speed >= 0,
+            f"cell.move_capture_max_speed: must be >= 0 (m/s, 0: any), got {self.move_capture_max_speed!r}",
         )
         require(
             isinstance(self.move_capture_registered, bool),

@@ -75,6 +75,9 @@ class RenderingCamera(Protocol):
     def render_sensor(self, T_table_camera: Pose) -> NDArray[np.float32]: ...
 
 
+VIEW_REACH = 0.4
+"""The distance ahead of the camera at which :meth:`MovePath.speed_at` counts its turning, metres (the working
+distance of a scan)."""
 BLUR_SUBFRAMES = 3
 """Renders across a frame's exposure (its start, middle and end) when the sensor's exposure is > 0."""
 
@@ -86,16 +89,21 @@ class MoveFrame:
     frame: the depth as captured; ``frame.T_world_camera`` is the pose the cell REPORTS for the frame's stamp (table
     frame), what a real cell knows; the true pose may differ (the sensor's timing model, calibration errors).
     t: the frame's stamp, seconds since the move started.
+    speed: how fast the view moved at the stamp (:meth:`MovePath.speed_at`, m/s), None when the cell does not say:
+    a stamp error of dt misplaces the frame by about speed * dt.
     """
 
     frame: DepthFrame
     t: float
+    speed: float | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.frame, DepthFrame):
             raise ValueError(f"frame: expected a DepthFrame, got {type(self.frame).__name__}")
         if not (isinstance(self.t, int | float) and math.isfinite(self.t) and self.t >= 0):
             raise ValueError(f"t: must be a finite number of seconds >= 0, got {self.t!r}")
+        if self.speed is not None and not (math.isfinite(self.speed) and self.speed >= 0):
+            raise ValueError(f"speed: must be a finite number of m/s >= 0, got {self.speed!r}")
 
 
 OnFrame = Callable[[MoveFrame], None]
@@ -206,6 +214,16 @@ class MovePath:
         t = min(max(float(t), 0.0), self.duration)
         return rz(-self.angle_at(t)) @ self.base_camera_at(t)
 
+    def speed_at(self, t: float, reach: float = VIEW_REACH, dt: float = 0.01) -> float:
+        """How fast the view moves at time ``t`` (table frame), m/s: the camera's speed plus its turn rate times
+        ``reach`` (a point that far ahead of the camera), by central differences over ``dt`` seconds."""
+        a, b = self.T_table_camera(t - dt), self.T_table_camera(t + dt)
+        span = min(t + dt, self.duration) - max(t - dt, 0.0)
+        if span <= 0:
+            return 0.0
+        turn = Rotation.from_matrix(a.rotation.T @ b.rotation).magnitude()
+        return float((np.linalg.norm(b.translation - a.translation) + turn * reach) / span)
+
     def poses(self, times: Sequence[float] | NDArray[np.float64]) -> list[Pose]:
         """The nominal ``T_table_camera`` at each time."""
         return [self.T_table_camera(float(t)) for t in np.asarray(times, dtype=np.float64).reshape(-1)]
@@ -289,7 +307,7 @@ class SimulatedMoveCapture:
     def frames(self, path: MovePath, hz: float) -> Iterator[MoveFrame]:
         """The frames at ``hz`` along ``path`` (:func:`capture_times`), in stamp order."""
         for t in capture_times(path.duration, hz):
-            yield MoveFrame(self.render(path, float(t)), float(t))
+            yield MoveFrame(self.render(path, float(t)), float(t), path.speed_at(float(t)))
 
 
 def blurred(plain: NDArray[np.float32], measured: NDArray[np.float32] | None, jump: float) -> NDArray[np.float32]:

@@ -48,10 +48,14 @@ class KeepRule:
     wait: float = 0.1
     registered: bool = False
     """Keep a frame only when ICP accepted its pose (a frame ICP cannot confirm counts as rejected)."""
+    max_speed: float = 0.0
+    """Keep a frame only when its view moved slower than this at its stamp, m/s (``MoveFrame.speed``; 0: any)."""
 
     @classmethod
     def of(cls, cell: CellConfig) -> KeepRule:
-        return cls(cell.move_capture_min_new, cell.move_capture_wait, cell.move_capture_registered)
+        return cls(
+            cell.move_capture_min_new, cell.move_capture_wait, cell.move_capture_registered, cell.move_capture_max_speed
+        )
 
 
 def new_share(planner: Planner, frame: DepthFrame, stride: int = NEW_SHARE_STRIDE) -> float:
@@ -109,6 +113,8 @@ class MoveIntegration:
     kept: list[KeptFrame] = field(default_factory=list)
     seen: int = 0
     """Left out: too little new (``min_new``)."""
+    fast: int = 0
+    """Left out: taken while the view moved faster than ``max_speed``."""
     late: int = 0
     """Left out: integration would have outlasted the move by more than ``wait`` of its duration."""
     rejected: int = 0
@@ -127,6 +133,7 @@ class MoveIntegration:
             "taken": self.taken,
             "kept": len(self.kept),
             "seen": self.seen,
+            "fast": self.fast,
             "late": self.late,
             "rejected": self.rejected,
             "integration_seconds": self.integration_seconds,
@@ -151,6 +158,9 @@ def integrate_move_frames(
     finish = 0.0
     costs: list[float] = []
     for mf in sorted(frames, key=lambda f: f.t):
+        if rule.max_speed > 0 and mf.speed is not None and mf.speed > rule.max_speed:
+            out.fast += 1
+            continue
         start = max(mf.t, finish)
         estimate = max(costs, default=prior)  # the slowest so far: a loaded machine's spikes are kept in the bound
         if start + estimate > limit:

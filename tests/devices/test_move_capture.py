@@ -85,6 +85,14 @@ def _hold(cell: Cell):
     return JointTrajectory.hold(cell.kinematics.joint_names, q)
 
 
+def test_the_views_speed_during_a_plate_turn_is_the_turn_rate_times_radius_plus_reach(bunny_cell: Cell) -> None:
+    path = _plate_path(bunny_cell, 45.0)
+    radius = float(np.hypot(*bunny_cell.pose.translation[:2]))
+    rate = math.radians(45.0)
+    assert path.speed_at(path.duration / 2) == pytest.approx(rate * (radius + 0.4), rel=1e-3)
+    assert path.speed_at(path.duration + 1.0) == 0.0  # after the move: still
+
+
 def test_the_reach_sphere_turns_then_travels_straight() -> None:
     cell = make_sim_cell(None, SMALL, CellConfig(kinematics="reach_sphere"), seed=0)
     start = cell.pose

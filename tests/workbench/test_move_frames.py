@@ -62,6 +62,15 @@ def test_a_frame_of_what_the_map_holds_is_left_out_and_a_new_side_is_kept(scene)
     assert out.to_json()["kept"] == 1
 
 
+def test_frames_taken_faster_than_the_limit_are_left_out(scene) -> None:
+    planner = Planner(PlannerConfig())
+    planner.integrate(scene(0.0))
+    frames = [MoveFrame(scene(90.0), 0.2, 1.2), MoveFrame(scene(180.0), 0.4, 0.3), MoveFrame(scene(270.0), 0.6)]
+    out = integrate_move_frames(planner, frames, 5.0, KeepRule(min_new=0.0, wait=1.0, max_speed=0.5))
+    assert ([k.t for k in out.kept], out.fast) == ([0.4, 0.6], 1)  # a frame without a speed is not judged by it
+    assert out.to_json()["fast"] == 1
+
+
 def test_frames_that_would_make_the_move_wait_are_left_out(scene) -> None:
     planner = Planner(PlannerConfig())
     planner.integrate(scene(0.0))
