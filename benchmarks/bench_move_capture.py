@@ -3,7 +3,8 @@ coverage, F@5mm of the cloud and the surface) and what they cost (render, integr
 move's modelled duration), at a few rates and keep rules. docs/experiments/move-capture.md reports its numbers.
 
 Run: ``PYTHONPATH=. .venv/bin/python benchmarks/bench_move_capture.py [--model ../shared/models/bunny.obj]
-[--views 10] [--rates 0,2.5,5] [--sensors ideal,realsense-d435] [--min-new 0.02] [--repeat 1] [--cost N]``.
+[--views 10] [--rates 0,2.5,5] [--sensors ideal,realsense-d435] [--min-new 0.02] [--max-speed 0.8] [--registered]
+[--repeat 1] [--cost N]``.
 
 One simulated scan (the UR5 cell, the ``projection`` planner) per (sensor, rate); a realistic sensor scans with the
 ``typical`` calibration. Per scan one line: robot seconds to 90 and 95 % of the reachable-coverage ceiling (each
@@ -39,7 +40,7 @@ def one_scan(
     min_new: float,
     wait: float,
     registered: bool = False,
-    max_speed: float = 0.0,
+    max_speed: float = CellConfig().move_capture_max_speed,
 ) -> dict[str, Any]:
     calibration = "none" if sensor == "ideal" else "typical"
     config = dataclasses.replace(
@@ -161,7 +162,12 @@ def main() -> None:
     parser.add_argument("--wait", type=float, default=CellConfig().move_capture_wait)
     parser.add_argument("--repeat", type=int, default=1)
     parser.add_argument("--registered", action="store_true", help="keep only the move frames ICP accepted")
-    parser.add_argument("--max-speed", type=float, default=0.0, help="keep only frames slower than this, m/s")
+    parser.add_argument(
+        "--max-speed",
+        type=float,
+        default=CellConfig().move_capture_max_speed,
+        help="keep only frames slower than this, m/s (0: any)",
+    )
     parser.add_argument("--cost", type=int, default=0, help="only the cost of N move frames per sensor")
     args = parser.parse_args()
     if args.cost:

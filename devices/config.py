@@ -112,10 +112,10 @@ class CellConfig:
     move_capture_min_new: float = 0.02
     """Capture during moves: a move frame is integrated only when at least this share of its points on the object
     lies farther than one voxel from the map's occupied voxels (0: every frame)."""
-    move_capture_max_speed: float = 0.0
+    move_capture_max_speed: float = 0.8
     """Capture during moves: integrate a move frame only when the view moved slower than this at its stamp, m/s (the
-    camera's speed plus its turn rate times 0.4 m; a stamp error of dt misplaces the frame by about speed * dt);
-    0: any speed."""
+    camera's speed plus its turn rate times 0.4 m; a stamp error of dt misplaces the frame by about speed * dt; the
+    plate's turn alone moves it about 0.6-0.7 m/s); 0: any speed. docs/experiments/move-capture.md measured 0.8."""
     move_capture_registered: bool = False
     """Capture during moves: integrate a move frame only when ICP accepted its pose (a frame taken at speed carries
     the stamp's timing error)."""
