@@ -29,6 +29,7 @@ import numpy as np
 from devices.cell import Cell, Motion
 from devices.cellfile import CellFile, T_table_base
 from devices.config import CameraConfig, CellConfig
+from devices.move_capture import OnFrame
 from devices.protocols import DeviceError
 from devices.rig import Rig
 from planner.types import Pose
@@ -98,6 +99,8 @@ def arm_cell_config(cell: CellFile, base: CellConfig) -> CellConfig:
         changes["joint_upper_deg"] = tuple(config.joint_upper_deg)
     if config is not None and hasattr(config, "max_joint_acceleration_deg"):
         changes["acceleration_limit_deg"] = min(base.arm.acceleration_limit_deg, config.max_joint_acceleration_deg)
+    if cell.move_capture_hz is not None:  # the cell file's rate of capture during moves wins over the server's
+        base = dataclasses.replace(base, move_capture_hz=cell.move_capture_hz)
     return dataclasses.replace(base, kinematics="urdf", arm=dataclasses.replace(base.arm, **changes))
 
 
@@ -193,13 +196,15 @@ class HardwareCell(Cell):
         plate_angle: float | None = None,
         then: Sequence[Pose] = (),
         motion: Motion | None = None,
+        capture_hz: float = 0.0,
+        on_frame: OnFrame | None = None,
     ) -> Motion:
-        """:meth:`Cell.move_to` (``plate_angle``, ``then``, ``motion`` as there); a DeviceError (a fault, a refused
+        """:meth:`Cell.move_to` (``plate_angle``, ``then``, ``motion``, ``capture_hz``, ``on_frame`` as there); a DeviceError (a fault, a refused
         trajectory, a stop) names the arm's last joints."""
         self.stop_requested.clear()
         self.moving.set()
         try:
-            motion = super().move_to(T_table_camera, plate_angle, then, motion)
+            motion = super().move_to(T_table_camera, plate_angle, then, motion, capture_hz, on_frame)
             if self.stop_requested.is_set():
                 raise DeviceError("stopped on request")
             return motion

@@ -41,6 +41,7 @@ from devices.angles import wrap_angle
 from devices.cell import Cell, Motion, rz
 from devices.cellreach import SphereReach, UrdfArm
 from devices.config import CellConfig
+from devices.move_capture import OnFrame
 from devices.protocols import CaptureError, UnreachableError
 from devices.sim import SimulatedArm, SimulatedTurntable
 from planner.config import PlannerConfig
@@ -713,9 +714,12 @@ class RecordedCell(Cell):
         plate_angle: float | None = None,
         then: Sequence[Pose] = (),
         motion: Motion | None = None,
+        capture_hz: float = 0.0,
+        on_frame: OnFrame | None = None,
     ) -> Motion:
         """Put the camera at the recorded view (to the bit: a capture finds its view by the pose) with the plate at
-        the motion's angle; the timing arm moves on to the motion's joints when it took one."""
+        the motion's angle; the timing arm moves on to the motion's joints when it took one. No frames during the
+        move, whatever ``capture_hz``: a recorded set has only its views."""
         done = motion if motion is not None else self.plan_motion(T_table_camera, plate_angle, then)
         if self.recorded.index_of(T_table_camera) is None:
             raise UnreachableError("unreachable: not a recorded view of this set")
