@@ -62,6 +62,11 @@ class RealSenseConfig:
     """Returns nearer than this are dropped (depth 0), metres."""
     max_depth: float = 1.5
     """Returns farther than this are dropped (depth 0), metres."""
+    move_capture_gap_s: float = 0.1
+    """Move capture: two joint states further apart than this place no frame between them (it is dropped), seconds."""
+    move_capture_wait_s: float = 0.3
+    """Move capture: how long a frame may wait for the joint state after its stamp, and frames stamped within a move
+    may still arrive after it ended, seconds."""
     noise_model: str = "ideal"
     """The depth noise the planner assumes for this camera: a sensor model of ``nbv scan --sensor`` (e.g.
     "realsense-d435", "realsense-d405"). It sets the planner's plate band, ICP gate and the real sensors' candidate
@@ -93,7 +98,9 @@ class RealSenseConfig:
         for f in filters:
             require(f in FILTERS, f"{p}filters: unknown filter {f!r} (known: {', '.join(FILTERS)})")
         object.__setattr__(self, "filters", tuple(filters))
-        require(finite(self.timeout_s) and self.timeout_s > 0, f"{p}timeout_s: must be > 0, got {self.timeout_s!r}")
+        for name in ("timeout_s", "move_capture_gap_s", "move_capture_wait_s"):
+            v = getattr(self, name)
+            require(finite(v) and v > 0, f"{p}{name}: must be > 0, got {v!r}")
         require(finite(self.min_depth) and self.min_depth >= 0, f"{p}min_depth: must be >= 0, got {self.min_depth!r}")
         require(
             finite(self.max_depth) and self.max_depth > self.min_depth,
