@@ -41,6 +41,7 @@ from scipy.spatial.transform import Rotation
 from devices.cellreach import Reach, SphereReach, UrdfArm
 from devices.config import CellConfig
 from devices.motion import Motion, rz
+from devices.move_capture import MoveFrame, MovePath, OnFrame, SimulatedMoveCapture, capture_times
 from devices.protocols import Arm, Camera, JointArm, Turntable
 from devices.trajectory import JointTrajectory
 from planner.types import BoundingBox, DepthFrame, Intrinsics, Pose
@@ -48,7 +49,7 @@ from planner.types import BoundingBox, DepthFrame, Intrinsics, Pose
 if TYPE_CHECKING:
     from devices.arm.kinematics import ArmKinematics
 
-__all__ = ["Cell", "Motion", "ScanCell", "rz"]
+__all__ = ["Cell", "Motion", "MoveFrame", "ScanCell", "rz"]
 
 
 class ScanCell(Protocol):
@@ -125,8 +126,12 @@ class ScanCell(Protocol):
         plate_angle: float | None = None,
         then: Sequence[Pose] = (),
         motion: Motion | None = None,
+        capture_hz: float = 0.0,
+        on_frame: OnFrame | None = None,
     ) -> Motion:
-        """Move to a view (by ``motion`` when it was planned already); returns the motion run."""
+        """Move to a view (by ``motion`` when it was planned already); returns the motion run. capture_hz > 0: the
+        cell calls ``on_frame(MoveFrame)`` for each frame taken during the move, in stamp order, as they are taken
+        (a cell that cannot capture while moving, or a move that is not timed, takes none)."""
         ...
 
     def stop_moving(self) -> None:
@@ -201,6 +206,9 @@ class Cell:
         self.reach: Reach = reach
         self.last_motion: Motion | None = None
         """The motion of the last :meth:`move_to` that started (the 3D view animates its trajectory)."""
+        self.move_capture: SimulatedMoveCapture | None = None
+        """A simulated cell's renderer of the frames taken during a move (``Cell.move_to(capture_hz=...)``); None: the
+        cell takes none (a real cell captures from its stream instead)."""
         self.errors: Any = None
         """A simulated cell's calibration and motion errors (``devices.calibration_error.CellErrors``): the true
         transforms beside the nominal ones the cell reports; None for a real cell."""
@@ -367,6 +375,8 @@ class Cell:
         plate_angle: float | None = None,
         then: Sequence[Pose] = (),
         motion: Motion | None = None,
+        capture_hz: float = 0.0,
+        on_frame: OnFrame | None = None,
     ) -> Motion:
         """Turn the plate, then move the arm, so the camera is at ``T_table_camera`` (a URDF arm retracts first
         when the turn would sweep the object's box into it: ``Motion.retract``; with ``Motion.overlapped`` the plate
@@ -376,23 +386,39 @@ class Cell:
         (an approval checks the view by planning it, and that plan is the one executed); None, or one the arm has
         moved away from since (:meth:`Reach.is_current`): planned here (``plate_angle``, ``then``: as in
         :meth:`plan_motion`), an unreachable view raising UnreachableError with nothing moved.
+        capture_hz, on_frame: capture during the move: ``on_frame(MoveFrame)`` for each frame taken at
+        ``capture_hz`` along the path the cell executes (:class:`devices.move_capture.MovePath`), in stamp order; a
+        simulated cell (``move_capture`` set) renders them after its instant move, each reported at the nominal pose
+        of its stamp (with the cell's pose noise), rendered from the true one (the sensor's timing model). 0 or no
+        ``on_frame``: none. ValueError for a bad rate, with nothing moved.
         A device fault (DeviceError) after the turntable moved leaves the plate at its
         new angle; a fault during the trajectory leaves the arm where it stopped.
         """
+        capture_times(1.0, capture_hz)  # a bad rate raises before anything moves
         if motion is None or not self.reach.is_current(motion):
             motion = self.plan_motion(T_table_camera, plate_angle, then)
         self.last_motion = motion
+        path = None
+        if capture_hz > 0 and on_frame is not None and motion.timed and self.move_capture is not None:
+            path = MovePath.of(self, motion)
+        self._run(motion)
+        if path is not None and on_frame is not None and self.move_capture is not None:
+            for taken in self.move_capture.frames(path, capture_hz):
+                on_frame(MoveFrame(taken.frame.with_pose(self._perturb(taken.frame.T_world_camera)), taken.t))
+        return motion
+
+    def _run(self, motion: Motion) -> None:
+        """Send ``motion`` to the devices: the retract, then the turn and the trajectory (or both at once)."""
         if motion.retract is not None:
             self.arm.execute(motion.retract)
         if motion.overlapped and motion.trajectory is not None:
             self._turn_during(motion.angle, motion.trajectory)
-            return motion
+            return
         self.turntable.rotate_to(motion.angle)
         if motion.trajectory is not None:
             self.arm.execute(motion.trajectory)
         else:
             self.arm.move_to(motion.T_base_camera)
-        return motion
 
     def stop_moving(self) -> None:
         """Stop the arm and the turntable (those whose driver has a ``stop()``), e.g. after a move timed out."""
@@ -446,6 +472,8 @@ class Cell:
         arm_state = self.reach.arm_state()
         if arm_state is not None:
             state["arm"] = arm_state
+        if self.move_capture is not None:
+            state["move_capture"] = self.move_capture.device_state()
         return state
 
     def restore_device_state(self, state: dict[str, Any]) -> None:
@@ -461,6 +489,8 @@ class Cell:
             arm_state = state.get("arm")
             if arm_state is not None:
                 self.reach.restore_arm(arm_state)
+            if "move_capture" in state and self.move_capture is not None:
+                self.move_capture.restore_device_state(state["move_capture"])
         except (TypeError, KeyError, ValueError) as exc:
             raise ValueError(f"device state: cannot restore ({exc})") from None
 

@@ -32,6 +32,7 @@ import numpy as np
 from devices.cell import Cell, Motion
 from devices.cellfile import CellFile, T_table_base
 from devices.config import CameraConfig, CellConfig
+from devices.move_capture import MoveFrame, OnFrame
 from devices.movestream import (
     FrameStreamer,
     JointRecorder,
@@ -51,7 +52,6 @@ if TYPE_CHECKING:
     import trimesh
 
     from devices.arm.kinematics import ArmKinematics
-    from devices.move_capture import MoveFrame
 
 log = logging.getLogger(__name__)
 
@@ -215,7 +215,7 @@ class HardwareCell(Cell):
         then: Sequence[Pose] = (),
         motion: Motion | None = None,
         capture_hz: float = 0.0,
-        on_frame: Callable[[MoveFrame], None] | None = None,
+        on_frame: OnFrame | None = None,
     ) -> Motion:
         """:meth:`Cell.move_to` (``plate_angle``, ``then``, ``motion``, ``capture_hz``, ``on_frame`` as there); a
         DeviceError (a fault, a refused trajectory, a stop) names the arm's last joints.
@@ -226,19 +226,13 @@ class HardwareCell(Cell):
         the stream never breaks the move; a halt ends it. ValueError for a bad ``capture_hz`` (nothing moved)."""
         if not (finite(capture_hz) and capture_hz >= 0):
             raise ValueError(f"capture_hz: must be >= 0 (0 = off), got {capture_hz!r}")
-        if capture_hz > 0 and not callable(on_frame):
-            raise ValueError("on_frame: a callable is needed when capture_hz > 0")
         self.stop_requested.clear()
         self.moving.set()
         try:
-            if self.rig is None and capture_hz > 0:  # a dry run: the simulated cell renders along the path
-                motion = super().move_to(
-                    T_table_camera, plate_angle, then, motion, capture_hz=capture_hz, on_frame=on_frame
-                )
-            else:
-                if capture_hz > 0 and on_frame is not None:
-                    self._stream = self._start_stream(capture_hz, on_frame)
-                motion = super().move_to(T_table_camera, plate_angle, then, motion)
+            if self.rig is not None and capture_hz > 0 and on_frame is not None:
+                self._stream = self._start_stream(capture_hz, on_frame)
+            # a dry run's simulated cell renders its move frames along the path; on real devices the stream does
+            motion = super().move_to(T_table_camera, plate_angle, then, motion, capture_hz, on_frame)
             if self.stop_requested.is_set():
                 raise DeviceError("stopped on request")
             return motion
@@ -254,7 +248,7 @@ class HardwareCell(Cell):
 
     # ------------------------------------------------------------------ move capture on real devices
 
-    def _start_stream(self, hz: float, on_frame: Callable[[MoveFrame], None]) -> MoveStreamer | None:
+    def _start_stream(self, hz: float, on_frame: OnFrame) -> MoveStreamer | None:
         """The streamer of one move (None, logged, when this cell cannot stream: the move runs without it)."""
         stats = MoveStreamStats(hz=hz)
         self.last_move_stream = stats
@@ -267,8 +261,6 @@ class HardwareCell(Cell):
             )
             log.warning("move capture off for this move: %s", stats.error)
             return None
-        from devices.move_capture import MoveFrame
-
         axis = self.cellfile.turntable_axis
         config = self.cellfile.camera.config if self.cellfile.camera is not None else None
         limits = MoveStreamLimits(
@@ -427,7 +419,7 @@ def dry_run_cell(
     config, _ = configured_arm(cellfile, cell_config)
     sim = make_sim_cell(mesh, camera, config, seed=seed)
     assert sim.kinematics is not None
-    return HardwareCell(
+    cell = HardwareCell(
         sim.camera,
         sim.arm,
         sim.turntable,
@@ -439,3 +431,5 @@ def dry_run_cell(
         pose_noise_rotation_deg=camera.pose_noise_rotation_deg,
         seed=seed,
     )
+    cell.move_capture = sim.move_capture  # a dry run renders its move frames as the simulator does
+    return cell

@@ -15,8 +15,9 @@ of its own) turns them into posed frames:
   ``wait_s``), ``gap`` (the two joint states around it are more than ``max_gap_s`` apart), ``clock`` (the camera
   could not stamp it on the joint states' clock), ``out_of_order`` (stamped before a frame already handled),
   ``decode`` (an image that cannot be read), ``queue_full`` (the camera delivered faster than they were placed).
-- **The rate.** Of the placed frames, the one nearest each tick ``t0 + k / hz`` (k = 1, 2, ... up to the move's
-  end) is delivered, each frame at most once, in stamp order; the others are ``skipped``.
+- **The rate.** Of the placed frames, the one nearest each tick ``t0 + k / hz`` (k = 1, 2, ..., strictly before
+  the move's end, as :func:`devices.move_capture.capture_times`) is delivered, each frame at most once, in stamp
+  order; the others are ``skipped``.
 - **Delivery.** ``deliver(frame, t)`` runs in the streamer's thread, during the move, with ``t`` the stamp in
   seconds since the move started (``t0``, the stamp of the last joint state before the move). A fault in it is
   counted (``failed``) and logged; it never reaches the move. :meth:`MoveStreamer.stop` (a halt) ends delivery at
@@ -434,7 +435,7 @@ class MoveStreamer:
         frame before it)."""
         while self.t0 + self._tick * self.period <= s:
             tick = self.t0 + self._tick * self.period
-            if self._end is not None and tick > self._end:
+            if self._end is not None and tick >= self._end:
                 break
             if self._pending is not None and tick - self._pending[0] <= s - tick:
                 self._send(*self._pending)  # a no-op when it went to the tick before
@@ -449,7 +450,7 @@ class MoveStreamer:
         if self._pending is None or self._pending[0] <= self._delivered_stamp:
             return
         tick = self.t0 + self._tick * self.period
-        if self._end is not None and tick <= self._end and tick - self._pending[0] <= self.period:
+        if self._end is not None and tick < self._end and tick - self._pending[0] <= self.period:
             self._send(*self._pending)
 
     def _send(self, s: float, frame: StampedFrame, pose: Pose) -> None:

@@ -41,6 +41,7 @@ from devices.angles import wrap_angle
 from devices.cell import Cell, Motion, rz
 from devices.cellreach import SphereReach
 from devices.config import CellConfig
+from devices.move_capture import OnFrame
 from devices.protocols import CaptureError, UnreachableError
 from devices.sim import SimulatedArm, SimulatedTurntable
 from planner.types import DepthFrame, Intrinsics, Pose
@@ -641,7 +642,11 @@ class RecordedCell(Cell):
         plate_angle: float | None = None,
         then: Sequence[Pose] = (),
         motion: Motion | None = None,
+        capture_hz: float = 0.0,
+        on_frame: OnFrame | None = None,
     ) -> Motion:
+        """Turn the plate and put the camera at the recorded view (not timed: no frames during the move, whatever
+        ``capture_hz``)."""
         done = motion if motion is not None else self.plan_motion(T_table_camera, plate_angle, then)
         self.turntable.rotate_to(done.angle)
         self.arm.move_to(done.T_base_camera)

@@ -28,6 +28,7 @@ import numpy as np
 from devices.cell import Cell, Motion, rz
 from devices.cellreach import SphereReach
 from devices.config import CellConfig
+from devices.move_capture import OnFrame
 from devices.ply import read_ply
 from devices.protocols import CaptureError
 from devices.sim import SimulatedArm, SimulatedTurntable
@@ -159,9 +160,12 @@ class ReplayCell(Cell):
         plate_angle: float | None = None,
         then: Sequence[Pose] = (),
         motion: Motion | None = None,
+        capture_hz: float = 0.0,
+        on_frame: OnFrame | None = None,
     ) -> Motion:
         """Put the (virtual) camera at ``T_table_camera`` without turning the plate; no reach check. ``plate_angle``,
-        ``then`` and ``motion`` (:meth:`Cell.move_to`'s) are accepted and ignored: the views were taken already. The
+        ``then``, ``motion``, ``capture_hz`` and ``on_frame`` (:meth:`Cell.move_to`'s) are accepted and ignored: the views
+        were taken already. The
         motion is not timed (``Motion.timed`` False)."""
         done = Motion(self.turntable.angle, rz(self.turntable.angle) @ T_table_camera, timed=False)
         self.arm.move_to(done.T_base_camera)

@@ -34,6 +34,7 @@ from devices.arm.sim_arm import SimulatedJointArm
 from devices.calibration_error import CellErrors, calibration_named, configuration_key
 from devices.cell import Cell, rz
 from devices.config import CameraConfig, CellConfig, DeviceConfig
+from devices.move_capture import SimulatedMoveCapture
 from devices.planner_noise import cell_config_for
 from devices.protocols import CaptureError, DeviceError
 from devices.sensors import apply_effects, second_view_visible, sensor_named
@@ -269,7 +270,7 @@ def make_sim_cell(
     """
     camera_config = camera_config if camera_config is not None else CameraConfig()
     cell_config = cell_config_for(cell_config if cell_config is not None else CellConfig(), camera_config)
-    depth_seed, pose_seed, error_seed = np.random.SeedSequence(seed).spawn(3)
+    depth_seed, pose_seed, error_seed, move_seed = np.random.SeedSequence(seed).spawn(4)
     errors = CellErrors(calibration_named(camera_config.calibration), int(error_seed.generate_state(1)[0]))
     turntable = SimulatedTurntable()
     kinematics = None
@@ -317,6 +318,7 @@ def make_sim_cell(
         seed=int(pose_seed.generate_state(1)[0]),
     )
     cell.errors = errors
+    cell.move_capture = SimulatedMoveCapture(camera, errors, seed=int(move_seed.generate_state(1)[0]))
     initial = _initial_move(cell, cell_config)
     if initial is None:
         return cell  # an unusual geometry: leave the arm where it is until the first move

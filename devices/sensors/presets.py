@@ -51,10 +51,28 @@ class SensorModel:
     """Share of the image lost to dropout blobs (specular spots, low texture), 0..1."""
     hole_size_px: int = 6
     """Edge of a dropout blob, pixels."""
+    stamp_latency: float = 0.0
+    """Capture during moves: how much earlier than its stamp a frame was really exposed, against the joint states
+    the cell reads its pose from (the residual after the driver's clock alignment), seconds."""
+    stamp_jitter: float = 0.0
+    """Std of that latency from frame to frame, seconds."""
+    exposure: float = 0.0
+    """Exposure time of one depth frame, seconds: a move during it blurs the frame (0: instantaneous)."""
 
     def __post_init__(self) -> None:
         require(isinstance(self.name, str) and self.name != "", f"sensor.name: must be a name, got {self.name!r}")
-        for field in ("baseline", "subpixel", "focal_px", "min_range", "depth_unit", "lateral_px", "flying_jump"):
+        for field in (
+            "baseline",
+            "subpixel",
+            "focal_px",
+            "min_range",
+            "depth_unit",
+            "lateral_px",
+            "flying_jump",
+            "stamp_latency",
+            "stamp_jitter",
+            "exposure",
+        ):
             v = getattr(self, field)
             require(finite(v) and v >= 0, f"sensor.{field}: must be >= 0, got {v!r}")
         require(self.max_range > self.min_range, f"sensor.max_range: must be > min_range, got {self.max_range!r}")
@@ -93,6 +111,8 @@ def _focal(half_width_px: float, hfov_deg: float) -> float:
 
 SENSORS: dict[str, SensorModel] = {
     "ideal": SensorModel("ideal"),
+    # Capture during moves (assumptions, docs/experiments/move-capture.md): a stereo frame exposed ~5-8 ms, stamped
+    # ~10 +- 3 ms after the joint states it is matched with; a structured-light pattern sequence takes ~0.1 s.
     # Intel RealSense D435: 50 mm stereo baseline, depth FOV 87 x 58 deg, best depth at 848 x 480 (min-Z 0.195 m
     # there), depth unit 1 mm, subpixel 0.08 typical (datasheet rev. 014 and the depth-tuning white paper).
     "realsense-d435": SensorModel(
@@ -107,6 +127,9 @@ SENSORS: dict[str, SensorModel] = {
         max_incidence_deg=75.0,
         flying_probability=0.5,
         hole_fraction=0.01,
+        stamp_latency=0.010,
+        stamp_jitter=0.003,
+        exposure=0.008,
     ),
     # Intel RealSense D405: 18 mm baseline, FOV 87 x 58 deg, 1280 x 720, ideal range 7-50 cm, depth unit 0.1 mm.
     "realsense-d405": SensorModel(
@@ -121,6 +144,9 @@ SENSORS: dict[str, SensorModel] = {
         max_incidence_deg=75.0,
         flying_probability=0.5,
         hole_fraction=0.01,
+        stamp_latency=0.010,
+        stamp_jitter=0.003,
+        exposure=0.005,
     ),
     # A projector-camera rig like the paper's (a 2048 px wide camera, 70 deg HFOV, projector 120 mm to its side,
     # phase precision 0.05 px): an assumption in the range of desktop structured-light scanners (docs/experiments/sensors.md).
@@ -136,6 +162,9 @@ SENSORS: dict[str, SensorModel] = {
         max_incidence_deg=70.0,
         flying_probability=0.2,
         hole_fraction=0.005,
+        stamp_latency=0.020,
+        stamp_jitter=0.005,
+        exposure=0.100,
     ),
 }
 """Every named sensor preset."""

@@ -106,8 +106,8 @@ def test_each_tick_gets_the_nearest_frame_posed_at_its_interpolated_joints() -> 
     frame_stamps = 0.004 + np.arange(0, 30) / 30.0  # 30 Hz, between joint states
     got, stats = run([frame_at(T0 + s) for s in frame_stamps], joints, plate, hz=5.0, end=1.0)
     assert stats.received == 30 and stats.placed == 30 and stats.dropped == {}
-    assert stats.delivered == len(got) == 5  # ticks 0.2, 0.4, ... 1.0
-    assert stats.skipped == 25 and stats.failed == 0 and stats.error == ""
+    assert stats.delivered == len(got) == 4  # ticks 0.2, 0.4, 0.6, 0.8: strictly inside the move
+    assert stats.skipped == 26 and stats.failed == 0 and stats.error == ""
     ts = [t for _, t in got]
     assert ts == sorted(ts)
     for k, (frame, t) in enumerate(got, start=1):
@@ -121,7 +121,7 @@ def test_each_tick_gets_the_nearest_frame_posed_at_its_interpolated_joints() -> 
         # the pose between two joint states, not the nearest one's
         assert not np.allclose(frame.T_world_camera.translation, joints_of_t(joint_stamps[i]), atol=1e-6)
         assert frame.depth[0, 0] == pytest.approx(0.5 + t * 0.01, abs=1e-6)  # its own image
-    assert len(stats.latency_s) == 5
+    assert len(stats.latency_s) == 4
 
 
 def test_frames_that_cannot_be_placed_are_dropped_with_their_reason() -> None:
@@ -139,8 +139,7 @@ def test_frames_that_cannot_be_placed_are_dropped_with_their_reason() -> None:
     got, stats = run(frames, joints, plate, hz=2.0, end=1.0)
     assert stats.dropped == {"before_history": 1, "out_of_order": 1, "clock": 1, "gap": 1}
     assert stats.placed == 2 and stats.after_move == 1
-    # the tick at 0.5 takes the nearer placed frame (0.8, not 0.1); none is within a period of the tick at 1.0 but 0.8,
-    # delivered already
+    # the tick at 0.5 takes the nearer placed frame (0.8, not 0.1); the move ends at the next tick
     assert [round(t, 6) for _, t in got] == [0.8] and stats.skipped == 1
     # a frame after the last joint state: none comes within wait_s
     joints, plate = histories(np.arange(0.0, 0.5001, 0.01))
@@ -165,7 +164,7 @@ def test_a_frame_waits_for_the_joint_state_after_its_stamp() -> None:
             plate.add(T0 + s, 0.5 * s)
 
     threading.Thread(target=late_states).start()
-    stats = streamer.finish(T0 + 0.5)
+    stats = streamer.finish(T0 + 0.51)
     assert stats.dropped == {} and stats.placed == 2
     assert [round(t, 6) for t in got] == [0.255, 0.33]  # the ticks at 0.25 and 0.5 (the last one by the flush)
 
@@ -180,7 +179,7 @@ def test_a_failing_delivery_is_counted_and_the_stream_goes_on_and_a_stop_ends_it
             raise RuntimeError("the consumer broke")
 
     got, stats = run([frame_at(T0 + s) for s in np.arange(0.01, 1.0, 0.05)], joints, plate, 5.0, 1.0, deliver)
-    assert len(calls) == 5 and stats.failed == 1 and stats.delivered == 4 and stats.error == ""
+    assert len(calls) == 4 and stats.failed == 1 and stats.delivered == 3 and stats.error == ""
     # a stop (a halt): nothing is delivered after it
     queue = FrameQueue()
     delivered: list[float] = []
