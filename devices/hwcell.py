@@ -283,7 +283,9 @@ class HardwareCell(Cell):
             on_frame(MoveFrame(frame=frame, t=t))
 
         self._stream_closers = closers
-        return MoveStreamer(camera.stream(), joints, plate, pose_of, t0, hz, deliver, limits)
+        streamer = MoveStreamer(camera.stream(), joints, plate, pose_of, t0, hz, deliver, limits)
+        self.last_move_stream = streamer.stats
+        return streamer
 
     def _histories(self) -> tuple[StampedSeries, StampedSeries, list[Callable[[], None]]]:
         """(joints, plate angle, what ends their recording): the drivers' stamped joint states where they have them,

@@ -178,7 +178,7 @@ def test_a_failing_delivery_is_counted_and_the_stream_goes_on_and_a_stop_ends_it
         if len(calls) == 2:
             raise RuntimeError("the consumer broke")
 
-    got, stats = run([frame_at(T0 + s) for s in np.arange(0.01, 1.0, 0.05)], joints, plate, 5.0, 1.0, deliver)
+    _, stats = run([frame_at(T0 + s) for s in np.arange(0.01, 1.0, 0.05)], joints, plate, 5.0, 1.0, deliver)
     assert len(calls) == 4 and stats.failed == 1 and stats.delivered == 3 and stats.error == ""
     # a stop (a halt): nothing is delivered after it
     queue = FrameQueue()
