@@ -55,6 +55,9 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
+TURNTABLE_POLL_HZ = 50.0
+"""Move capture: how often a turntable without stamped states (the Modbus drive) is read during a move."""
+
 
 class DevicesInUse(RuntimeError):  # noqa: N818 - it says what the devices are
     """Another holder has the devices of this cell file open."""
@@ -288,8 +291,9 @@ class HardwareCell(Cell):
         return streamer
 
     def _histories(self) -> tuple[StampedSeries, StampedSeries, list[Callable[[], None]]]:
-        """(joints, plate angle, what ends their recording): the drivers' stamped joint states where they have them,
-        else the devices polled and stamped with the host clock."""
+        """(joints, plate angle, what ends their recording): the drivers' stamped states where they have them (the
+        ``ros2`` arm and turntable, the GRBL turntable's status reports), else the devices polled and stamped with
+        the host clock (a UR arm at 200 Hz, a Modbus turntable at ``TURNTABLE_POLL_HZ``)."""
         closers: list[Callable[[], None]] = []
         arm, table = self.arm, self.turntable
         if isinstance(arm, JointRecorder):
@@ -302,8 +306,8 @@ class HardwareCell(Cell):
         if isinstance(table, PlateRecorder):
             plate = table.record_plate()
             closers.append(lambda: table.stop_recording(plate))
-        else:
-            polled_plate = PolledSeries(lambda: self.turntable.angle, angle=True)
+        else:  # a driver whose reads may come from a second thread (the Modbus drive's bus is locked)
+            polled_plate = PolledSeries(lambda: table.angle, hz=TURNTABLE_POLL_HZ, angle=True)
             plate = polled_plate.series
             closers.append(polled_plate.close)
         return joints, plate, closers

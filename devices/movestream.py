@@ -159,17 +159,20 @@ class StampedSeries:
 
     Thread-safe: the driver's thread :meth:`add` s while the streamer reads. A value stamped before the last one
     is ignored (counted in ``out_of_order``). ``angle``: the values are angles (radians) that may wrap at pi (a
-    polled plate angle): the interpolation takes the short way round.
+    polled plate angle): the interpolation takes the short way round. A value added with ``rest`` (a device that
+    reports only while it moves, seen standing still) holds until the next value: no gap limit after it, and it
+    covers every later stamp while it is the last.
     """
 
     def __init__(self, angle: bool = False) -> None:
         self._stamps: list[float] = []
         self._values: list[NDArray[np.float64]] = []
+        self._rest: list[bool] = []
         self._angle = angle
         self._cond = threading.Condition()
         self.out_of_order = 0
 
-    def add(self, stamp: float, value: NDArray[np.float64] | float) -> None:
+    def add(self, stamp: float, value: NDArray[np.float64] | float, rest: bool = False) -> None:
         v = np.atleast_1d(np.asarray(value, dtype=np.float64)).copy()
         with self._cond:
             if self._stamps and stamp <= self._stamps[-1]:
@@ -178,6 +181,7 @@ class StampedSeries:
                 return
             self._stamps.append(float(stamp))
             self._values.append(v)
+            self._rest.append(bool(rest))
             self._cond.notify_all()
 
     def __len__(self) -> int:
@@ -195,10 +199,11 @@ class StampedSeries:
             return self._stamps[-1] if self._stamps else None
 
     def wait_past(self, stamp: float, timeout: float) -> bool:
-        """Whether a value stamped at or after ``stamp`` is here (waiting at most ``timeout`` seconds for it)."""
+        """Whether a value stamped at or after ``stamp`` is here, or the last one rests (waiting at most ``timeout``
+        seconds for either)."""
         deadline = time.monotonic() + timeout
         with self._cond:
-            while not self._stamps or self._stamps[-1] < stamp:
+            while not self._stamps or (self._stamps[-1] < stamp and not self._rest[-1]):
                 left = deadline - time.monotonic()
                 if left <= 0:
                     return False
@@ -220,12 +225,15 @@ class StampedSeries:
             if not stamps or stamp < stamps[0]:
                 return None, "before_history"
             if stamp > stamps[-1]:
-                return None, "after_history"
+                return (self._values[-1].copy(), "") if self._rest[-1] else (None, "after_history")
             i = int(np.searchsorted(stamps, stamp, side="left"))
             if stamps[i] == stamp:
                 return self._values[i].copy(), ""
             s0, s1 = stamps[i - 1], stamps[i]
             a, b = self._values[i - 1], self._values[i]
+            resting = self._rest[i - 1] and self._rest[i] and bool(np.array_equal(a, b))
+        if resting:
+            return a.copy(), ""
         if s1 - s0 > max_gap_s:
             return None, "gap"
         w = (stamp - s0) / (s1 - s0)

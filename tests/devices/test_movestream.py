@@ -216,3 +216,20 @@ def test_a_polled_series_stamps_with_the_host_clock_and_skips_failed_reads() -> 
     stamps, values = polled.series.snapshot()
     assert len(stamps) >= 5 and before <= stamps[0] and stamps[-1] <= time.time()
     assert not np.any(values[:, 0] % 3 == 0)  # the failed reads left no value
+
+
+def test_a_resting_value_holds_until_the_next_one() -> None:
+    series = StampedSeries()
+    series.add(1.0, 0.5, rest=True)
+    series.add(3.0, 0.5, rest=True)  # still there two seconds later: no gap in between
+    value, why = series.at(2.0, max_gap_s=0.1)
+    assert why == "" and value is not None and value[0] == 0.5
+    assert series.wait_past(100.0, timeout=0.0)  # resting last: it covers every later stamp
+    value, _ = series.at(100.0, 0.1)
+    assert value is not None and value[0] == 0.5
+    series.add(3.05, 0.6)  # moving again
+    assert series.at(3.2, 0.1) == (None, "after_history")
+    value, _ = series.at(3.025, 0.1)
+    assert value is not None and value[0] == pytest.approx(0.55)
+    series.add(3.5, 1.0, rest=True)
+    assert series.at(3.3, 0.1) == (None, "gap")  # a moving value before it: the gap rule holds
