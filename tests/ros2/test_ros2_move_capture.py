@@ -202,3 +202,18 @@ def test_frames_outside_the_joint_states_are_dropped_with_their_reason_and_a_hal
         assert stats.halted and 1 <= stats.delivered <= 6, stats.summary()
         assert all(a <= halted_at[0] + 0.05 for a in arrivals)
         print(f"\nhalted: {stats.summary()}")
+
+
+def test_a_dry_run_of_the_cell_renders_its_move_frames_as_the_simulator_does(cell: FakeRos2Cell) -> None:
+    from devices.config import CellConfig
+    from devices.hwcell import dry_run_cell
+    from tests.ros2.fakecell import CAMERA
+
+    dry = dry_run_cell(load_cell_file(cell.path), CellConfig(), None, CAMERA, seed=0)
+    from devices.motion import rz
+
+    got: list[MoveFrame] = []
+    dry.move_to(dry.initial_pose())
+    motion = dry.move_to(rz(2.0) @ dry.initial_pose(), capture_hz=5.0, on_frame=got.append)  # the plate turns
+    assert motion.duration > 0.3 and len(got) == len(capture_times(motion.duration, 5.0)) > 0
+    assert dry.last_move_stream is None  # no device streamed: the simulator rendered them
