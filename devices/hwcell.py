@@ -233,6 +233,8 @@ class HardwareCell(Cell):
         self.moving.set()
         try:
             if self.rig is not None and capture_hz > 0 and on_frame is not None:
+                if motion is None or not self.reach.is_current(motion):  # planned before the stream starts: an
+                    motion = self.plan_motion(T_table_camera, plate_angle, then)  # unreachable view streams nothing
                 self._stream = self._start_stream(capture_hz, on_frame)
             # a dry run's simulated cell renders its move frames along the path; on real devices the stream does
             motion = super().move_to(T_table_camera, plate_angle, then, motion, capture_hz, on_frame)
