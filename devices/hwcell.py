@@ -235,7 +235,7 @@ class HardwareCell(Cell):
             if self.rig is not None and capture_hz > 0 and on_frame is not None:
                 if motion is None or not self.reach.is_current(motion):  # planned before the stream starts: an
                     motion = self.plan_motion(T_table_camera, plate_angle, then)  # unreachable view streams nothing
-                self._stream = self._start_stream(capture_hz, on_frame)
+                self._stream = self._stream_or_none(capture_hz, on_frame)
             # a dry run's simulated cell renders its move frames along the path; on real devices the stream does
             motion = super().move_to(T_table_camera, plate_angle, then, motion, capture_hz, on_frame)
             if self.stop_requested.is_set():
@@ -252,6 +252,19 @@ class HardwareCell(Cell):
             self.moving.clear()
 
     # ------------------------------------------------------------------ move capture on real devices
+
+    def _stream_or_none(self, hz: float, on_frame: OnFrame) -> MoveStreamer | None:
+        """:meth:`_start_stream`; a fault starting it (a device that cannot be read, a closed camera) is logged and
+        counted, and the move runs without capture."""
+        try:
+            return self._start_stream(hz, on_frame)
+        except Exception as exc:
+            for close in self._stream_closers:
+                close()
+            self._stream_closers = []
+            self.last_move_stream = MoveStreamStats(hz=hz, error=f"{type(exc).__name__}: {exc}")
+            log.warning("move capture off for this move: the stream did not start (%s)", exc)
+            return None
 
     def _start_stream(self, hz: float, on_frame: OnFrame) -> MoveStreamer | None:
         """The streamer of one move (None, logged, when this cell cannot stream: the move runs without it)."""
@@ -272,11 +285,14 @@ class HardwareCell(Cell):
             max_gap_s=float(getattr(config, "move_capture_gap_s", MoveStreamLimits.max_gap_s)),
             wait_s=float(getattr(config, "move_capture_wait_s", MoveStreamLimits.wait_s)),
         )
-        joints, plate, closers = self._histories()
+        closers: list[Callable[[], None]] = []
+        self._stream_closers = closers  # filled as the recordings start (a failure on the way closes them)
+        joints, plate = self._histories(closers)
         t0 = joints.last_stamp
         if t0 is None:
             for close in closers:
                 close()
+            self._stream_closers = []
             stats.error = "no joint state to start from"
             log.warning("move capture off for this move: %s", stats.error)
             return None
@@ -287,16 +303,14 @@ class HardwareCell(Cell):
         def deliver(frame: DepthFrame, t: float) -> None:
             on_frame(MoveFrame(frame=frame, t=t))
 
-        self._stream_closers = closers
         streamer = MoveStreamer(camera.stream(), joints, plate, pose_of, t0, hz, deliver, limits)
         self.last_move_stream = streamer.stats
         return streamer
 
-    def _histories(self) -> tuple[StampedSeries, StampedSeries, list[Callable[[], None]]]:
-        """(joints, plate angle, what ends their recording): the drivers' stamped states where they have them (the
+    def _histories(self, closers: list[Callable[[], None]]) -> tuple[StampedSeries, StampedSeries]:
+        """(joints, plate angle), with what ends each recording appended to ``closers``: the drivers' stamped states where they have them (the
         ``ros2`` arm and turntable, the GRBL turntable's status reports), else the devices polled and stamped with
         the host clock (a UR arm at 200 Hz, a Modbus turntable at ``TURNTABLE_POLL_HZ``)."""
-        closers: list[Callable[[], None]] = []
         arm, table = self.arm, self.turntable
         if isinstance(arm, JointRecorder):
             joints = arm.record_joints()
@@ -312,7 +326,7 @@ class HardwareCell(Cell):
             polled_plate = PolledSeries(lambda: table.angle, hz=TURNTABLE_POLL_HZ, angle=True)
             plate = polled_plate.series
             closers.append(polled_plate.close)
-        return joints, plate, closers
+        return joints, plate
 
     def _end_stream(self) -> None:
         """After the move (done, failed or halted): deliver the frames stamped up to its end, then stop recording."""

@@ -217,3 +217,19 @@ def test_a_dry_run_of_the_cell_renders_its_move_frames_as_the_simulator_does(cel
     motion = dry.move_to(rz(2.0) @ dry.initial_pose(), capture_hz=5.0, on_frame=got.append)  # the plate turns
     assert motion.duration > 0.3 and len(got) == len(capture_times(motion.duration, 5.0)) > 0
     assert dry.last_move_stream is None  # no device streamed: the simulator rendered them
+    # on devices whose camera cannot stream, the move runs without capture and says why
+    assert dry.kinematics is not None
+    on_devices = HardwareCell(
+        dry.camera,
+        dry.arm,
+        dry.turntable,
+        dry.config,
+        kinematics=dry.kinematics,
+        cellfile=dry.cellfile,
+        rig=object(),  # type: ignore[arg-type]  # devices that are not simulated (only its presence matters here)
+    )
+    got.clear()
+    on_devices.move_to(dry.initial_pose(), capture_hz=5.0, on_frame=got.append)
+    stats = on_devices.last_move_stream
+    assert got == [] and stats is not None and "SimulatedCamera camera driver does not stream" in stats.error
+    assert np.allclose(on_devices.pose.matrix, dry.initial_pose().matrix, atol=1e-3)  # the move ran
