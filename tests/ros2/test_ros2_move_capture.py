@@ -58,15 +58,51 @@ class States:
 
         self.subscription = Subscription(hw.arm.node, "/joint_states", JointState, on_state)
 
-    def at(self, stamp: float) -> tuple[np.ndarray, float, float]:
-        """(joints, plate angle, gap between the bracketing states) interpolated at ``stamp``."""
+    def at(self, stamp: float) -> tuple[np.ndarray, float, float, bool]:
+        """(joints, plate angle, gap between the bracketing states, whether they differ) interpolated at
+        ``stamp``."""
         rows = sorted(self.rows, key=lambda r: r[0])
         stamps = np.array([r[0] for r in rows])
         i = int(np.searchsorted(stamps, stamp))
         assert 0 < i < len(rows), f"stamp {stamp} outside the test's record"
         (s0, q0, p0), (s1, q1, p1) = rows[i - 1], rows[i]
         w = (stamp - s0) / (s1 - s0)
-        return q0 + w * (q1 - q0), p0 + w * (p1 - p0), s1 - s0
+        moving = not (np.array_equal(q0, q1) and p0 == p1)
+        return q0 + w * (q1 - q0), p0 + w * (p1 - p0), s1 - s0, moving
+
+
+class Images:
+    """The test's own record of the depth images' header stamps."""
+
+    def __init__(self, hw: HardwareCell) -> None:
+        from devices.drivers.ros2.messages import Image, seconds_of
+
+        self.stamps: list[float] = []
+        self.subscription = Subscription(
+            hw.arm.node,
+            "/camera/camera/depth/image_rect_raw",
+            Image,
+            lambda m: self.stamps.append(seconds_of(m.header.stamp)),
+        )
+
+    def nearest(self, t0: float, end: float, ticks: np.ndarray) -> list[float]:
+        """The stamps (s since t0) the rate should pick: for each tick the nearer of the frames just before and
+        after it (after the last frame: the last one, when within a period of the tick), each once."""
+        frames = sorted(s - t0 for s in self.stamps if t0 <= s <= end)
+        period = float(ticks[1] - ticks[0]) if len(ticks) > 1 else 1.0
+        picked: list[float] = []
+        for tick in ticks:
+            before = [f for f in frames if f <= tick]
+            after = [f for f in frames if f >= tick]
+            if after:
+                choice = before[-1] if before and tick - before[-1] <= after[0] - tick else after[0]
+            elif before and tick - before[-1] <= period:
+                choice = before[-1]
+            else:
+                continue
+            if not picked or choice > picked[-1]:
+                picked.append(choice)
+        return picked
 
 
 def move(hw: HardwareCell, offsets_deg: list[float], turn_deg: float, seconds: float) -> Motion:
@@ -95,6 +131,7 @@ def test_frames_during_a_move_are_posed_by_the_joint_states_at_their_stamps(cell
     with open_rig(cellfile) as rig:
         hw = hardware_cell(rig)
         states = States(hw)
+        images = Images(hw)
         hz = 10.0
         got: list[tuple[MoveFrame, float]] = []
         threads: set[str] = set()
@@ -103,35 +140,40 @@ def test_frames_during_a_move_are_posed_by_the_joint_states_at_their_stamps(cell
             got.append((frame, time.time()))
             threads.add(threading.current_thread().name)
 
-        motion = move(hw, [25.0, -10.0, 10.0, 15.0, 0.0, 30.0], turn_deg=40.0, seconds=1.0)
+        motion = move(hw, [25.0, -10.0, 10.0, 15.0, 0.0, 30.0], turn_deg=40.0, seconds=0.7)
         hw.move_to(motion.T_base_camera, motion=motion, capture_hz=hz, on_frame=on_frame)
         stats = hw.last_move_stream
         assert stats is not None and stats.t0 is not None and stats.end is not None
-        assert stats.error == "" and stats.failed == 0 and stats.dropped == {}, stats.summary()
+        # nothing dropped but, maybe, a frame stamped before the move that was still on its way when it started
+        assert stats.error == "" and stats.failed == 0, stats.summary()
+        assert set(stats.dropped) <= {"before_history"} and stats.dropped.get("before_history", 0) <= 2, stats.summary()
         moved = stats.end - stats.t0
-        assert 1.0 < moved < 2.5  # the trajectory, the settle, the discovery of the command's reader
-        # one frame per tick strictly inside the move, as the simulated cell's capture_times
+        assert 0.7 < moved < 2.5  # the trajectory, the settle, the discovery of the command's reader
+        # the frame nearest each tick strictly inside the move (as the simulated cell's capture_times), by the test's
+        # own record of the images' stamps; one per tick unless the camera fell behind at the move's end
         ticks = capture_times(moved, hz)
-        assert stats.delivered == len(got) == len(ticks), stats.summary()
+        expected = images.nearest(stats.t0, stats.end, ticks)
         assert threads == {"move-stream"}  # from the stream's thread, during the move
         ts = [f.t for f, _ in got]
-        assert ts == sorted(ts) and ts[0] > 0 and ts[-1] < moved
-        assert max(abs(t - tick) for t, tick in zip(ts, ticks, strict=True)) < 1.0 / CAMERA_HZ
+        assert stats.delivered == len(got) == len(expected) >= len(ticks) - 1, stats.summary()
+        assert np.allclose(ts, expected, atol=1e-6) and ts == sorted(ts) and ts[0] > 0 and ts[-1] < moved
         assert stats.received >= 0.6 * CAMERA_HZ * moved  # the camera streamed (the fake renders as fast as it can)
         # each pose: forward kinematics of the joints and the plate angle interpolated at the frame's stamp
         assert hw.kinematics is not None
-        errors, between = [], 0
+        errors, between, moving = [], 0, 0
         for frame, _ in got:
-            q, plate, _ = states.at(stats.t0 + frame.t)
+            q, plate, _, differ = states.at(stats.t0 + frame.t)
             want = T_table_base(plate, cellfile.turntable_axis) @ hw.kinematics.camera_pose(q)
             errors.append(float(np.max(np.abs(frame.frame.T_world_camera.matrix - want.matrix))))
             stamps = np.array([r[0] for r in states.rows])
             nearest = states.rows[int(np.argmin(np.abs(stamps - (stats.t0 + frame.t))))]
             at_nearest = T_table_base(nearest[2], cellfile.turntable_axis) @ hw.kinematics.camera_pose(nearest[1])
-            between += not np.allclose(frame.frame.T_world_camera.matrix, at_nearest.matrix, atol=1e-6)
+            moving += differ
+            between += differ and not np.allclose(frame.frame.T_world_camera.matrix, at_nearest.matrix, atol=1e-6)
             assert frame.frame.depth.shape == (120, 160) and frame.frame.depth.dtype == np.float32
         assert max(errors) < 1e-6, errors
-        assert between >= len(got) - 2  # placed between two joint states, not at the nearest one
+        # while the arm moved, placed between two joint states, not at the nearest one
+        assert moving >= len(got) - 3 and between >= moving - 1, (moving, between)
         latency = [arrived - (stats.t0 + f.t) for f, arrived in got]
         assert 0 < float(np.median(latency)) < 0.5
         print(
@@ -157,10 +199,10 @@ def test_frames_outside_the_joint_states_are_dropped_with_their_reason_and_a_hal
             if len(got) == 1:
                 raise RuntimeError("the consumer broke")
 
-        motion = move(hw, [-20.0, 5.0, -5.0, 0.0, 10.0, -20.0], turn_deg=-30.0, seconds=1.2)
+        motion = move(hw, [-20.0, 5.0, -5.0, 0.0, 10.0, -20.0], turn_deg=-30.0, seconds=1.0)
         # a frame stamped 30 s ago arrives during the move; later the joint states pause for 0.4 s
-        threading.Timer(0.2, cell.command, ["stale_frame"]).start()
-        threading.Timer(0.6, cell.command, ["pause_joints 0.4"]).start()
+        threading.Timer(0.15, cell.command, ["stale_frame"]).start()
+        threading.Timer(0.4, cell.command, ["pause_joints 0.4"]).start()
         hw.move_to(motion.T_base_camera, motion=motion, capture_hz=10.0, on_frame=on_frame)  # the move completes
         stats = hw.last_move_stream
         assert stats is not None and stats.t0 is not None and stats.end is not None
@@ -180,7 +222,7 @@ def test_frames_outside_the_joint_states_are_dropped_with_their_reason_and_a_hal
         states.subscription = None  # type: ignore[assignment]
         cell.command("reset")
         # a halt: the move stops, and so does the stream
-        motion = move(hw, [20.0, -5.0, 5.0, 0.0, -10.0, 20.0], turn_deg=0.0, seconds=1.5)
+        motion = move(hw, [20.0, -5.0, 5.0, 0.0, -10.0, 20.0], turn_deg=0.0, seconds=1.2)
         got.clear()
         halted_at: list[float] = []
 
@@ -194,7 +236,7 @@ def test_frames_outside_the_joint_states_are_dropped_with_their_reason_and_a_hal
             got.append(frame)
             arrivals.append(time.monotonic())
 
-        threading.Timer(0.6, halt).start()
+        threading.Timer(0.5, halt).start()
         with pytest.raises(DeviceError, match="stopped on request"):
             hw.move_to(motion.T_base_camera, motion=motion, capture_hz=10.0, on_frame=on_frame_timed)
         stats = hw.last_move_stream
@@ -213,7 +255,6 @@ def test_a_dry_run_of_the_cell_renders_its_move_frames_as_the_simulator_does(cel
     from devices.motion import rz
 
     got: list[MoveFrame] = []
-    dry.move_to(dry.initial_pose())
     motion = dry.move_to(rz(2.0) @ dry.initial_pose(), capture_hz=5.0, on_frame=got.append)  # the plate turns
     assert motion.duration > 0.3 and len(got) == len(capture_times(motion.duration, 5.0)) > 0
     assert dry.last_move_stream is None  # no device streamed: the simulator rendered them

@@ -97,7 +97,10 @@ def test_a_sim_rehearsal_cell_and_the_defaults(tmp_path):
         ("[voxel]\nresolution = 0.01\n", r"^devices: the cell file needs a \[devices\] table"),
         ("[devices]\nspeed = 1\n", r"^devices.speed: unknown setting \(known: camera, arm, turntable, hand_eye"),
         ("[devices]\nallow_auto = 1\n", r"^devices.allow_auto: expected true/false, got 1$"),
-        ("[devices.camera]\nwidth = 640\n", r"^devices.camera.driver: required \(one of realsense, replay, ros2, sim\)$"),
+        (
+            "[devices.camera]\nwidth = 640\n",
+            r"^devices.camera.driver: required \(one of realsense, replay, ros2, sim\)$",
+        ),
         ('[devices.arm]\ndriver = "kuka"\n', r"^devices.arm.driver: unknown driver 'kuka' \(known: ros2, ur\)$"),
         ('[devices.arm]\ndriver = "ur"\n', r"^devices.arm.host: required"),
         ('[devices.arm]\ndriver = "ur"\nhost = "a"\nspeed = 2\n', r"^devices.arm.speed: unknown setting \(known: "),

@@ -91,3 +91,72 @@ def test_frames_from_the_realsense_stream_are_posed_at_their_global_time_stamps(
         want = pose_of(q, 0.3 * t)
         assert np.max(np.abs(frame.T_world_camera.matrix - want.matrix)) < 1e-6
         assert frame.intrinsics == k
+
+
+def test_a_hardware_cell_places_the_realsense_frames_of_a_ur_move_by_its_polled_joints(tmp_path: Path) -> None:
+    """The whole path on one cell file: RealSense (a recording stamped on the host clock over the next seconds,
+    read ahead: each frame waits until the arm's readings pass its stamp), the fake UR read 200 times a second, the
+    fake GRBL's status reports. Each delivered pose against the fake controller's true joints at the frame's stamp."""
+    from devices.cellfile import load_cell_file
+    from devices.hwcell import hardware_cell
+    from devices.motion import Motion
+    from devices.move_capture import MoveFrame
+    from devices.rig import open_rig
+    from devices.trajectory import JointTrajectory
+    from tests.devices.drivers.rigfixtures import fake_hardware_cell
+
+    start = time.time() + 0.3
+    stamps_ms = [(start + i / FPS) * 1000.0 for i in range(60)]  # two seconds of frames, from 0.3 s on
+    depths = [np.full((SMALL.height, SMALL.width), 0.5, dtype=np.float32)] * len(stamps_ms)
+    with fake_hardware_cell(
+        tmp_path,
+        depths,
+        SMALL.intrinsics,
+        arm_speed="max_joint_speed_deg = 60",
+        camera="move_capture_wait_s = 3.0\nmove_capture_gap_s = 0.3",  # room for a loaded machine's scheduling
+        timestamps_ms=stamps_ms,
+        domains=["global_time"] * len(stamps_ms),
+    ) as fake:
+        cellfile = load_cell_file(fake.path)
+        with open_rig(cellfile) as rig:
+            hw = hardware_cell(rig)
+            assert hw.kinematics is not None
+            q0 = hw.joint_positions()
+            assert q0 is not None
+            q1 = q0 + np.radians([10.0, -5.0, 5.0, 5.0, 0.0, 10.0])
+            times = np.array([0.0, 0.5])
+            trajectory = JointTrajectory(hw.arm.joint_names, times, np.vstack([q0, q1]), np.zeros((2, 6)))
+            motion = Motion(hw.angle, hw.kinematics.camera_pose(q1), q=q1, trajectory=trajectory, duration=0.5)
+            truth: list[list] = []
+            got: list[MoveFrame] = []
+
+            def on_frame(frame: MoveFrame) -> None:
+                if not truth:
+                    truth.append(list(fake.controller._segments))  # the controller's path, monotonic clock
+                got.append(frame)
+
+            offset = time.time() - time.monotonic()
+            while time.time() < start + 0.1:
+                time.sleep(0.01)
+            hw.move_to(motion.T_base_camera, motion=motion, capture_hz=10.0, on_frame=on_frame)
+            stats = hw.last_move_stream
+    assert stats is not None and stats.t0 is not None and stats.end is not None, stats
+    assert stats.error == "" and stats.failed == 0 and set(stats.dropped) <= {"before_history"}, stats.summary()
+    moved = stats.end - stats.t0
+    assert stats.end < stamps_ms[-1] / 1000.0 - 0.1  # the recording covers the move
+    assert stats.delivered == len(got) == math.ceil(moved * 10.0) - 1 >= 4, stats.summary()
+    segments = truth[0]
+    errors = []
+    for frame in got:
+        t = stats.t0 + frame.t - offset  # the stamp on the controller's (monotonic) clock
+        q = segments[-1][3]
+        for a, b, qa, qb in segments:
+            if t <= b:
+                q = qa + min(max((t - a) / (b - a), 0.0), 1.0) * (qb - qa)
+                break
+        true = T_table_base(0.0) @ hw.kinematics.camera_pose(q)
+        errors.append(float(np.linalg.norm(frame.frame.T_world_camera.translation - true.translation)))
+    assert max(errors) < 0.002, errors  # the polling's 5 ms at the camera's speed, and the two clocks' offset
+    print(
+        f"\nRealSense + UR + GRBL, {stats.summary()}; position error vs the true joints max {max(errors) * 1000:.2f} mm"
+    )
