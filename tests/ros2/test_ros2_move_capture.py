@@ -181,7 +181,6 @@ def test_frames_during_a_move_are_posed_by_the_joint_states_at_their_stamps(cell
             f"{stats.received} received; pose error vs FK max {max(errors):.1e}; "
             f"stamp to on_frame median {np.median(latency) * 1000:.0f} ms, max {max(latency) * 1000:.0f} ms"
         )
-        states.subscription = None  # type: ignore[assignment]
 
 
 def test_frames_outside_the_joint_states_are_dropped_with_their_reason_and_a_halt_ends_the_stream(
@@ -219,7 +218,6 @@ def test_frames_outside_the_joint_states_are_dropped_with_their_reason_and_a_hal
         inside = stamps[(stamps > stats.t0) & (stamps < stats.end)]
         assert float(np.max(np.diff(inside))) > 0.3
         assert max(states.at(stats.t0 + f.t)[2] for f in got) <= 0.2
-        states.subscription = None  # type: ignore[assignment]
         cell.command("reset")
         # a halt: the move stops, and so does the stream
         motion = move(hw, [20.0, -5.0, 5.0, 0.0, -10.0, 20.0], turn_deg=0.0, seconds=1.2)
