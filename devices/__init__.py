@@ -12,6 +12,7 @@
 - ``cellfile``   the cell file: which driver per device, hand-eye, arm base, allow_auto
 - ``rig``        open_rig / check_devices: the cell file's devices opened, checked, stopped
 - ``hwcell``     hardware_cell: the kinematic Cell on a rig's devices
+- ``movestream`` a real cell's capture during moves: streamed frames placed by the joint states at their stamps
 
 Importing ``devices`` does not import open3d (the simulated camera does, when built).
 """

@@ -8,7 +8,9 @@ both that the model's joint names are the driver's and that the speeds fit, so a
 first move. :func:`dry_run_cell` builds the same cell on simulated devices (a rehearsal of the same scan).
 Planning, IK, collision checks and trajectories then run on our side exactly as in simulation;
 ``Cell.move_to`` turns the real plate and sends the trajectory to the real arm, ``Cell.capture`` takes a real
-image and places it by forward kinematics of the joints the controller reports.
+image and places it by forward kinematics of the joints the controller reports. With move capture on
+(``capture_hz``), the camera streams during the move and each frame is placed by the joint states at its stamp
+(:mod:`devices.movestream`).
 
 One holder at a time: :func:`device_claim` claims a cell file's devices for the block that opens them and hands
 the claim to the cell, which releases it when it is closed (:class:`DevicesInUse` for a second claimant).
@@ -17,9 +19,10 @@ the claim to the cell, which releases it when it is closed (:class:`DevicesInUse
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import threading
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -29,15 +32,31 @@ import numpy as np
 from devices.cell import Cell, Motion
 from devices.cellfile import CellFile, T_table_base
 from devices.config import CameraConfig, CellConfig
-from devices.move_capture import OnFrame
+from devices.move_capture import MoveFrame, OnFrame
+from devices.movestream import (
+    FrameStreamer,
+    JointRecorder,
+    MoveStreamer,
+    MoveStreamLimits,
+    MoveStreamStats,
+    PlateRecorder,
+    PolledSeries,
+    StampedSeries,
+)
 from devices.protocols import DeviceError
 from devices.rig import Rig
-from planner.types import Pose
+from planner.types import DepthFrame, Pose
+from planner.validate import finite
 
 if TYPE_CHECKING:
     import trimesh
 
     from devices.arm.kinematics import ArmKinematics
+
+log = logging.getLogger(__name__)
+
+TURNTABLE_POLL_HZ = 50.0
+"""Move capture: how often a turntable without stamped states (the Modbus drive) is read during a move."""
 
 
 class DevicesInUse(RuntimeError):  # noqa: N818 - it says what the devices are
@@ -151,6 +170,10 @@ class HardwareCell(Cell):
         self.moving = threading.Event()
         self.stop_requested = threading.Event()
         self._closed = False
+        self._stream: MoveStreamer | None = None
+        self._stream_closers: list[Callable[[], None]] = []
+        self.last_move_stream: MoveStreamStats | None = None
+        """What the move capture of the last move on real devices did (None: none ran)."""
 
     @property
     def dry_run(self) -> bool:
@@ -199,11 +222,23 @@ class HardwareCell(Cell):
         capture_hz: float = 0.0,
         on_frame: OnFrame | None = None,
     ) -> Motion:
-        """:meth:`Cell.move_to` (``plate_angle``, ``then``, ``motion``, ``capture_hz``, ``on_frame`` as there); a DeviceError (a fault, a refused
-        trajectory, a stop) names the arm's last joints."""
+        """:meth:`Cell.move_to` (``plate_angle``, ``then``, ``motion``, ``capture_hz``, ``on_frame`` as there); a
+        DeviceError (a fault, a refused trajectory, a stop) names the arm's last joints.
+
+        On real devices with ``capture_hz`` > 0 the camera streams during the move: ``on_frame`` gets a MoveFrame
+        for the frame nearest each ``1 / capture_hz`` tick, placed by the joint states at its stamp, in stamp order,
+        from the stream's thread (:mod:`devices.movestream`; ``last_move_stream`` counts what it did). A fault of
+        the stream never breaks the move; a halt ends it. ValueError for a bad ``capture_hz`` (nothing moved)."""
+        if not (finite(capture_hz) and capture_hz >= 0):
+            raise ValueError(f"capture_hz: must be >= 0 (0 = off), got {capture_hz!r}")
         self.stop_requested.clear()
         self.moving.set()
         try:
+            if self.rig is not None and capture_hz > 0 and on_frame is not None:
+                if motion is None or not self.reach.is_current(motion):  # planned before the stream starts: an
+                    motion = self.plan_motion(T_table_camera, plate_angle, then)  # unreachable view streams nothing
+                self._stream = self._stream_or_none(capture_hz, on_frame)
+            # a dry run's simulated cell renders its move frames along the path; on real devices the stream does
             motion = super().move_to(T_table_camera, plate_angle, then, motion, capture_hz, on_frame)
             if self.stop_requested.is_set():
                 raise DeviceError("stopped on request")
@@ -215,13 +250,110 @@ class HardwareCell(Cell):
             exc.args = (message,)  # the same type and fields (ArmFaultError.joint_positions), a fuller message
             raise
         finally:
+            self._end_stream()
             self.moving.clear()
+
+    # ------------------------------------------------------------------ move capture on real devices
+
+    def _stream_or_none(self, hz: float, on_frame: OnFrame) -> MoveStreamer | None:
+        """:meth:`_start_stream`; a fault starting it (a device that cannot be read, a closed camera) is logged and
+        counted, and the move runs without capture."""
+        try:
+            return self._start_stream(hz, on_frame)
+        except Exception as exc:
+            for close in self._stream_closers:
+                close()
+            self._stream_closers = []
+            self.last_move_stream = MoveStreamStats(hz=hz, error=f"{type(exc).__name__}: {exc}")
+            log.warning("move capture off for this move: the stream did not start (%s)", exc)
+            return None
+
+    def _start_stream(self, hz: float, on_frame: OnFrame) -> MoveStreamer | None:
+        """The streamer of one move (None, logged, when this cell cannot stream: the move runs without it)."""
+        stats = MoveStreamStats(hz=hz)
+        self.last_move_stream = stats
+        camera, kinematics = self.camera, self.kinematics
+        if not isinstance(camera, FrameStreamer) or kinematics is None:
+            stats.error = (
+                "no arm model to place frames by"
+                if kinematics is None
+                else f"the {type(camera).__name__} camera driver does not stream frames"
+            )
+            log.warning("move capture off for this move: %s", stats.error)
+            return None
+        axis = self.cellfile.turntable_axis
+        config = self.cellfile.camera.config if self.cellfile.camera is not None else None
+        limits = MoveStreamLimits(
+            max_gap_s=float(getattr(config, "move_capture_gap_s", MoveStreamLimits.max_gap_s)),
+            wait_s=float(getattr(config, "move_capture_wait_s", MoveStreamLimits.wait_s)),
+        )
+        closers: list[Callable[[], None]] = []
+        self._stream_closers = closers  # filled as the recordings start (a failure on the way closes them)
+        joints, plate = self._histories(closers)
+        t0 = joints.last_stamp
+        if t0 is None:
+            for close in closers:
+                close()
+            self._stream_closers = []
+            stats.error = "no joint state to start from"
+            log.warning("move capture off for this move: %s", stats.error)
+            return None
+
+        def pose_of(q: Any, theta: float) -> Pose:
+            return T_table_base(theta, axis) @ kinematics.camera_pose(q)
+
+        def deliver(frame: DepthFrame, t: float) -> None:
+            on_frame(MoveFrame(frame=frame, t=t))
+
+        streamer = MoveStreamer(camera.stream(), joints, plate, pose_of, t0, hz, deliver, limits)
+        self.last_move_stream = streamer.stats
+        return streamer
+
+    def _histories(self, closers: list[Callable[[], None]]) -> tuple[StampedSeries, StampedSeries]:
+        """(joints, plate angle), with what ends each recording appended to ``closers``: the drivers' stamped states where they have them (the
+        ``ros2`` arm and turntable, the GRBL turntable's status reports), else the devices polled and stamped with
+        the host clock (a UR arm at 200 Hz, a Modbus turntable at ``TURNTABLE_POLL_HZ``)."""
+        arm, table = self.arm, self.turntable
+        if isinstance(arm, JointRecorder):
+            joints = arm.record_joints()
+            closers.append(lambda: arm.stop_recording(joints))
+        else:
+            polled = PolledSeries(self.arm.joint_positions)
+            joints = polled.series
+            closers.append(polled.close)
+        if isinstance(table, PlateRecorder):
+            plate = table.record_plate()
+            closers.append(lambda: table.stop_recording(plate))
+        else:  # a driver whose reads may come from a second thread (the Modbus drive's bus is locked)
+            polled_plate = PolledSeries(lambda: table.angle, hz=TURNTABLE_POLL_HZ, angle=True)
+            plate = polled_plate.series
+            closers.append(polled_plate.close)
+        return joints, plate
+
+    def _end_stream(self) -> None:
+        """After the move (done, failed or halted): deliver the frames stamped up to its end, then stop recording."""
+        streamer, self._stream = self._stream, None
+        if streamer is None:
+            return
+        try:
+            end = None if self.stop_requested.is_set() else streamer.joints.last_stamp
+            stats = streamer.finish(end)
+            log.info("%s", stats.summary())
+        except Exception:  # never breaks the move
+            log.exception("move capture: ending the stream failed")
+        finally:
+            closers, self._stream_closers = self._stream_closers, []
+            for close in closers:
+                close()
 
     def halt(self) -> list[str] | None:
         """Stop the arm and the turntable at once if a move is running (None when none is); the drivers' errors."""
         if not self.moving.is_set():
             return None
         self.stop_requested.set()
+        streamer = self._stream
+        if streamer is not None:
+            streamer.stop()
         if self.rig is not None:
             return self.rig.stop()
         self.stop_moving()
@@ -311,7 +443,7 @@ def dry_run_cell(
     config, _ = configured_arm(cellfile, cell_config)
     sim = make_sim_cell(mesh, camera, config, seed=seed)
     assert sim.kinematics is not None
-    return HardwareCell(
+    cell = HardwareCell(
         sim.camera,
         sim.arm,
         sim.turntable,
@@ -323,3 +455,5 @@ def dry_run_cell(
         pose_noise_rotation_deg=camera.pose_noise_rotation_deg,
         seed=seed,
     )
+    cell.move_capture = sim.move_capture  # a dry run renders its move frames as the simulator does
+    return cell

@@ -11,6 +11,10 @@ the real-time ``?`` (``<Idle|MPos:...|...>``) until the plate is idle at the tar
 ``Alarm`` state is a DeviceError with the alarm's meaning; no answer within the timeouts is a
 DeviceTimeoutError. ``stop()`` sends a feed hold (``!``); the moving call then waits for the hold to
 complete and resets GRBL (safe after a hold: the position is kept), dropping the rest of the move.
+
+For move capture, :meth:`GrblTurntable.record_plate` keeps the plate angle of every status report with the host
+clock's time of its arrival (the reports a turn polls every ``poll_s``; an ``Idle`` one holds until the next): the
+serial port is never read from a second thread.
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from typing import Any
 
 from devices.drivers.common import import_vendor
 from devices.drivers.plate import PlateScale, check_angle, wrap_deg
+from devices.movestream import StampedSeries
 from devices.protocols import DeviceError
 from devices.timeout import DeviceTimeoutError
 from planner.validate import finite, integer, require
@@ -116,6 +121,7 @@ class GrblTurntable:
         self._scale = PlateScale(config.units_per_degree, config.invert, config.zero_offset_deg, config.continuous)
         serial = import_vendor("serial", "turntable", "GRBL turntable")
         self._write_lock = threading.Lock()
+        self._recorders: list[StampedSeries] = []
         self._stop = threading.Event()
         self._moving = False
         self._buffer = b""
@@ -211,6 +217,9 @@ class GrblTurntable:
                         index = "XYZA".index(self.config.axis)
                         if index >= len(values):
                             raise DeviceError(f"turntable: GRBL reports no {self.config.axis} axis: {line}")
+                        for series in list(self._recorders):
+                            plate = math.radians(self._plate_deg(values[index]))
+                            series.add(time.time(), plate, rest=fields[0] == "Idle")
                         return fields[0], values[index]
                 raise DeviceError(f"turntable: GRBL status without a position: {line}")
 
@@ -224,6 +233,18 @@ class GrblTurntable:
         """The plate angle, radians in (-pi, pi]."""
         _, units = self._status()
         return math.radians(wrap_deg(self._plate_deg(units)))
+
+    def record_plate(self) -> StampedSeries:
+        """A history of the plate angle (radians, host clock), from a status report now on, until
+        :meth:`stop_recording` (:class:`devices.movestream.PlateRecorder`; call it from the thread that moves)."""
+        series = StampedSeries(angle=True)
+        self._recorders.append(series)
+        self._status()
+        return series
+
+    def stop_recording(self, series: StampedSeries) -> None:
+        if series in self._recorders:
+            self._recorders.remove(series)
 
     def home(self) -> None:
         """Run the homing cycle ($H); the plate is then at ``zero_offset_deg``."""

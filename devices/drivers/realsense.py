@@ -14,11 +14,19 @@ frames that had a return there (0 if none had). A frame that does not arrive wit
 ``playback`` names a recording (``.bag``, or rosbag2 ``.db3`` as librealsense 2.59 writes) played back not
 in real time, frame by frame: how the driver is tested offline, and how a recorded scan is replayed
 through the exact code path of the live camera.
+
+While the cell moves with move capture on, :meth:`RealSenseCamera.stream` reads the depth stream in a thread of
+its own and hands every frame with its timestamp to the cell's :class:`devices.movestream.MoveStreamer`: in the
+global time domain (a live camera's is turned on at opening: the device clock mapped onto the host clock) or the
+system time domain (the host's arrival time), milliseconds since the epoch, the host clock the joint states are
+stamped with; a frame on the camera's hardware clock cannot be placed (dropped as ``clock``). The ``temporal``
+filter is not applied to moving frames (it would blend frames taken from different poses).
 """
 
 from __future__ import annotations
 
 import contextlib
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from devices.drivers.common import import_vendor
+from devices.movestream import FrameQueue, StampedFrame
 from devices.protocols import CaptureError, DeviceError
 from planner.types import DepthFrame, Intrinsics, Pose
 from planner.validate import finite, integer, require
@@ -62,6 +71,11 @@ class RealSenseConfig:
     """Returns nearer than this are dropped (depth 0), metres."""
     max_depth: float = 1.5
     """Returns farther than this are dropped (depth 0), metres."""
+    move_capture_gap_s: float = 0.1
+    """Move capture: two joint states further apart than this place no frame between them (it is dropped), seconds."""
+    move_capture_wait_s: float = 0.3
+    """Move capture: how long a frame may wait for the joint state after its stamp, and frames stamped within a move
+    may still arrive after it ended, seconds."""
     noise_model: str = "ideal"
     """The depth noise the planner assumes for this camera: a sensor model of ``nbv scan --sensor`` (e.g.
     "realsense-d435", "realsense-d405"). It sets the planner's plate band, ICP gate and the real sensors' candidate
@@ -93,7 +107,9 @@ class RealSenseConfig:
         for f in filters:
             require(f in FILTERS, f"{p}filters: unknown filter {f!r} (known: {', '.join(FILTERS)})")
         object.__setattr__(self, "filters", tuple(filters))
-        require(finite(self.timeout_s) and self.timeout_s > 0, f"{p}timeout_s: must be > 0, got {self.timeout_s!r}")
+        for name in ("timeout_s", "move_capture_gap_s", "move_capture_wait_s"):
+            v = getattr(self, name)
+            require(finite(v) and v > 0, f"{p}{name}: must be > 0, got {v!r}")
         require(finite(self.min_depth) and self.min_depth >= 0, f"{p}min_depth: must be >= 0, got {self.min_depth!r}")
         require(
             finite(self.max_depth) and self.max_depth > self.min_depth,
@@ -114,6 +130,8 @@ class RealSenseCamera:
         self._rs: Any = import_vendor("pyrealsense2", "realsense", "RealSense camera")
         self.captures = 0
         self._pipeline: Any = None
+        self._stream_thread: threading.Thread | None = None
+        self._stream_frames: FrameQueue | None = None
         self._open()
 
     # ------------------------------------------------------------------ opening
@@ -159,9 +177,16 @@ class RealSenseCamera:
             raise
         makers = {"spatial": rs.spatial_filter, "temporal": rs.temporal_filter, "hole_filling": rs.hole_filling_filter}
         self._filters = [makers[name]() for name in cfg.filters]
+        self._moving_filters = [f for name, f in zip(cfg.filters, self._filters, strict=True) if name != "temporal"]
+        if not cfg.playback:  # stamps on the host clock, for frames taken during a move
+            with contextlib.suppress(RuntimeError, AttributeError):
+                sensor = device.first_depth_sensor()
+                if sensor.supports(rs.option.global_time_enabled):
+                    sensor.set_option(rs.option.global_time_enabled, 1)
 
     def close(self) -> None:
         """Stop the pipeline (harmless when already stopped)."""
+        self._end_stream()
         if self._pipeline is not None:
             pipeline, self._pipeline = self._pipeline, None
             with contextlib.suppress(RuntimeError):
@@ -193,6 +218,7 @@ class RealSenseCamera:
 
     def _next_depth(self) -> NDArray[np.float32]:
         """(H, W) float32 metres of the next frame, after the filters. CaptureError on timeout."""
+        self._end_stream()
         if self._pipeline is None:
             raise CaptureError("RealSense: the camera is closed")
         timeout_ms = max(1, round(self.config.timeout_s * 1000))
@@ -232,6 +258,60 @@ class RealSenseCamera:
         in_range = (mean >= cfg.min_depth) & (mean <= cfg.max_depth)
         self.captures += 1
         return DepthFrame(np.where(in_range, mean, 0.0).astype(np.float32), Pose.identity(), k)
+
+    # ------------------------------------------------------------------ move capture
+
+    def stream(self) -> FrameQueue:
+        """Read every new depth frame, with its timestamp in seconds on the host clock, into a fresh queue until it is
+        closed (:class:`devices.movestream.FrameStreamer`; see the module docstring). CaptureError when closed."""
+        if self._pipeline is None:
+            raise CaptureError("RealSense: the camera is closed")
+        self._end_stream()
+        frames = FrameQueue()
+        thread = threading.Thread(target=self._stream_into, args=(frames,), name="realsense-stream", daemon=True)
+        self._stream_thread, self._stream_frames = thread, frames
+        thread.start()
+        return frames
+
+    def _end_stream(self) -> None:
+        """End a stream (close its queue) and wait for its reader to let go of the pipeline (a capture or a close
+        comes after it)."""
+        thread, self._stream_thread = self._stream_thread, None
+        frames, self._stream_frames = self._stream_frames, None
+        if frames is not None:
+            frames.close()
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout=1.0 + self.config.timeout_s)
+
+    def _stream_into(self, frames: FrameQueue) -> None:
+        rs, k, cfg = self._rs, self._intrinsics, self.config
+        clocks = (rs.timestamp_domain.global_time, rs.timestamp_domain.system_time)
+        while not frames.closed and self._pipeline is not None:
+            try:
+                ok, got = self._pipeline.try_wait_for_frames(100)
+            except RuntimeError:
+                return
+            if not ok:
+                continue
+            depth = got.get_depth_frame()
+            if not depth:
+                continue
+            arrival = time.monotonic()
+            domain = depth.get_frame_timestamp_domain()
+            stamp = depth.get_timestamp() / 1000.0 if domain in clocks else None
+            for f in self._moving_filters:
+                depth = f.process(depth)
+            raw = np.array(depth.get_data(), dtype=np.uint16, copy=True)  # the frame goes back to librealsense
+
+            def decode(raw: NDArray[np.uint16] = raw) -> DepthFrame:
+                if raw.shape != (k.height, k.width):
+                    raise CaptureError(f"RealSense: depth image {raw.shape}, expected {(k.height, k.width)}")
+                metres = raw.astype(np.float32) * np.float32(self.depth_scale)
+                metres[(metres < cfg.min_depth) | (metres > cfg.max_depth)] = 0.0
+                return DepthFrame(metres, Pose.identity(), k)
+
+            reason = "" if stamp is not None else f"timestamp domain {domain}, not the host clock"
+            frames.put(StampedFrame(stamp, decode, arrival, reason))
 
     def describe(self) -> str:
         """One line for ``nbv devices check``: model, serial, stream, depth scale."""

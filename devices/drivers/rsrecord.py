@@ -31,10 +31,15 @@ def write_depth_recording(
     *,
     depth_unit: float = 1e-4,
     fps: int = 30,
+    timestamps_ms: Sequence[float] | None = None,
+    domains: Sequence[str] | None = None,
 ) -> Path:
     """Record ``depths`` (each (H, W) float32 metres, 0 = no return) as z16 frames of one depth stream.
 
     depth_unit: metres per z16 count (the device's depth scale; 1e-4 keeps 0.1 mm up to 6.5 m).
+    timestamps_ms: each frame's timestamp, milliseconds (None: ``i * 1000 / fps``); domains: each frame's timestamp
+    domain, "system_time" (None: all), "global_time" (the host clock, as a live camera's global time) or
+    "hardware_clock" (the camera's own clock): how a move's frames are recorded with their stamps.
     Depths beyond the z16 range raise ValueError. Returns the path written.
     """
     rs: Any = import_vendor("pyrealsense2", "realsense", "RealSense recording")
@@ -55,6 +60,17 @@ def write_depth_recording(
         if counts.max() > Z16_MAX:
             raise ValueError(f"depths[{i}]: {d.max():.3f} m exceeds the z16 range at depth_unit {depth_unit:g}")
         raws.append(np.ascontiguousarray(counts.astype(np.uint16)))
+    stamps = (
+        [i * 1000.0 / fps for i in range(len(raws))] if timestamps_ms is None else [float(t) for t in timestamps_ms]
+    )
+    names = ["system_time"] * len(raws) if domains is None else list(domains)
+    if len(stamps) != len(raws) or len(names) != len(raws):
+        raise ValueError(f"timestamps_ms, domains: one per depth image ({len(raws)})")
+    if not all(np.isfinite(stamps)):
+        raise ValueError("timestamps_ms: must be finite")
+    known = ("system_time", "global_time", "hardware_clock")
+    if any(n not in known for n in names):
+        raise ValueError(f"domains: each one of {', '.join(known)}, got {names}")
 
     if path.exists():
         path.unlink()
@@ -81,8 +97,8 @@ def write_depth_recording(
         frame = rs.software_video_frame()
         frame.pixels = raw
         frame.bpp, frame.stride = 2, 2 * k.width
-        frame.timestamp = i * 1000.0 / fps
-        frame.domain = rs.timestamp_domain.system_time
+        frame.timestamp = stamps[i]
+        frame.domain = getattr(rs.timestamp_domain, names[i])
         frame.frame_number = i + 1
         frame.profile = profile
         frame.depth_units = float(depth_unit)

@@ -13,7 +13,8 @@ domain, interface, peers) and publishes over DDS, like ``realsense2_camera`` and
 
 It prints ``ready`` once publishing. Faults are lines on stdin, each answered by ``ok``: ``silent_camera``,
 ``ignore_trajectory``, ``jump`` (joints jump 20 degrees in the middle of the next move), ``encoding rgb8``,
-``silent_joints``, ``reset``.
+``silent_joints``, ``pause_joints S`` (no joint state for S seconds from now, the joints moving on meanwhile),
+``stale_frame`` (the next depth image is stamped 30 s in the past), ``reset``.
 """
 
 from __future__ import annotations
@@ -70,6 +71,7 @@ def main(argv: list[str]) -> int:
         "trajectory": None,  # (start, times (K,), positions (K, n))
         "faults": set(),
         "encoding": "16UC1",
+        "paused_until": 0.0,
     }
 
     def joint_now() -> tuple[np.ndarray, float]:
@@ -144,7 +146,7 @@ def main(argv: list[str]) -> int:
                 gap = state["table_target"] - state["theta_joint"]
                 state["theta_joint"] += max(-step, min(step, gap))
                 q, joint = state["q"].copy(), state["theta_joint"]
-                silent = "silent_joints" in state["faults"]
+                silent = "silent_joints" in state["faults"] or now < state["paused_until"]
             if not silent:
                 joints_writer.write(
                     JointState(
@@ -178,6 +180,9 @@ def main(argv: list[str]) -> int:
             with lock:
                 silent = "silent_camera" in state["faults"]
                 encoding = state["encoding"]
+                if "stale_frame" in state["faults"]:
+                    state["faults"].discard("stale_frame")
+                    header = Header(stamp=stamp_of(time.time() - 30.0), frame_id=header.frame_id)
             info_writer.write(info)
             if not silent:
                 mm = np.round(frame.depth * 1000.0).astype("<u2")
@@ -199,8 +204,11 @@ def main(argv: list[str]) -> int:
             if words[0] == "reset":
                 state["faults"].clear()
                 state["encoding"] = "16UC1"
+                state["paused_until"] = 0.0
             elif words[0] == "encoding":
                 state["encoding"] = words[1]
+            elif words[0] == "pause_joints":
+                state["paused_until"] = time.monotonic() + float(words[1])
             else:
                 state["faults"].add(words[0])
         print("ok", flush=True)

@@ -81,7 +81,8 @@ class FakeRos2Cell:
     lock: threading.Lock
 
     def command(self, line: str) -> None:
-        """Send a fault line (``silent_camera``, ``ignore_trajectory``, ``jump``, ``encoding rgb8``, ``reset``)."""
+        """Send a fault line (``silent_camera``, ``ignore_trajectory``, ``jump``, ``encoding rgb8``, ``pause_joints S``,
+        ``stale_frame``, ``reset``: see ``tests/ros2/fake_cell.py``)."""
         with self.lock:
             assert self.process.stdin is not None and self.process.stdout is not None
             self.process.stdin.write(line + "\n")
@@ -92,12 +93,13 @@ class FakeRos2Cell:
 
 @contextmanager
 def fake_ros2_cell(
-    folder: Path, camera: CameraConfig = CAMERA, rate_hz: float = 15.0, **sections: Any
+    folder: Path, camera: CameraConfig = CAMERA, rate_hz: float = 15.0, camera_section: str = "", **sections: Any
 ) -> Iterator[FakeRos2Cell]:
-    """See the module docstring; ``sections``: :func:`cell_toml`'s keywords."""
+    """See the module docstring; ``camera_section``: extra lines of ``[devices.camera]``; ``sections``: the other
+    keywords of :func:`cell_toml`."""
     domain = fresh_domain()
     path = folder / "cell.toml"
-    path.write_text(cell_toml(domain, **sections))
+    path.write_text(cell_toml(domain, camera=camera_section, **sections))
     spec = {
         "width": camera.width,
         "height": camera.height,

@@ -15,6 +15,9 @@ Each is an :class:`devices.drivers.common.ArmFaultError` (the reason and the las
 stop: an empty ``JointTrajectory``, which a joint trajectory controller takes as "hold where you are". The move is
 done when the joints are within ``goal_tolerance_deg`` of the goal and stay there for ``settle_s``; the stamp of
 that joint state is the node's ``settled_stamp`` (a capture takes an image stamped after it).
+
+For move capture, :meth:`Ros2Arm.record_joints` keeps every joint state with its header stamp (from the latest one
+before the move on): the history a frame's pose is interpolated from.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ from numpy.typing import NDArray
 
 from devices.drivers.common import ArmFaultError
 from devices.drivers.ros2.dds import DdsConfig, Subscription, acquire, await_subscriber, release
+from devices.movestream import StampedSeries
 from devices.protocols import DeviceError
 from devices.trajectory import JointTrajectory
 from planner.validate import finite, require
@@ -144,6 +148,8 @@ class Ros2Arm:
 
         self.config = config
         self.last_joint_positions: NDArray[np.float64] | None = None
+        self._last_stamp: float | None = None
+        self._recorders: list[StampedSeries] = []
         self._stop = threading.Event()
         self._history: list[tuple[float, float, NDArray[np.float64]]] = []  # (arrival, stamp, q) while moving
         self._recording = False
@@ -170,14 +176,35 @@ class Ros2Arm:
         q = joints_of(message, self.config.joint_names)
         if q is None:
             return
-        self.last_joint_positions = q
+        stamp = seconds_of(message.header.stamp)
+        with self._lock:
+            self.last_joint_positions = q
+            self._last_stamp = stamp
+            recorders = list(self._recorders)
+        for series in recorders:
+            series.add(stamp, q)
         if self._recording:
             with self._lock:
-                self._history.append((time.monotonic(), seconds_of(message.header.stamp), q))
+                self._history.append((time.monotonic(), stamp, q))
 
     @property
     def joint_names(self) -> tuple[str, ...]:
         return self.config.joint_names
+
+    def record_joints(self) -> StampedSeries:
+        """A history of the joint states with their header stamps (ROS time, seconds), from the latest one on,
+        until :meth:`stop_recording` (:class:`devices.movestream.JointRecorder`)."""
+        series = StampedSeries()
+        with self._lock:
+            if self.last_joint_positions is not None and self._last_stamp is not None:
+                series.add(self._last_stamp, self.last_joint_positions)
+            self._recorders.append(series)
+        return series
+
+    def stop_recording(self, series: StampedSeries) -> None:
+        with self._lock:
+            if series in self._recorders:
+                self._recorders.remove(series)
 
     def joint_positions(self) -> NDArray[np.float64]:
         """(n,) the latest joints, radians; DeviceError when the joint states are silent."""

@@ -7,10 +7,16 @@ ROS puts pixel centres at integer coordinates like :class:`planner.types.DepthFr
 distortion is refused (a depth stream should be rectified: ``image_rect_raw``). A capture takes the first complete
 image stamped after the arm and the turntable last came to rest (the shared node's ``settled_stamp``), never one
 taken during a move; none within ``timeout_s`` is a :class:`devices.protocols.CaptureError` naming the topic.
+
+While the cell moves with move capture on, :meth:`Ros2Camera.stream` hands every depth image with its header stamp
+to the cell's :class:`devices.movestream.MoveStreamer` (decoded only when it is delivered), which places it by the
+joint states at that stamp.
 """
 
 from __future__ import annotations
 
+import threading
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -18,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from devices.drivers.ros2.dds import DdsConfig, Subscription, acquire, release
+from devices.movestream import FrameQueue, StampedFrame
 from devices.protocols import CaptureError, DeviceError
 from planner.types import DepthFrame, Intrinsics, Pose
 from planner.validate import finite, require
@@ -45,6 +52,11 @@ class Ros2CameraConfig(DdsConfig):
     """Returns farther than this are dropped (depth 0), metres."""
     noise_model: str = "ideal"
     """The depth noise the planner assumes for this camera (as ``[devices.camera] driver = "realsense"``)."""
+    move_capture_gap_s: float = 0.1
+    """Move capture: two joint states further apart than this place no frame between them (it is dropped), seconds."""
+    move_capture_wait_s: float = 0.3
+    """Move capture: how long a frame may wait for the joint state after its stamp, and frames stamped within a move
+    may still arrive after it ended, seconds."""
 
     def __post_init__(self) -> None:
         from devices.sensors import SENSORS
@@ -57,7 +69,7 @@ class Ros2CameraConfig(DdsConfig):
         for name in ("depth_topic", "info_topic"):
             v = getattr(self, name)
             require(isinstance(v, str) and v.startswith("/"), f"{p}{name}: a ROS 2 topic name (/...), got {v!r}")
-        for name in ("depth_unit_16uc1", "timeout_s", "max_depth"):
+        for name in ("depth_unit_16uc1", "timeout_s", "max_depth", "move_capture_gap_s", "move_capture_wait_s"):
             v = getattr(self, name)
             require(finite(v) and v > 0, f"{p}{name}: must be > 0, got {v!r}")
         require(finite(self.min_depth) and 0 <= self.min_depth < self.max_depth, f"{p}min_depth: in [0, max_depth)")
@@ -117,11 +129,13 @@ class Ros2Camera:
 
         self.config = config
         self._held = False
+        self._streams: list[FrameQueue] = []
+        self._streams_lock = threading.Lock()
         self.node = acquire(config.dds)
         self._held = True
         try:
             self.info = Subscription(self.node, config.info_topic, CameraInfo)
-            self.depth = Subscription(self.node, config.depth_topic, Image)
+            self.depth = Subscription(self.node, config.depth_topic, Image, self._on_depth)
             info = self.info.wait(lambda m: True, config.timeout_s)
             if info is None:
                 raise DeviceError(
@@ -154,14 +168,46 @@ class Ros2Camera:
                 f"camera: no complete depth image on {self.config.depth_topic} stamped after the devices settled "
                 f"(at {after:.3f} s) within {self.config.timeout_s:g} s; {seen}"
             )
+        return self._frame_of(image)
+
+    def _frame_of(self, image: Any) -> DepthFrame:
+        """The DepthFrame (identity pose, depth range applied) of a depth image; CaptureError for a wrong size or
+        encoding."""
         k = self._intrinsics
         if (int(image.width), int(image.height)) != (k.width, k.height):
             raise CaptureError(
                 f"camera: depth image {image.width}x{image.height} does not match its CameraInfo {k.width}x{k.height}"
             )
+        if not complete(image):
+            raise CaptureError(f"camera: incomplete depth image ({len(image.data)} bytes)")
         depth = depth_of(image, self.config.depth_unit_16uc1)
         depth[(depth < self.config.min_depth) | (depth > self.config.max_depth)] = 0.0
         return DepthFrame(depth, Pose.identity(), k)
+
+    def stream(self) -> FrameQueue:
+        """Hand every depth image from now on, with its header stamp (ROS time, seconds), to a fresh queue until it
+        is closed (:class:`devices.movestream.FrameStreamer`)."""
+        frames = FrameQueue(on_close=self._unstream)
+        with self._streams_lock:
+            self._streams.append(frames)
+        return frames
+
+    def _unstream(self, frames: FrameQueue) -> None:
+        with self._streams_lock:
+            if frames in self._streams:
+                self._streams.remove(frames)
+
+    def _on_depth(self, image: Any) -> None:
+        """Every depth image (the reader's thread): to the open streams, if any."""
+        if not self._streams:
+            return
+        from devices.drivers.ros2.messages import seconds_of
+
+        frame = StampedFrame(seconds_of(image.header.stamp), lambda: self._frame_of(image), time.monotonic())
+        with self._streams_lock:
+            streams = list(self._streams)
+        for frames in streams:
+            frames.put(frame)
 
     def describe(self) -> str:
         k = self._intrinsics

@@ -5,7 +5,8 @@ of one joint), its angle read from ``sensor_msgs/JointState``.
 The plate angle is the joint's position (radians, counter-clockwise seen from above; ``invert`` flips it,
 ``zero_offset_deg`` is the plate angle at joint 0). A move is done when the joint is within ``tolerance_deg`` of
 the target and stays there for ``settle_s`` (its stamp becomes the node's ``settled_stamp``); not there after
-``|turn| / speed_deg + timeout_margin_s`` or silent joint states are a DeviceError.
+``|turn| / speed_deg + timeout_margin_s`` or silent joint states are a DeviceError. For move capture,
+:meth:`Ros2Turntable.record_plate` keeps the plate angle of every joint state with its header stamp.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from typing import Any
 
 from devices.drivers.plate import check_angle
 from devices.drivers.ros2.dds import DdsConfig, Subscription, acquire, await_subscriber, release
+from devices.movestream import StampedSeries
 from devices.protocols import DeviceError
 from planner.validate import finite, require
 
@@ -82,6 +84,8 @@ class Ros2Turntable:
         self._stop = threading.Event()
         self._position: float | None = None
         self._stamp = 0.0
+        self._recorders: list[StampedSeries] = []
+        self._lock = threading.Lock()
         self._held = False
         self.node = acquire(config.dds)
         self._held = True
@@ -106,8 +110,27 @@ class Ros2Turntable:
         if self.config.joint_name in names:
             i = names.index(self.config.joint_name)
             if i < len(message.position):
-                self._position = float(message.position[i])
-                self._stamp = seconds_of(message.header.stamp)
+                position, stamp = float(message.position[i]), seconds_of(message.header.stamp)
+                with self._lock:
+                    self._position, self._stamp = position, stamp
+                    recorders = list(self._recorders)
+                for series in recorders:
+                    series.add(stamp, self._plate(position))
+
+    def record_plate(self) -> StampedSeries:
+        """A history of the plate angle (radians) with the joint states' header stamps, from the latest one on,
+        until :meth:`stop_recording` (:class:`devices.movestream.PlateRecorder`)."""
+        series = StampedSeries()
+        with self._lock:
+            if self._position is not None:
+                series.add(self._stamp, self._plate(self._position))
+            self._recorders.append(series)
+        return series
+
+    def stop_recording(self, series: StampedSeries) -> None:
+        with self._lock:
+            if series in self._recorders:
+                self._recorders.remove(series)
 
     def _plate(self, joint: float) -> float:
         sign = -1.0 if self.config.invert else 1.0

@@ -39,10 +39,16 @@ class FakeCell:
 
 
 def cell_toml(
-    port: str, intrinsics: Intrinsics, *, arm: bool = True, arm_speed: str = "max_joint_speed_deg = 30"
+    port: str,
+    intrinsics: Intrinsics,
+    *,
+    arm: bool = True,
+    arm_speed: str = "max_joint_speed_deg = 30",
+    camera: str = "",
 ) -> str:
     """A cell file for the recording ``scan.db3`` next to it, the GRBL on ``port`` and (if ``arm``) the fake UR
-    (``arm_speed``: lines for its section) mounted like the simulator's UR5, beside the plate. The fake firmware
+    (``arm_speed``: lines for its section) mounted like the simulator's UR5, beside the plate; ``camera``: more
+    lines of the camera's section. The fake firmware
     answers from a thread of the test's process, which a busy machine can hold for longer than half a second:
     a status request may take up to 5 s (the tests of a silent GRBL wait for its banner, ``startup_s``)."""
     k = intrinsics
@@ -58,6 +64,7 @@ min_depth = 0.05
 max_depth = 3.0
 timeout_s = 1.0
 playback = "scan.db3"
+{camera}
 
 [devices.turntable]
 driver = "grbl"
@@ -89,15 +96,21 @@ def fake_hardware_cell(
     *,
     depth_unit: float = 1e-4,
     arm_speed: str = "max_joint_speed_deg = 30",
+    camera: str = "",
+    timestamps_ms: Sequence[float] | None = None,
+    domains: Sequence[str] | None = None,
 ) -> Iterator[FakeCell]:
-    """See the module docstring. ``depths``: (H, W) float32 metres each, played back in order."""
-    write_depth_recording(folder / "scan.db3", depths, intrinsics, depth_unit=depth_unit)
+    """See the module docstring. ``depths``: (H, W) float32 metres each, played back in order (``timestamps_ms``,
+    ``domains``: their timestamps, as :func:`write_depth_recording`); ``camera``: more lines of its section."""
+    write_depth_recording(
+        folder / "scan.db3", depths, intrinsics, depth_unit=depth_unit, timestamps_ms=timestamps_ms, domains=domains
+    )
     controller = FakeController()
     CONTROLLERS[UR_HOST] = controller
     try:
         with FakeGrbl() as grbl:
             path = folder / "cell.toml"
-            path.write_text(cell_toml(grbl.port, intrinsics, arm_speed=arm_speed))
+            path.write_text(cell_toml(grbl.port, intrinsics, arm_speed=arm_speed, camera=camera))
 
             def open_ur(config):
                 return URArm(config, control_factory=FakeRTDEControl, receive_factory=FakeRTDEReceive)

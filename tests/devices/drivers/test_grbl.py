@@ -6,6 +6,7 @@ import math
 import threading
 import time
 
+import numpy as np
 import pytest
 
 from devices.drivers.grbl import GrblConfig, GrblTurntable
@@ -139,3 +140,26 @@ def test_bad_angles_are_value_errors_and_move_nothing(grbl):
 def test_bad_config_names_the_field(overrides, message):
     with pytest.raises(ValueError, match=message):
         GrblConfig(**{"port": "/dev/ttyUSB0", **overrides})
+
+
+def test_a_turn_records_the_plate_angle_of_its_own_status_reports(grbl):
+    """Move capture's plate history: every status report of the turn, stamped on arrival, the Idle ones holding."""
+    with table(grbl) as t:
+        before = time.time()
+        series = t.record_plate()
+        t.rotate_to(math.pi / 2)  # at the fake's 360 deg/s: 0.25 s, polled every 10 ms
+        after = time.time()
+        t.stop_recording(series)
+        count = len(series)
+        assert t.angle == pytest.approx(math.pi / 2)
+        assert len(series) == count  # not recorded any more
+    stamps, values = series.snapshot()
+    assert count >= 10 and before <= stamps[0] and stamps[-1] <= after
+    assert values[0, 0] == 0.0 and values[-1, 0] == pytest.approx(math.pi / 2)
+    assert np.all(np.diff(values[:, 0]) >= 0)  # the plate only turned one way
+    middle = (stamps[0] + stamps[-1]) / 2
+    value, why = series.at(middle, max_gap_s=0.1)
+    assert why == "" and value is not None and 0.0 < value[0] < math.pi / 2
+    # the last report was Idle: it holds after the turn
+    value, why = series.at(after + 5.0, max_gap_s=0.1)
+    assert why == "" and value is not None and value[0] == pytest.approx(math.pi / 2)
