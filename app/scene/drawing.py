@@ -223,12 +223,12 @@ class SessionDrawing:
                 edges = frustum_edges(poses, data.fov_y, data.aspect, FRUSTUM_SCALE)
                 edge_colors = np.repeat(colors, 8 * 2, axis=0).reshape(-1, 2, 3)
                 self._put("/path/edges", self.scene.add_line_segments(
-                    "/path/edges", edges, edge_colors, thickness=1.5, thickness_units="screen",
+                    "/path/edges", edges, edge_colors, thickness=2.0, thickness_units="screen",
                 ))  # fmt: skip
             points = np.array([p.translation for p in preview.line], dtype=np.float32)
             segments = np.stack([points[:-1], points[1:]], axis=1)
             self._put("/path/line", self.scene.add_line_segments(
-                "/path/line", segments, PATH_COLORS[0], thickness=2.5, thickness_units="screen",
+                "/path/line", segments, PATH_COLORS[0], thickness=3.5, thickness_units="screen",
             ))  # fmt: skip
 
     def candidate_at(self, event: viser.SceneNodePointerEvent) -> int | None:

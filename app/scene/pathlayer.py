@@ -36,9 +36,9 @@ REST read (``GET /api/sessions/{id}/plan/path``) lists every one."""
 LINE_STEP = 0.05
 """Seconds between the points of the centre's line (at most :data:`LINE_POINTS`)."""
 LINE_POINTS = 400
-FRUSTUM_SCALE = 0.03
-"""Metres from a path frustum's apex to its image plane (the views taken are drawn at 0.045, the next view 0.07)."""
-FRUSTUM_OPACITY = 0.3
+FRUSTUM_SCALE = 0.04
+"""Metres from a path frustum's apex to its image plane (the views taken are drawn at 0.045, the next view at 0.07)."""
+FRUSTUM_OPACITY = 0.35
 PATH_COLORS: tuple[tuple[int, int, int], tuple[int, int, int]] = (COLORS["path"], (0, 90, 255))
 """RGB of the path's first and last frame (a light cyan to a deep blue: the way's direction); the line takes the
 first."""
