@@ -1,9 +1,9 @@
 """Take the docs screenshot of the path layer: ``python -m tests.e2e.screenshot_path docs/workbench-path.png 1600
 1000``.
 
-Scans the built-in L-block on the UR5 cell for a few views, plans, and saves the page with this tab's viewer showing
-the camera frustums along the move to the planner's choice (the plate's turn, then the arm's trajectory) beside the
-views taken, the next view and the ghost arm.
+Scans the built-in L-block on the UR5 cell for two views, plans, and saves this tab's 3D view (from beside the way the
+camera goes) showing the camera frustums along the move to the planner's choice (the plate's turn, then the arm's
+trajectory) beside the views taken, the next view and the ghost arm.
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ import tempfile
 from pathlib import Path
 
 import httpx
+import numpy as np
 
 from app.settings import AppSettings
 from tests.e2e.conftest import CHROMIUM_ARGS, chromium_path, free_port, running_server, save_screenshot
@@ -21,7 +22,13 @@ HIDDEN = ("unknown", "candidates", "sectors", "ellipsoids")
 """Layers the screenshot hides (the path among the views, the next view, the map's occupied and frontier voxels)."""
 
 
-def main(out: str = "docs/workbench-path.png", width: int = 1600, height: int = 1000, steps: int = 2) -> None:
+def main(
+    out: str = "docs/workbench-path.png",
+    width: int = 1600,
+    height: int = 1000,
+    steps: int = 1,
+    viewer_only: bool = True,
+) -> None:
     from playwright.sync_api import expect, sync_playwright
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -45,8 +52,15 @@ def main(out: str = "docs/workbench-path.png", width: int = 1600, height: int = 
                 page.locator(f"#layers input[data-layer='{name}']").uncheck()
             path = api.get(f"/api/sessions/{sid}/plan/path").json()
             print(f"path: {len(path['frames'])} frames at {path['rate_hz']} Hz over {path['duration']:.2f} s")
-            api.post(f"/api/scene/{viewer}/camera", json={"position": [0.75, -0.75, 0.75], "look_at": [0.0, 0.0, 0.12]})
+            ends = np.array([path["start"]["position"], path["end"]["position"]])
+            look_at = (ends.mean(axis=0) + np.array([0.0, 0.0, 0.1])) / 2  # between the way and the object
+            away = np.array([look_at[0], look_at[1], 0.0])
+            away = away / max(float(np.linalg.norm(away)), 1e-9)
+            eye = look_at + 0.9 * away + np.array([0.0, 0.0, 0.6]) + 0.5 * np.cross([0.0, 0.0, 1.0], away)
+            api.post(f"/api/scene/{viewer}/camera", json={"position": eye.tolist(), "look_at": look_at.tolist()})
             save_screenshot(page, out, 12000)  # SwiftShader: the scene loads and renders
+            if viewer_only:
+                page.locator("#viewer").screenshot(path=out)
             browser.close()
     print(f"saved {out}")
 
