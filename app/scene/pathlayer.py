@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 
 from app.scene.geometry import COLORS
 from app.scene.movetarget import ArmTarget
+from devices.cell import ScanCell
 from devices.move_capture import capture_times
 from planner import Pose
 
@@ -140,6 +141,7 @@ def frame_colors(k: int) -> NDArray[np.uint8]:
     return np.round(a * (1 - s) + b * s).astype(np.uint8)
 
 
-def capture_rate(cell: Any) -> float:
-    """The frames per second ``cell`` takes during moves (``CellConfig.move_capture_hz``; 0: it does not)."""
-    return float(getattr(cell.config, "move_capture_hz", 0.0))
+def capture_rate(cell: ScanCell) -> float:
+    """The frames per second ``cell`` takes during moves (``CellConfig.move_capture_hz``, the session's
+    ``move_capture`` when it was created with one; 0: it does not)."""
+    return float(cell.config.move_capture_hz)

@@ -1,11 +1,13 @@
 """The ``path`` layer: the camera frustums along the move to the selected view, before approval (real viser server,
 a raw websocket client, the real UR5 model and planner). The path starts where the camera stands and ends at the
-selected view, follows the plate's turn round the object, is re-drawn for another selection, is gone once the view
-is approved, and the approval still plans its move once."""
+selected view, its frames at the session's capture rate (else the preview's), follows the plate's turn round the
+object, is re-drawn for another selection, is gone once the view is approved, and the approval still plans its move
+once."""
 
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Iterator
 from typing import Any
 
@@ -22,8 +24,8 @@ from devices.config import CameraConfig, CellConfig
 from devices.move_capture import MovePath, capture_times
 from devices.sim import make_sim_cell
 from planner import Pose
-from tests.helpers import orbit_view
-from tests.viewer_wire import RawViewer, wait_for
+from tests.helpers import SMALL, orbit_view
+from tests.viewer_wire import RawViewer, click_message, owner_of, wait_for
 from tests.workbench.test_approve_motion import count_plans
 
 SMALL_CAMERA = CameraConfig(width=80, height=60, fx=76.0, fy=76.0, cx=39.5, cy=29.5)
@@ -68,11 +70,20 @@ def test_the_frames_are_at_the_capture_rate_or_the_preview_rate_and_thinned_for_
     assert path_preview(ArmTarget(("p", "candidate", 1), "candidate", 1, None, "no_ik"), 0.0) is None
 
 
+RATE = 4.0
+"""Frames per second the session of the page's test captures during moves."""
+
+
+@pytest.mark.slow
 def test_the_page_previews_the_path_of_the_selected_view_until_it_is_approved(
-    scene_client: TestClient, planned_session: Any, monkeypatch: pytest.MonkeyPatch
+    scene_client: TestClient, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     client = scene_client
-    sid, plan = planned_session(client)
+    r = client.post("/api/sessions", json={"model": "l-block", "config": SMALL, "move_capture": RATE})
+    assert r.status_code == 201, r.text
+    sid = r.json()["id"]
+    assert client.post(f"/api/sessions/{sid}/capture").status_code == 200
+    plan = client.post(f"/api/sessions/{sid}/plan").json()
     body = client.post("/api/viewer", json={"session": sid}).json()
     port, vid = body["port"], body["viewer"]
     raw = RawViewer(f"ws://127.0.0.1:{port}/?ticket={body['url'].split('ticket%3D')[1]}", f"http://127.0.0.1:{port}")
@@ -93,15 +104,15 @@ def test_the_page_previews_the_path_of_the_selected_view_until_it_is_approved(
         assert r.status_code == 200, r.text
         path = r.json()
         assert path["target"]["index"] == best and path["target"]["reachable"]
-        # from where the camera stands to the planner's choice, in the move's time, at the preview rate
+        # from where the camera stands to the planner's choice, in the move's time, at the session's capture rate
         assert _near(_pose(path["start"]), cell.pose, 1e-6, 1e-5)
         end = _pose(path["end"])
         view = session.pending.plan.candidates[best].T_world_camera
         assert _near(end, view, 2e-3, 5e-3)
         assert path["duration"] == pytest.approx(path["target"]["duration"]) and path["duration"] > 0.5
-        assert path["rate_hz"] == PREVIEW_HZ and path["captured"] is False
+        assert path["rate_hz"] == RATE and path["captured"] is True
         times = [f["t"] for f in path["frames"]]
-        np.testing.assert_allclose(times, capture_times(path["duration"], PREVIEW_HZ))
+        np.testing.assert_allclose(times, capture_times(path["duration"], RATE))
         assert times[0] > 0 and times[-1] < path["duration"]
         # what the viewer drew is what the REST read says
         preview = drawn()
@@ -119,10 +130,20 @@ def test_the_page_previews_the_path_of_the_selected_view_until_it_is_approved(
             assert abs(np.linalg.norm(p.translation[:2]) - np.linalg.norm(start[:2])) < 1e-6
         assert max(np.linalg.norm(p.translation - start) for p in turning) > 0.05
 
-        # another selection: the path re-drawn to it; asking again plans nothing more
+        # a click on another candidate in the 3D view: the path re-drawn to it, the move planned on the scene's
+        # worker thread (never viser's event thread); asking again plans nothing more
         other = next(c.index for c in session.pending.plan.scores if c.eligible and c.index != best)
-        assert client.put(f"/api/sessions/{sid}/selection", json={"index": other}).status_code == 200
+        threads: list[str] = []
+        plan_motion = cell.plan_motion
+
+        def recorded(*args: Any, **kwargs: Any) -> Any:
+            threads.append(threading.current_thread().name)
+            return plan_motion(*args, **kwargs)
+
+        monkeypatch.setattr(cell, "plan_motion", recorded)
+        raw.send(click_message("/candidates", other, owner_of(raw.messages(), "/candidates")))
         assert wait_for(lambda: drawn() is not None and drawn().target.index == other, timeout=30.0)
+        assert threads == ["scene-work"]
         again = client.get(f"/api/sessions/{sid}/plan/path").json()
         assert again["target"]["index"] == other
         other_view = session.pending.plan.candidates[other].T_world_camera
