@@ -37,7 +37,7 @@ from app.scene.fit_view import FitViews, viewer_message
 from app.scene.geometry import COLORS, DEFAULT_LAYERS, SCALE_PERCENTILES, VIRIDIS, candidate_colors, outward_camera
 from app.scene.guard import install_guard
 from app.scene.lighting import configure_lighting
-from app.scene.movetarget import SessionMoves
+from app.scene.movetarget import SessionMoves, selected_target
 from app.scene.pathlayer import PathPreview, capture_rate, path_preview
 from app.scene.reachlayer import REACH_CLASSES, ReachMaps
 from app.scene.robot import RobotScene
@@ -366,19 +366,22 @@ class SceneController:
     def _show_move(self, session: Session, viewers: list[Viewer], show: bool = True) -> None:
         """Show the move to ``session``'s selected view in ``viewers`` (those still showing the session now): the
         ghost arm at its target and the path layer's frustums (``show`` False: neither). Plans the move if it
-        was not (under the session's lock: call it from a REST request's or the scene's worker thread)."""
+        was not (under the session's lock: call it from a REST request's or the scene's worker thread). A move
+        whose selection changed while it was planned is not drawn: the change's own event draws the new one."""
         target = self.moves_of(session).target() if show else None
         preview = None if target is None else path_preview(target, capture_rate(session.cell))
         arm = self.arm_of(session)
         with self._lock:
+            if target is not None:
+                sel = selected_target(session.scene_data())
+                if sel is None or sel[0] != target.key:
+                    return
             now = [v for v in viewers if v.step is None and self._viewers.get(v.id) is v]
             for v in now:
                 if v.drawing is not None:
                     v.drawing.draw_path(preview)
-            robots = [v.robot for v in now if v.robot is not None]
-        if arm is not None:
-            for robot in robots:
-                arm.show_target(robot, target)
+                if v.robot is not None and arm is not None:
+                    arm.show_target(v.robot, target)
 
     def _robots_of(self, session_id: str, live_only: bool = False) -> list[RobotScene]:
         """The arms of the viewers of ``session_id`` (``live_only``: of those not on the timeline)."""
