@@ -74,6 +74,17 @@ def _path_pixels(png: bytes) -> int:
     return int(np.sum((b >= 190) & (g >= 150) & (r <= 150) & (b - r >= 70)))
 
 
+def _scene_shot(tab: Tab, out: Path) -> bytes:
+    """The viewer's 3D view as a PNG (saved to ``out``) without the page's overlays (the layer bar and the legend,
+    whose swatches have the layers' colours)."""
+    hide = "(v) => ['legend', 'layers'].forEach((id) => { document.getElementById(id).style.visibility = v; })"
+    tab.page.evaluate(hide, "hidden")
+    try:
+        return tab.page.locator("#viewer").screenshot(path=str(out))
+    finally:
+        tab.page.evaluate(hide, "")
+
+
 def _reachable_pixels(png: bytes) -> int:
     """Pixels of ``png`` near the reach layer's reachable colour (no viridis stop of the candidates is near it)."""
     return _pixels_near(png, REACH_CLASSES["reachable"][1])
@@ -154,8 +165,8 @@ def test_arm_preview_and_approve(live_server: LiveServer, browser_context: Brows
     api.put(f"/api/scene/{viewer}/layers", json={k: False for k in tab.page.evaluate("Object.keys(S.layers)")})
     draw_viewer(tab.page)
     tab.page.wait_for_timeout(1500)  # SwiftShader: the hidden layers rendered away
-    blank = tab.page.locator("#viewer").screenshot()
-    before, path_before = _reachable_pixels(blank), _path_pixels(blank)
+    before = _reachable_pixels(tab.page.locator("#viewer").screenshot())
+    path_before = _path_pixels(_scene_shot(tab, output_dir / "arm-blank.png"))
     tab.page.locator("#layers input[data-layer='turntable']").check()
     tab.page.locator("#layers input[data-layer='reach']").check(timeout=60_000)
     tab.wait(lambda: "/reach/points" in api.get(f"/api/scene/{viewer}").json()["nodes"], timeout_ms=60_000)
@@ -174,7 +185,6 @@ def test_arm_preview_and_approve(live_server: LiveServer, browser_context: Brows
     tab.wait(lambda: _path_drawn(tab, mark), timeout_ms=60_000)
     api.post(f"/api/scene/{viewer}/camera", json={"position": [0.9, -0.9, 1.1], "look_at": [0.0, 0.0, 0.15]})
     tab.page.wait_for_timeout(1500)  # SwiftShader: the path rendered
-    shot = tab.page.locator("#viewer").screenshot(path=str(output_dir / "arm-path.png"))
-    path_after = _path_pixels(shot)
+    path_after = _path_pixels(_scene_shot(tab, output_dir / "arm-path.png"))
     assert path_before < 50 and path_after > 500, (path_before, path_after)
     draw_viewer(tab.page, on=False)
