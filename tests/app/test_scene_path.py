@@ -70,7 +70,7 @@ def test_the_frames_are_at_the_capture_rate_or_the_preview_rate_and_thinned_for_
     assert path_preview(ArmTarget(("p", "candidate", 1), "candidate", 1, None, "no_ik"), 0.0) is None
 
 
-RATE = 4.0
+RATE = 3.0
 """Frames per second the session of the page's test captures during moves."""
 
 
@@ -149,11 +149,18 @@ def test_the_page_previews_the_path_of_the_selected_view_until_it_is_approved(
         other_view = session.pending.plan.candidates[other].T_world_camera
         assert _near(_pose(again["end"]), other_view, 2e-3, 5e-3)
         assert _near(drawn().line[-1], other_view, 2e-3, 5e-3)
+        # a custom pose (the gizmo's override): the path goes there
+        third = next(c.index for c in session.pending.plan.scores if c.eligible and c.index not in (best, other))
+        custom = session.pending.plan.candidates[third].T_world_camera
+        r = client.put(f"/api/sessions/{sid}/custom_pose", json={"pose": custom.to_dict()})
+        assert r.status_code == 200 and r.json()["reachable"], r.text
+        assert wait_for(lambda: drawn() is not None and drawn().target.kind == "custom", timeout=30.0)
+        assert _near(drawn().line[-1], custom, 2e-3, 5e-3) and _near(drawn().line[0], cell.pose, 1e-6, 1e-5)
         planned = count_plans(monkeypatch, cell.kinematics)
         client.get(f"/api/sessions/{sid}/plan/path")
         assert planned == []  # the previewed move is kept for its selection
         # approve: the move planned once (as without the preview), the path gone, nothing left to read
-        r = client.post(f"/api/sessions/{sid}/approve", json={"plan_id": plan["plan_id"], "index": other})
+        r = client.post(f"/api/sessions/{sid}/approve", json={"plan_id": plan["plan_id"], "pose": custom.to_dict()})
         assert r.status_code == 200, r.text
         assert len(planned) == 1
         assert wait_for(lambda: drawn() is None, timeout=30.0)
