@@ -260,6 +260,7 @@ class SceneController:
             for v in viewers:
                 if v.drawing is not None and v.step is None:
                     v.drawing.update(data)
+        self.work.submit(lambda: self._show_move(session, viewers))  # the new object's move (none while busy)
 
     def _on_event(self, session: Session, event: SessionEvent) -> None:
         if event not in REDRAW_EVENTS:
