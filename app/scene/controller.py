@@ -38,7 +38,7 @@ from app.scene.geometry import COLORS, DEFAULT_LAYERS, SCALE_PERCENTILES, VIRIDI
 from app.scene.guard import install_guard
 from app.scene.lighting import configure_lighting
 from app.scene.movetarget import SessionMoves, selected_target
-from app.scene.pathlayer import PathPreview, capture_rate, path_preview
+from app.scene.pathlayer import capture_rate, path_preview
 from app.scene.reachlayer import REACH_CLASSES, ReachMaps
 from app.scene.robot import RobotScene
 from app.scene.tickets import Ticket, TicketBook
@@ -358,11 +358,6 @@ class SceneController:
             if arm is None or arm.session is not session:
                 arm = self._arms[session.id] = SessionArm(session, moves)
             return arm
-
-    def path_of(self, session: Session) -> PathPreview | None:
-        """The path layer's frames of the move to ``session``'s selected view (planned now if it was not, under
-        the session's lock); None without a pending plan, a reachable view or a timed move, or while busy."""
-        return path_preview(self.moves_of(session).target(), capture_rate(session.cell))
 
     def _show_move(self, session: Session, viewers: list[Viewer], show: bool = True) -> None:
         """Show the move to ``session``'s selected view in ``viewers`` (those still showing the session now): the
