@@ -603,6 +603,7 @@ class TimelineStepOut(BaseModel):
     voxels: dict[str, int] = Field(description="voxel counts by class after this view")
     points: int
     coverage: float | None
+    move_frames: int = Field(default=0, description="frames kept from the move to this view (capture during moves)")
     n_candidates: int | None
     n_eligible: int | None
     terminated: str | None

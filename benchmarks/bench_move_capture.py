@@ -26,19 +26,20 @@ from typing import Any
 from devices.config import CameraConfig, CellConfig
 from devices.move_capture import SimulatedMoveCapture
 from planner import PlannerConfig
-from workbench.evaluation.curves import TIME_THRESHOLDS, time_to_reach
-from workbench.evaluation.simulate import simulate
-from workbench.surface.config import surface_config_for
-from workbench.surface.integrator import SurfaceIntegrator
-from workbench.surface.report import surface_block
+from workbench.evaluation import TIME_THRESHOLDS, simulate, time_to_reach
+from workbench.surface import SurfaceIntegrator, surface_block, surface_config_for
 
 
-def one_scan(model: str, views: int, sensor: str, hz: float, min_new: float, wait: float) -> dict[str, Any]:
+def one_scan(
+    model: str, views: int, sensor: str, hz: float, min_new: float, wait: float, registered: bool = False
+) -> dict[str, Any]:
     calibration = "none" if sensor == "ideal" else "typical"
     config = dataclasses.replace(
         PlannerConfig(), termination=dataclasses.replace(PlannerConfig().termination, max_views=views)
     )
-    cell = CellConfig(move_capture_hz=hz, move_capture_min_new=min_new, move_capture_wait=wait)
+    cell = CellConfig(
+        move_capture_hz=hz, move_capture_min_new=min_new, move_capture_wait=wait, move_capture_registered=registered
+    )
     surface = SurfaceIntegrator(surface_config_for(CameraConfig(sensor=sensor, calibration=calibration)))
     renders: list[float] = []
     original = SimulatedMoveCapture.render
@@ -146,6 +147,7 @@ def main() -> None:
     parser.add_argument("--min-new", type=float, default=CellConfig().move_capture_min_new)
     parser.add_argument("--wait", type=float, default=CellConfig().move_capture_wait)
     parser.add_argument("--repeat", type=int, default=1)
+    parser.add_argument("--registered", action="store_true", help="keep only the move frames ICP accepted")
     parser.add_argument("--cost", type=int, default=0, help="only the cost of N move frames per sensor")
     args = parser.parse_args()
     if args.cost:
@@ -161,13 +163,16 @@ def main() -> None:
             )
         print(f"load: {os.getloadavg()}")
         return
-    print(f"load: {os.getloadavg()}  model {args.model}, {args.views} views, min_new {args.min_new}, wait {args.wait}")
+    print(
+        f"load: {os.getloadavg()}  model {args.model}, {args.views} views, min_new {args.min_new}, wait {args.wait}, "
+        f"registered {args.registered}"
+    )
     head = "sensor          Hz    t90    t95  cover  ratio  F5cld  F5srf  taken kept  move_s integ_s med%  max%  wait  ms/kept ms/render"
     print(head)
     for _ in range(args.repeat):
         for sensor in args.sensors.split(","):
             for hz in (float(v) for v in args.rates.split(",")):
-                r = one_scan(args.model, args.views, sensor, hz, args.min_new, args.wait)
+                r = one_scan(args.model, args.views, sensor, hz, args.min_new, args.wait, args.registered)
                 print(
                     f"{r['sensor']:<15} {r['hz']:>3.1f} {r['t90']:>6.1f} {r['t95']:>6.1f} {r['coverage']:.4f} "
                     f"{r['ratio']:.4f} {r['f5_cloud']:.4f} {r['f5_surface']:.4f} {r['taken']:>5} {r['kept']:>4} "

@@ -112,6 +112,9 @@ class CellConfig:
     move_capture_min_new: float = 0.02
     """Capture during moves: a move frame is integrated only when at least this share of its points on the object
     lies farther than one voxel from the map's occupied voxels (0: every frame)."""
+    move_capture_registered: bool = False
+    """Capture during moves: integrate a move frame only when ICP accepted its pose (a frame taken at speed carries
+    the stamp's timing error)."""
     move_capture_wait: float = 0.1
     """Capture during moves: integrating a move's frames may outlast the move by at most this share of its
     modelled duration (frames that would make it wait longer are left out)."""
@@ -168,6 +171,10 @@ class CellConfig:
         require(
             finite(self.move_capture_min_new) and 0 <= self.move_capture_min_new <= 1,
             f"cell.move_capture_min_new: must be in [0, 1], got {self.move_capture_min_new!r}",
+        )
+        require(
+            isinstance(self.move_capture_registered, bool),
+            f"cell.move_capture_registered: true or false, got {self.move_capture_registered!r}",
         )
         require(
             finite(self.move_capture_wait) and self.move_capture_wait >= 0,

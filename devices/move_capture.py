@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,9 +35,45 @@ from devices.motion import Motion, rz
 from planner.types import DepthFrame, Pose
 
 if TYPE_CHECKING:
+    from devices.arm.kinematics import ArmKinematics
     from devices.calibration_error import CellErrors
-    from devices.cell import Cell
-    from devices.sim import SimulatedCamera
+    from devices.config import CameraConfig, CellConfig
+    from devices.sensors import SensorModel
+    from planner.types import Intrinsics
+
+
+class MovingCell(Protocol):
+    """What a path needs of the cell that runs the move (:class:`devices.cell.Cell`): its state before the move."""
+
+    @property
+    def kinematics(self) -> ArmKinematics | None: ...
+
+    @property
+    def config(self) -> CellConfig: ...
+
+    @property
+    def angle(self) -> float: ...
+
+    @property
+    def T_base_camera(self) -> Pose: ...
+
+
+class RenderingCamera(Protocol):
+    """What the frames of a move need of the simulated camera (:class:`devices.sim.SimulatedCamera`)."""
+
+    @property
+    def sensor(self) -> SensorModel: ...
+
+    @property
+    def config(self) -> CameraConfig: ...
+
+    @property
+    def intrinsics(self) -> Intrinsics: ...
+
+    def render(self, T_table_camera: Pose) -> NDArray[np.float32]: ...
+
+    def render_sensor(self, T_table_camera: Pose) -> NDArray[np.float32]: ...
+
 
 BLUR_SUBFRAMES = 3
 """Renders across a frame's exposure (its start, middle and end) when the sensor's exposure is > 0."""
@@ -93,7 +129,7 @@ class MovePath:
     turn_speed: float
 
     @classmethod
-    def of(cls, cell: Cell, motion: Motion) -> MovePath:
+    def of(cls, cell: MovingCell, motion: Motion) -> MovePath:
         """The path of ``motion`` run by ``cell`` from its current state (call it before the move)."""
         if cell.kinematics is not None:
             speed = cell.kinematics.config.turntable_speed_deg
@@ -175,7 +211,7 @@ class MovePath:
         return [self.T_table_camera(float(t)) for t in np.asarray(times, dtype=np.float64).reshape(-1)]
 
 
-def camera_path(cell: Cell, motion: Motion, times: Sequence[float] | NDArray[np.float64]) -> list[Pose]:
+def camera_path(cell: MovingCell, motion: Motion, times: Sequence[float] | NDArray[np.float64]) -> list[Pose]:
     """``T_table_camera`` at each time (s since the move started) along ``motion`` as ``cell`` executes it from its
     current state: retract, plate turn (or the turn overlapped with the trajectory) and the arm's trajectory, by
     forward kinematics of the trajectory's joints at t and the plate's angle at t (reach sphere: the plate turn, then
@@ -191,7 +227,7 @@ class SimulatedMoveCapture:
     seed: seeds the stamp jitter.
     """
 
-    def __init__(self, camera: SimulatedCamera, errors: CellErrors | None = None, seed: int = 0) -> None:
+    def __init__(self, camera: RenderingCamera, errors: CellErrors | None = None, seed: int = 0) -> None:
         self.camera = camera
         self.errors = errors
         self._rng = np.random.default_rng(seed)

@@ -968,7 +968,7 @@ function renderStep(step) {
   showNotice("");
   $("iteration").textContent = step.view;
   $("coverage").textContent = step.coverage !== null ? (100 * step.coverage).toFixed(1) + " %" : "–";
-  $("points").textContent = step.points;
+  $("points").textContent = step.move_frames ? `${step.points} (${step.move_frames} move frames)` : step.points;
   $("plan-id").textContent = step.plan_id ? `plan ${step.plan_id} · after view ${step.view}` : `no plan after view ${step.view}`;
   $("selected-label").textContent = step.approved !== null ? `candidate ${step.approved} (approved)` : "no selection";
   if (!$("arm").hidden) {

@@ -13,7 +13,7 @@ from devices.config import CameraConfig, CellConfig
 from devices.move_capture import MoveFrame
 from devices.sim import make_sim_cell
 from planner import Planner, PlannerConfig
-from planner.types import DepthFrame
+from planner.types import DepthFrame, Pose
 from tests.helpers import orbit_view
 from workbench.evaluation.curves import run_metrics, time_to_reach
 from workbench.move_frames import KeepRule, integrate_move_frames, new_share
@@ -77,3 +77,18 @@ def test_frames_that_would_make_the_move_wait_are_left_out(scene) -> None:
     ticks = itertools.count(0.0, 0.3)
     out = integrate_move_frames(unbounded, frames, 1.0, KeepRule(min_new=0.0, wait=10.0), clock=lambda: next(ticks))
     assert len(out.kept) == 4 and out.wait_seconds == pytest.approx(0.3)  # 1.3 s: the move waits 0.3 s
+
+
+def test_a_frame_icp_cannot_confirm_is_refused_when_the_rule_asks_for_registration(scene) -> None:
+    planner = Planner(PlannerConfig())
+    planner.integrate(scene(0.0))
+    good = scene(20.0)
+    off = good.with_pose(
+        Pose(good.T_world_camera.rotation, good.T_world_camera.translation + np.array([0.0, 0.0, 0.06]))
+    )
+    points = len(planner.cloud)
+    with pytest.raises(ValueError, match="registration"):
+        planner.integrate(off, move_frame=True, registered=True)
+    assert len(planner.cloud) == points  # nothing changed
+    out = integrate_move_frames(planner, [MoveFrame(off, 0.2), MoveFrame(good, 0.4)], 1.0, KeepRule(0.0, 1.0, True))
+    assert (len(out.kept), out.rejected) == (1, 1) and out.kept[0].t == 0.4

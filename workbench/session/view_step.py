@@ -89,6 +89,8 @@ class ViewStep:
     process it also scores the surface (a worker has its own)."""
     _moving: threading.Event | None = field(default=None, repr=False)
     """Set when the last move that timed out has really ended (None: no such move)."""
+    _move_prior: float = field(default=0.0, repr=False)
+    """The slowest move frame's integration seconds of the last move (the next move's first estimate)."""
     _surface: LiveSurface | None = field(default=None, repr=False)
     """The surface when integration runs in this process (a worker keeps its own)."""
 
@@ -149,7 +151,7 @@ class ViewStep:
             journal_dir = None if self.journal is None else self.journal.directory
             moving = None
             if taken and move_seconds is not None:
-                moving = (list(taken), move_seconds, KeepRule.of(self.cell.config))
+                moving = (list(taken), move_seconds, KeepRule.of(self.cell.config), self._move_prior)
             try:
                 if self.worker is None:
                     views = len(planner.views)
@@ -164,6 +166,8 @@ class ViewStep:
                     )
             except ValueError as exc:
                 raise UnusableFrame(str(exc)) from exc
+            if moves is not None:
+                self._move_prior = moves.slowest
             if self.journal is not None and moves is not None:
                 for k, kept in enumerate(moves.kept, start=1):
                     move_stored.append(self.journal.write_move_frame(planner.iteration + 1, k, kept.frame))
