@@ -551,6 +551,25 @@ class ArmPreviewOut(BaseModel):
     seconds: float
 
 
+class PathFrameOut(BaseModel):
+    t: float = Field(description="seconds since the move starts")
+    position: list[float] = Field(description="camera centre, table frame, metres")
+    wxyz: list[float] = Field(description="camera orientation (OpenCV axes) in the table frame")
+
+
+class PathOut(BaseModel):
+    target: ArmTargetOut
+    rate_hz: float | None = Field(
+        description="frames per second along the move: the cell's move_capture_hz, or the preview's 2.5 when it "
+        "does not capture during moves; null without a path"
+    )
+    captured: bool = Field(description="whether the cell takes these frames during the move (move_capture_hz > 0)")
+    duration: float | None = Field(description="seconds of the move; null when unreachable or not timed")
+    frames: list[PathFrameOut] = Field(description="the camera at each frame's time, strictly inside the move")
+    start: PoseModel | None = Field(description="where the camera stands now (the move's start)")
+    end: PoseModel | None = Field(description="where the move ends: the selected view")
+
+
 class ViewerCameraOut(BaseModel):
     client_id: int
     position: list[float]

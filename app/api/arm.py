@@ -6,12 +6,16 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Query
+from fastapi import APIRouter, Query, Request
 
 from app.api.deps import Scene, SessionDep
-from app.schemas import ArmOut, ArmPreviewOut
+from app.scene.movetarget import SessionMoves
+from app.scene.pathlayer import capture_rate, no_path_json, path_preview
+from app.schemas import ArmOut, ArmPreviewOut, PathOut
+from workbench import Conflict
 
 router = APIRouter(prefix="/sessions/{session_id}/arm", tags=["arm"])
+path_router = APIRouter(prefix="/sessions/{session_id}/plan", tags=["arm"])
 
 
 def _arm_json(scene: Any, session: Any) -> dict[str, Any]:
@@ -48,4 +52,20 @@ def preview(session: SessionDep, scene: Scene, speed: Annotated[float, Query(gt=
     return {"target": target.to_json(), "tabs": tabs, "seconds": target.to_json()["duration"] / speed}
 
 
-routers = [router]
+@path_router.get("/path", response_model=PathOut)
+def move_path(session: SessionDep, request: Request) -> dict[str, Any]:
+    """The camera along the move to the selected view of the pending plan (the planner's choice, a clicked
+    candidate or the custom pose), as the cell would execute it: the frames at the cell's capture rate (or the
+    preview's 2.5 Hz when it does not capture during moves), where it starts and where it ends; what the 3D view's
+    ``path`` layer draws. Nothing moves. 409 without a pending plan or while the session is busy; an unreachable
+    view answers ``target.reachable`` false and no frames."""
+    scene = request.app.state.scene
+    moves = scene.moves_of(session) if scene is not None else SessionMoves(session)
+    target = moves.target()
+    if target is None:
+        raise Conflict(f"session {session.id}: no pending plan to preview a move of (plan first), or busy")
+    preview = path_preview(target, capture_rate(session.cell))
+    return no_path_json(target) if preview is None else preview.to_json()
+
+
+routers = [router, path_router]

@@ -1,8 +1,9 @@
 """The arm of one session in its tabs' 3D views: where it is, where the selected view would take it, and why an
 unreachable candidate is unreachable.
 
-One :class:`SessionArm` per session (shared by the session's viewers) plans the move to the selected target once
-per selection (``Cell.plan_motion``: the ghost's joint target and the camera's path) and works out, lazily once
+One :class:`SessionArm` per session (shared by the session's viewers) shows the move to the selected target
+(:class:`app.scene.movetarget.SessionMoves`, planned once per selection under the session's lock: the ghost's
+joint target and the camera's path) and works out, lazily once
 per plan, the cell's reason for each candidate the planner found unreachable (``no_ik``, ``joint_limit``,
 ``collision:<link>:<obstacle>``). Each viewer's :class:`app.scene.robot.RobotScene` draws it under ``/robot``.
 The URDF with its meshes is loaded once per arm model and shared by every tab.
@@ -11,17 +12,18 @@ The URDF with its meshes is loaded once per arm model and shared by every tab.
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from app.scene.movetarget import ArmTarget, SessionMoves, selected_target
 from app.scene.robot import RobotScene, load_urdf_for_viser
 from devices.arm.model import ArmModel
 from devices.cell import Motion
-from devices.protocols import UnreachableError
-from planner import PlanResult, Pose
+from planner import PlanResult
 from workbench import BUSY, SceneData
+
+__all__ = ["ArmTarget", "SessionArm", "selected_target", "shared_urdf"]
 
 _URDFS: dict[int, Any] = {}
 _URDF_LOCK = threading.Lock()
@@ -36,61 +38,18 @@ def shared_urdf(arm: ArmModel) -> Any:
         return urdf
 
 
-@dataclass(frozen=True, eq=False)
-class ArmTarget:
-    """The move to the selected view: ``motion`` when reachable, else None and the cell's ``reason``.
-
-    key: what was selected (plan id and candidate index, or the custom pose's position); kind: 'candidate' or
-    'custom'; index: the candidate (None for a custom pose).
-    """
-
-    key: tuple[Any, ...]
-    kind: str
-    index: int | None
-    motion: Motion | None
-    reason: str | None
-
-    def to_json(self) -> dict[str, Any]:
-        m = self.motion
-        return {
-            "kind": self.kind,
-            "index": self.index,
-            "reachable": m is not None,
-            "reason": self.reason,
-            "joints": None if m is None or m.q is None else [float(v) for v in m.q],
-            "plate_angle": None if m is None else float(m.angle),
-            "duration": None if m is None else float(m.duration),
-            "path_method": None if m is None else (m.path_method or None),
-        }
-
-
-def selected_target(data: SceneData) -> tuple[tuple[Any, ...], str, int | None, Pose] | None:
-    """(key, kind, index, T_table_camera) of what a tab shows as selected: the custom pose, else the selected
-    candidate, else the planner's choice; None without a pending plan."""
-    plan = data.plan
-    if plan is None or data.plan_id is None:
-        return None
-    if data.custom is not None:
-        pose = data.custom.pose
-        key = (data.plan_id, "custom", *np.round(pose.translation, 6), *np.round(pose.rotation.ravel(), 6))
-        return key, "custom", None, pose
-    index = data.selected if data.selected is not None else plan.best_index
-    if index is None or not 0 <= index < len(plan.candidates):
-        return None
-    return (data.plan_id, "candidate", index), "candidate", index, plan.candidates[index].T_world_camera
-
-
 class SessionArm:
     """The arm of session ``session`` (whose cell has kinematics): the move to the selection, unreachable reasons."""
 
-    def __init__(self, session: Any) -> None:
+    def __init__(self, session: Any, moves: SessionMoves | None = None) -> None:
         self.session = session
+        self.moves = moves if moves is not None and moves.session is session else SessionMoves(session)
+        """The move to the selection (shared with the session's ``path`` layer)."""
         self.cell = session.cell
         if self.cell.kinematics is None:
             raise ValueError(f"session {session.id}: its cell has no arm model (kinematics)")
         self.model: ArmModel = self.cell.kinematics.model
         self._lock = threading.Lock()
-        self._target: ArmTarget | None = None
         self._reasons_of: PlanResult | None = None
         self._reasons: dict[int, str] = {}
         self.animated_motion: Motion | None = None
@@ -102,33 +61,18 @@ class SessionArm:
         robot.show(self.cell.arm.joint_positions(), self.cell.angle)
         return robot
 
-    def target(self, data: SceneData) -> ArmTarget | None:
-        """The move to the selected target of ``data`` (planned once per selection); None without a plan, and
-        None while the session is busy (moving, planning, auto) unless it was planned already: the arm's
-        kinematics are the session's then."""
-        sel = selected_target(data)
-        if sel is None:
-            return None
-        key, kind, index, pose = sel
-        with self._lock:
-            if self._target is not None and self._target.key == key:
-                return self._target
-            if self.session.state in BUSY:
-                return None
-            then = [] if kind == "custom" or data.plan is None else data.plan.then_poses(index)
-            try:  # the move the approve will make (planned for the views the tour expects next, if any)
-                motion, reason = self.cell.plan_motion(pose, then=then), None
-            except UnreachableError as exc:
-                motion, reason = None, str(exc)
-            if motion is not None and (motion.q is None or motion.trajectory is None):
-                motion, reason = None, "the arm gave no joint target"
-            self._target = ArmTarget(key, kind, index, motion, reason)
-            return self._target
+    def target(self, data: SceneData | None = None) -> ArmTarget | None:
+        """The move to the session's selected target (``SessionMoves.target``: planned once per selection under the
+        session's lock); None without a plan, and None while the session is busy unless it was planned already.
+        data: ignored (the selection is read under the lock)."""
+        return self.moves.target()
 
     def unreachable_reasons(self, plan: PlanResult) -> dict[int, str]:
         """{candidate index: the cell's reason} for the candidates ``plan`` found unreachable (computed once per
-        plan, in candidate order so that neighbours warm-start each other's IK; {} while the session is busy)."""
-        with self._lock:
+        plan, in candidate order so that neighbours warm-start each other's IK; {} while the session is busy). The
+        cell is asked under the session's lock (then ours, the order :class:`SessionMoves` takes): no action uses it
+        meanwhile."""
+        with self.session.lock, self._lock:
             if self._reasons_of is plan:
                 return dict(self._reasons)
             if self.session.state in BUSY:

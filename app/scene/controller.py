@@ -8,7 +8,10 @@ step with the session's events. Nothing session-specific is ever put into the sh
 tab never receives scene messages of another session, and a client without a ticket sees an empty scene
 whose clicks reach no callback.
 
-GUI callbacks (a click on a candidate, a gizmo release) call the bound session, never the planner.
+GUI callbacks (a click on a candidate, a gizmo release) call the bound session, never the planner, from the
+controller's own worker thread (:class:`SceneWork`): viser's event thread never waits for a session's lock or a
+motion planner. The move to the selected view (the ghost arm, the ``path`` layer's frustums) is planned under the
+session's lock (:class:`app.scene.movetarget.SessionMoves`) on the thread of the event that changed the selection.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ from __future__ import annotations
 import io
 import logging
 import math
+import queue
 import threading
 import time
 from collections.abc import Callable, Collection
@@ -33,6 +37,8 @@ from app.scene.fit_view import FitViews, viewer_message
 from app.scene.geometry import COLORS, DEFAULT_LAYERS, SCALE_PERCENTILES, VIRIDIS, candidate_colors, outward_camera
 from app.scene.guard import install_guard
 from app.scene.lighting import configure_lighting
+from app.scene.movetarget import SessionMoves, selected_target
+from app.scene.pathlayer import capture_rate, path_preview
 from app.scene.reachlayer import REACH_CLASSES, ReachMaps
 from app.scene.robot import RobotScene
 from app.scene.tickets import Ticket, TicketBook
@@ -61,6 +67,32 @@ REDRAW_EVENTS = frozenset(
 
 INITIAL_EYE, INITIAL_LOOK_AT = framing(None)
 """Where a tab's camera starts before it is framed on its session (from the front-right, on the object)."""
+
+
+class SceneWork:
+    """Runs what viser's callbacks ask of the sessions (a click, a gizmo release, a new client's move to show) on a
+    thread of its own, in the order asked: viser's event thread never waits for a session's lock or a motion
+    planner, and a click's selection is planned under the session's lock like a REST request's."""
+
+    def __init__(self) -> None:
+        self._queue: queue.SimpleQueue[Callable[[], None]] = queue.SimpleQueue()
+        self._lock = threading.Lock()
+        self._thread: threading.Thread | None = None
+
+    def submit(self, job: Callable[[], None]) -> None:
+        self._queue.put(job)
+        with self._lock:
+            if self._thread is None or not self._thread.is_alive():
+                self._thread = threading.Thread(target=self._run, name="scene-work", daemon=True)
+                self._thread.start()
+
+    def _run(self) -> None:
+        while True:
+            job = self._queue.get()
+            try:
+                job()
+            except Exception:  # one failed job never stops the next
+                log.exception("scene work failed")
 
 
 @dataclass(eq=False)
@@ -109,6 +141,10 @@ class SceneController:
         """Sessions this controller follows (``SessionRegistry.follow``: their events, whichever object each is;
         one woken from sleep is a new object)."""
         self._arms: dict[str, SessionArm] = {}
+        self._moves: dict[str, SessionMoves] = {}
+        """The move to each session's selected view (the ghost's and the path layer's), planned once per selection."""
+        self.work = SceneWork()
+        """Where viser's callbacks call the sessions (never on viser's event thread)."""
         self.fit = FitViews(self)
         self.reach = ReachMaps(self._reach_ready)
         """The ``reach`` layer's maps (app/scene/reachlayer.py), computed only for sessions a tab shows it of."""
@@ -190,11 +226,10 @@ class SceneController:
 
         arm = self.arm_of(session)
         if arm is not None:
-            target = arm.target(data)
             robot = arm.new_scene(client)
-            arm.show_target(robot, target)
             with self._lock:
                 v.robot = robot
+        self.work.submit(lambda: self._show_move(session, [v]))
 
     def _on_client_gone(self, client: viser.ClientHandle) -> None:
         with self._lock:
@@ -225,6 +260,7 @@ class SceneController:
             for v in viewers:
                 if v.drawing is not None and v.step is None:
                     v.drawing.update(data)
+        self.work.submit(lambda: self._show_move(session, viewers))  # the new object's move (none while busy)
 
     def _on_event(self, session: Session, event: SessionEvent) -> None:
         if event not in REDRAW_EVENTS:
@@ -235,18 +271,22 @@ class SceneController:
                 if v.session_id == session.id and v.drawing is not None and v.step is None:
                     v.drawing.update(data)  # a viewer on the timeline keeps showing the past
         self._sync_reach(session, data.plan)
-        arm = self.arm_of(session)
-        robots = self._robots_of(session.id, live_only=True)
-        if arm is None or not robots:
-            return  # no tab shows this session's arm: plan no move for it
-        # in auto mode the next move starts at once: no ghost (the arm animates each executed move)
+        with self._lock:
+            live = [
+                v
+                for v in self._viewers.values()
+                if v.session_id == session.id and v.drawing is not None and v.step is None
+            ]
+        if not live:
+            return  # no tab shows this session now: plan no move for it
+        # in auto mode the next move starts at once: no ghost and no path (the arm animates each executed move)
         show_target = event != SessionEvent.CAPTURED and session.state != State.AUTO
-        target = arm.target(data) if show_target else None
-        for robot in robots:
-            if event == SessionEvent.CAPTURED:
-                arm.after_capture(robot)
-            else:
-                arm.show_target(robot, target)
+        self._show_move(session, live, show_target)
+        if event == SessionEvent.CAPTURED:
+            arm = self.arm_of(session)
+            if arm is not None:
+                for robot in self._robots_of(session.id, live_only=True):
+                    arm.after_capture(robot)
         if event == SessionEvent.CAPTURED:  # the plate turned: cameras nobody moved go round with it
             with self._lock:
                 viewers = [v for v in self._viewers.values() if v.session_id == session.id and v.step is None]
@@ -288,6 +328,7 @@ class SceneController:
         with self._lock:
             self._watched.discard(session.id)
             self._arms.pop(session.id, None)
+            self._moves.pop(session.id, None)
             self.reach.forget(session.id)
             for v in [v for v in self._viewers.values() if v.session_id == session.id]:
                 if v.drawing is not None:
@@ -297,17 +338,46 @@ class SceneController:
                     v.robot.remove()
                 v.robot = None
 
-    # ------------------------------------------------------------------ the arm
+    # ------------------------------------------------------------------ the arm and the move to the selection
+
+    def moves_of(self, session: Session) -> SessionMoves:
+        """The move to ``session``'s selected view (one per session object: a session woken from sleep is new)."""
+        with self._lock:
+            moves = self._moves.get(session.id)
+            if moves is None or moves.session is not session:
+                moves = self._moves[session.id] = SessionMoves(session)
+            return moves
 
     def arm_of(self, session: Session) -> SessionArm | None:
         """The arm of ``session`` as the views show it (None when its cell has no arm model)."""
         if session.cell.kinematics is None:
             return None
+        moves = self.moves_of(session)
         with self._lock:
             arm = self._arms.get(session.id)
             if arm is None or arm.session is not session:
-                arm = self._arms[session.id] = SessionArm(session)
+                arm = self._arms[session.id] = SessionArm(session, moves)
             return arm
+
+    def _show_move(self, session: Session, viewers: list[Viewer], show: bool = True) -> None:
+        """Show the move to ``session``'s selected view in ``viewers`` (those still showing the session now): the
+        ghost arm at its target and the path layer's frustums (``show`` False: neither). Plans the move if it
+        was not (under the session's lock: call it from a REST request's or the scene's worker thread). A move
+        whose selection changed while it was planned is not drawn: the change's own event draws the new one."""
+        target = self.moves_of(session).target() if show else None
+        preview = None if target is None else path_preview(target, capture_rate(session.cell))
+        arm = self.arm_of(session)
+        with self._lock:
+            if target is not None:
+                sel = selected_target(session.scene_data())
+                if sel is None or sel[0] != target.key:
+                    return
+            now = [v for v in viewers if v.step is None and self._viewers.get(v.id) is v]
+            for v in now:
+                if v.drawing is not None:
+                    v.drawing.draw_path(preview)
+                if v.robot is not None and arm is not None:
+                    arm.show_target(v.robot, target)
 
     def _robots_of(self, session_id: str, live_only: bool = False) -> list[RobotScene]:
         """The arms of the viewers of ``session_id`` (``live_only``: of those not on the timeline)."""
@@ -342,10 +412,14 @@ class SceneController:
             if v.step is not None:  # the past is looked at, not changed
                 log.info("click on candidate %s ignored: the viewer shows view %d of the timeline", index, v.step.view)
                 return
-            try:  # the session live now (a session woken from sleep is a new object)
-                self.registry.get(v.session_id).select(index)
-            except WorkbenchError as exc:
-                log.info("click on candidate %s ignored: %s", index, exc.detail)
+
+            def run() -> None:
+                try:  # the session live now (a session woken from sleep is a new object)
+                    self.registry.get(v.session_id).select(index)
+                except WorkbenchError as exc:
+                    log.info("click on candidate %s ignored: %s", index, exc.detail)
+
+            self.work.submit(run)
 
         return select
 
@@ -357,10 +431,14 @@ class SceneController:
             if v.step is not None:
                 log.info("gizmo pose ignored: the viewer shows view %d of the timeline", v.step.view)
                 return
-            try:
-                self.registry.get(v.session_id).set_custom(pose)
-            except (WorkbenchError, ValueError) as exc:
-                log.info("gizmo pose ignored: %s", exc)
+
+            def run() -> None:
+                try:
+                    self.registry.get(v.session_id).set_custom(pose)
+                except (WorkbenchError, ValueError) as exc:
+                    log.info("gizmo pose ignored: %s", exc)
+
+            self.work.submit(run)
 
         return set_custom
 
@@ -390,9 +468,14 @@ class SceneController:
             if step is None:
                 robot.stop()
                 robot.show(session.cell.arm.joint_positions(), session.cell.angle)
-                arm.show_target(robot, arm.target(now))
             else:
                 _show_step_arm(robot, step, nxt)
+        if step is None:
+            self._show_move(session, [v])
+        else:
+            with self._lock:
+                if v.drawing is not None:
+                    v.drawing.draw_path(None)  # the past's views are drawn, not the move that is pending now
         self.notify(v)
         return step
 
@@ -489,7 +572,8 @@ class SceneController:
                 "colormap": [list(c) for c in VIRIDIS],
                 "score_range": list(lo_hi),
                 "colors": {
-                    k: list(COLORS[k]) for k in ("occupied", "frontier", "unknown", "empty", "cloud", "nbv", "selected")
+                    k: list(COLORS[k])
+                    for k in ("occupied", "frontier", "unknown", "empty", "cloud", "nbv", "selected", "path")
                 },
                 "scale": f"F of eligible candidates, {SCALE_PERCENTILES[0]:g}th to {SCALE_PERCENTILES[1]:g}th percentile",
                 "timeline": None if step is None else step.summary(),

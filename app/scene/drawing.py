@@ -16,6 +16,8 @@ Node names (stable, per client)::
     /override/gizmo (+ /override/gizmo/frustum)              custom-pose transform gizmo
     /clusters/...                                            voxels by GMM cluster, ellipsoids named (app/scene/clusters.py)
     /reach/points                                            the hemisphere coloured by reachability (app/scene/reachlayer.py)
+    /path/frustums, /path/edges, /path/line                  the camera along the move to the selected view, before
+                                                             it is approved (app/scene/pathlayer.py)
 
 What is re-sent: the plan's layers when the plan changes, only the views and cloud points that are new after
 a capture, the selection when it changes. Hidden heavy layers (``LAZY``: empty / unknown voxels, GMM
@@ -46,6 +48,15 @@ from app.scene.geometry import (
     gmm_instance,
     sector_label_positions,
     sector_segments,
+)
+from app.scene.pathlayer import (
+    FRUSTUM_OPACITY,
+    FRUSTUM_SCALE,
+    PATH_COLORS,
+    PathPreview,
+    frame_colors,
+    frustum_edges,
+    frustum_pyramid,
 )
 from app.scene.reachlayer import ReachMap
 from planner import PlanResult, Pose
@@ -92,6 +103,8 @@ class SessionDrawing:
         self._surface: SurfaceMesh | None = None  # the surface drawn now
         self.reach_map: ReachMap | None = None
         """The reach map drawn under /reach (None: none drawn)."""
+        self.path: PathPreview | None = None
+        """The move drawn under /path (None: none drawn)."""
         self.surface_sends = 0
         """How many times the surface was sent (it is re-sent only when it changed)."""
         for name, layer in GROUPS.items():
@@ -142,6 +155,7 @@ class SessionDrawing:
             self._context = False
             self._surface = None
             self.reach_map = None
+            self.path = None
 
     def set_layers(self, changes: dict[str, bool]) -> None:
         """Show / hide layers (names checked by the caller); a lazy layer shown for the first time is sent now."""
@@ -181,6 +195,40 @@ class SessionDrawing:
             self._put("/reach/points", self.scene.add_point_cloud(
                 "/reach/points", reach.positions, reach.colors, point_size=0.1 * reach.spacing,
                 precision="float32", point_shape="circle", point_shading="flat",
+            ))  # fmt: skip
+
+    def draw_path(self, preview: PathPreview | None) -> None:
+        """Draw the camera along ``preview``'s move under /path (frustums where the frames are taken, outlined, and
+        the centre's line from the current pose to the view); None: remove it."""
+        if preview is self.path:
+            return
+        with self.client.atomic():
+            self._drop("/path")
+            self.path = preview
+            data = self._data
+            if preview is None or data is None:
+                return
+            _, poses = preview.drawn()
+            if poses:
+                k = len(poses)
+                vertices, faces = frustum_pyramid(data.fov_y, data.aspect)
+                colors = frame_colors(k)
+                self._put("/path/frustums", self.scene.add_batched_meshes_simple(
+                    "/path/frustums", vertices, faces,
+                    batched_wxyzs=np.array([p.wxyz for p in poses], dtype=np.float32),
+                    batched_positions=np.array([p.translation for p in poses], dtype=np.float32),
+                    batched_scales=np.full(k, FRUSTUM_SCALE, dtype=np.float32), batched_colors=colors,
+                    opacity=FRUSTUM_OPACITY, lod="off", side="double", cast_shadow=False, receive_shadow=False,
+                ))  # fmt: skip
+                edges = frustum_edges(poses, data.fov_y, data.aspect, FRUSTUM_SCALE)
+                edge_colors = np.repeat(colors, 8 * 2, axis=0).reshape(-1, 2, 3)
+                self._put("/path/edges", self.scene.add_line_segments(
+                    "/path/edges", edges, edge_colors, thickness=2.0, thickness_units="screen",
+                ))  # fmt: skip
+            points = np.array([p.translation for p in preview.line], dtype=np.float32)
+            segments = np.stack([points[:-1], points[1:]], axis=1)
+            self._put("/path/line", self.scene.add_line_segments(
+                "/path/line", segments, PATH_COLORS[0], thickness=3.5, thickness_units="screen",
             ))  # fmt: skip
 
     def candidate_at(self, event: viser.SceneNodePointerEvent) -> int | None:

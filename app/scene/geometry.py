@@ -44,6 +44,7 @@ DEFAULT_LAYERS: dict[str, bool] = {
     "clusters": False,
     "gizmo": False,
     "reach": False,
+    "path": True,
 }
 LAYER_NODES: dict[str, tuple[str, ...]] = {
     "occupied": ("/map/occupied",),
@@ -64,6 +65,7 @@ LAYER_NODES: dict[str, tuple[str, ...]] = {
     "clusters": ("/clusters",),
     "gizmo": ("/override",),
     "reach": ("/reach",),
+    "path": ("/path",),
 }
 GROUPS: dict[str, str | None] = {
     "/map": None,
@@ -77,6 +79,7 @@ GROUPS: dict[str, str | None] = {
     "/clusters": "clusters",
     "/tour": "nbv",
     "/reach": "reach",
+    "/path": "path",
 }
 """Group nodes (empty frames) and the layer that hides them (None: always shown)."""
 
@@ -101,6 +104,7 @@ COLORS: dict[str, tuple[int, int, int]] = {
     "surface": (120, 160, 205),
     "custom_ok": (0, 170, 70),
     "custom_bad": (220, 0, 0),
+    "path": (0, 205, 255),
 }
 
 

@@ -139,6 +139,14 @@ function renderLegend(scene) {
     s.innerHTML = `<i class="swatch" style="background:rgb(${c.join(",")})"></i>${name}`;
     box.appendChild(s);
   }
+  if (scene.colors.path) {  // the path layer: the camera along the move to the selected view, before approval
+    const c = scene.colors.path;
+    const s = document.createElement("span");
+    s.dataset.legend = "path";
+    s.title = "the path layer: where the camera goes (and the frames it would take) on the move to the selected view";
+    s.innerHTML = `<i class="swatch" style="background:rgb(${c.join(",")})"></i>move path`;
+    box.appendChild(s);
+  }
   const sec = document.createElement("span");
   sec.className = "help-tip";
   sec.title = SECTOR_HELP;

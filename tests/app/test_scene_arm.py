@@ -79,7 +79,8 @@ def test_the_arm_is_drawn_with_the_ghost_of_the_planners_choice(scene_client: Te
         target = arm["target"]
         assert target["kind"] == "candidate" and target["index"] == plan["best"]["index"]
         assert target["reachable"], target["reason"]  # the planner's choice is reachable by construction
-        assert {"/robot/ghost", "/robot/path"} <= set(nodes(scene_client, vid))
+        # drawn by the scene's worker once the viewer connected (the move is not planned on viser's event thread)
+        assert wait_for(lambda: {"/robot/ghost", "/robot/path"} <= set(nodes(scene_client, vid)), timeout=30)
         # the ghost's camera is where the candidate is (the plate turned to its angle)
         pose = ghost_pose(wb.cell.kinematics.model, np.array(target["joints"]), target["plate_angle"])
         cand = wb.pending.plan.candidates[plan["best"]["index"]]
