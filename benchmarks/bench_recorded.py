@@ -139,7 +139,7 @@ def icp_only(args: argparse.Namespace, recorded, config: PlannerConfig, truth, v
     from dataclasses import replace
 
     from planner import Planner
-    from workbench.evaluation.accuracy import accuracy
+    from workbench.evaluation import accuracy
 
     trimmed = read_recorded(args.data, edge_trim=trim)
     no_icp = replace(config, registration=replace(config.registration, enabled=False))
