@@ -7,6 +7,7 @@ import json
 from typing import Any
 
 import numpy as np
+import pytest
 from apphelpers import BASE_URL, SMALL
 from fastapi.testclient import TestClient
 
@@ -61,6 +62,7 @@ def test_garbage_in_the_middle_lists_damaged_and_resumes_up_to_it(settings: AppS
     assert original != path.read_bytes()
 
 
+@pytest.mark.slow
 def test_a_damaged_frame_resumes_up_to_the_view_before_it(settings: AppSettings) -> None:
     sid, states = three_views(settings)
     frame = settings.data_dir / "sessions" / sid / "frames" / "000003.npz"

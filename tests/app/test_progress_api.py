@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+import pytest
 import trimesh
 import websockets.sync.client
 from apphelpers import BASE_URL, SMALL, free_port, running_server
@@ -46,6 +47,7 @@ def post_in_thread(url: str, body: Any = None) -> tuple[threading.Thread, dict[s
     return thread, box
 
 
+@pytest.mark.slow
 def test_a_plans_progress_is_pushed_and_stop_ends_it(settings: AppSettings) -> None:
     with running_server(settings.replace(port=free_port())) as live:
         api = httpx.Client(base_url=live.url, timeout=120)

@@ -50,6 +50,7 @@ def scan(client: TestClient, seed: int = 5) -> tuple[str, dict[str, Any]]:
     return sid, client.post(f"/api/sessions/{sid}/plan").json()
 
 
+@pytest.mark.slow
 def test_resume_rebuilds_the_same_map_and_plan_and_continues_identically(settings: AppSettings) -> None:
     with server(settings) as a:
         sid, plan = scan(a)
@@ -156,6 +157,7 @@ def test_a_journaled_session_replays_as_a_source(settings: AppSettings, mode: st
         assert b.post("/api/sessions", json=bad).status_code == 404
 
 
+@pytest.mark.slow
 def test_views_taken_after_a_resume_survive_the_next_restart(settings: AppSettings) -> None:
     """A resumed session journals its new views (its view step once held the journal of before the
     resume, None, and wrote no frame), so a second restart brings back all of them."""

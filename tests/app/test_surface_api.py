@@ -65,6 +65,7 @@ def test_surface_follows_the_views_and_serves_three_formats(settings: AppSetting
         assert 0.9 <= block["precision_5mm"] <= 1.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("workers", [True, False])
 def test_resumed_and_discarded_sessions_rebuild_the_same_surface(settings: AppSettings, workers: bool) -> None:
     settings = settings.replace(workers=workers)

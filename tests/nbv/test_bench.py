@@ -114,6 +114,7 @@ def check_outputs(out: Path, reachable: bool) -> list[dict[str, str]]:
     return rows
 
 
+@pytest.mark.slow
 def test_inline_bench_writes_every_output(inline: Path) -> None:
     check_outputs(inline, reachable=True)
 

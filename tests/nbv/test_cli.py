@@ -132,6 +132,7 @@ def test_bad_meshes(name: str, content: str, message: str, tmp_path: Path, capfd
     assert len(lines) == 1 and message in lines[0], stderr
 
 
+@pytest.mark.slow
 def test_scan_is_reproducible(tmp_path: Path) -> None:
     docs = []
     for run in ("a", "b"):

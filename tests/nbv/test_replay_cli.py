@@ -12,6 +12,8 @@ from devices.ply import read_ply
 from nbv.cli import main
 from tests.helpers import SMALL
 
+pytestmark = pytest.mark.slow  # tests/conftest.py: handed out with the long groups, first
+
 
 @pytest.fixture(scope="module")
 def journaled(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict, bytes]:

@@ -182,6 +182,7 @@ def test_covariances_are_full_not_spherical() -> None:
     assert abs(abs(long_axis @ np.array([c, s, 0.0])) - 1.0) < 0.05
 
 
+@pytest.mark.slow
 def test_fast_search_never_chooses_or_reports_t_outside_the_range() -> None:
     """EM can lose a component on a small set; the model it falls back to (T < t_min) guides the
     search but is never chosen. Before this was pinned, 25 of these 300 sets chose T = 1 with t_min = 2."""

@@ -19,12 +19,26 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from devices.arm.config import ArmConfig
 from devices.config import CameraConfig
 
 ROOT = Path(__file__).resolve().parents[2]
 
 CAMERA = CameraConfig(width=160, height=120, fx=140.0, fy=140.0, cx=79.5, cy=59.5, min_depth=0.05, max_depth=3.0)
 """A small camera (quick to render and send) that still sees the object well from every candidate."""
+
+ARM_SPEED_DEG = 180.0
+"""The cell file's ``max_joint_speed_deg``: the UR5's URDF limit (180 deg/s). The fake executes a trajectory in real
+time, so a move's wall time is its duration; the tests check where the arm settles and what the camera sees there,
+not how fast it got there (tests/ros2/test_ros2_scan.py, with :data:`FAST_ARM` and :data:`TABLE_SPEED_DEG`: the
+arm's fourteen moves 19 -> 14 s of wall time, the plate's turns 11 -> 7 s, against 85 deg/s and 180 deg/s)."""
+
+TABLE_SPEED_DEG = 360.0
+"""The turntable's speed, deg/s, in the cell file and in the fake (a half turn in half a second)."""
+
+FAST_ARM = ArmConfig(velocity_scale=1.0, acceleration_limit_deg=720.0)
+"""The planning arm of the tests' sessions on the fake cell: the URDF's full joint speeds (kept within
+:data:`ARM_SPEED_DEG` by the cell file) and a quick ramp, so the planned trajectories are short in time."""
 
 _next_domain = [0]
 
@@ -54,13 +68,13 @@ max_depth = 3.0
 [devices.arm]
 driver = "ros2"
 {net}
-max_joint_speed_deg = 85
+max_joint_speed_deg = {ARM_SPEED_DEG:g}
 {arm}
 
 [devices.turntable]
 driver = "ros2"
 {net}
-speed_deg = 180
+speed_deg = {TABLE_SPEED_DEG:g}
 {turntable}
 
 [devices.hand_eye]
@@ -110,7 +124,7 @@ def fake_ros2_cell(
         "min_depth": camera.min_depth,
         "max_depth": camera.max_depth,
         "rate_hz": rate_hz,
-        "turntable_speed_deg": 180.0,
+        "turntable_speed_deg": TABLE_SPEED_DEG,
     }
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
     process = subprocess.Popen(

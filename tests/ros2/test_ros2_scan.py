@@ -19,12 +19,12 @@ from fastapi.testclient import TestClient
 
 from app.main import create_app
 from app.settings import AppSettings
-from devices.config import DeviceConfig
+from devices.config import CellConfig, DeviceConfig
 from devices.hwcell import HardwareCell
 from planner import PlannerConfig
 from planner.types import Pose
 from tests.helpers import SMALL as SMALL_PLANNER
-from tests.ros2.fakecell import CAMERA, FakeRos2Cell, fake_ros2_cell
+from tests.ros2.fakecell import CAMERA, FAST_ARM, FakeRos2Cell, fake_ros2_cell
 from workbench.journal.store import read_journal, sessions_dir
 
 BASE_URL = "http://127.0.0.1"
@@ -49,7 +49,7 @@ def settings(tmp: Path, cell: FakeRos2Cell, name: str) -> AppSettings:
         scene=False,
         data_dir=tmp / name,
         cell=str(cell.path),
-        devices=DeviceConfig(camera=CAMERA),
+        devices=DeviceConfig(camera=CAMERA, cell=CellConfig(arm=FAST_ARM)),
         planner=PlannerConfig().replace(**SMALL_PLANNER),
     )
 

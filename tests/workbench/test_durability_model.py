@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 import hypothesis.strategies as st
+import pytest
 from hypothesis import HealthCheck, Phase, settings
 from hypothesis.stateful import RuleBasedStateMachine, initialize, invariant, precondition, rule
 
@@ -49,6 +50,8 @@ from workbench.registry.registry import SessionRegistry
 from workbench.session.session import Session
 from workbench.session.values import SessionEvent
 from workbench.settings import WorkbenchSettings
+
+pytestmark = pytest.mark.slow  # tests/conftest.py: handed out with the long groups, first
 
 TINY = {
     "voxel": {"resolution": 0.025},

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 from test_durability_model import CAMERA, TINY
 
 from devices.config import DeviceConfig
@@ -63,6 +64,7 @@ def test_the_only_view_discarded_stays_discarded_over_two_restarts(tmp_path: Pat
     registry.close()
 
 
+@pytest.mark.slow
 def test_views_after_a_discard_survive_two_restarts(tmp_path: Path) -> None:
     settings = _settings(tmp_path)
     registry = SessionRegistry(settings)
