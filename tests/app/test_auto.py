@@ -41,12 +41,12 @@ def test_the_stop_button_ends_auto_mode_after_the_action_in_flight(client: TestC
     release = threading.Event()
     calls = []
 
-    def move(pose, plate_angle=None, then=(), motion=None):  # Cell.move_to's arguments
+    def move(pose, plate_angle=None, then=(), motion=None, capture_hz=0.0, on_frame=None):  # Cell.move_to's arguments
         calls.append(pose)
         if len(calls) == 2:  # step 1 passes, step 2 waits here
             second_move.set()
             assert release.wait(30)
-        return real_move(pose, plate_angle, then, motion)
+        return real_move(pose, plate_angle, then, motion, capture_hz=capture_hz, on_frame=on_frame)
 
     wb.cell.move_to = move
     assert client.post(f"/api/sessions/{sid}/auto", json={"count": 10}).status_code == 202

@@ -113,11 +113,11 @@ def test_a_busy_session_blocks_neither_reads_nor_other_sessions(
     real_move = wb_a.cell.move_to
 
     def slow_move(
-        pose, plate_angle=None, then=(), motion=None
+        pose, plate_angle=None, then=(), motion=None, capture_hz=0.0, on_frame=None
     ):  # session A's robot takes its time (Cell.move_to's args)
         entered.set()
         assert release.wait(30)
-        return real_move(pose, plate_angle, then, motion)
+        return real_move(pose, plate_angle, then, motion, capture_hz=capture_hz, on_frame=on_frame)
 
     wb_a.cell.move_to = slow_move
     body = {"plan_id": plan_a["plan_id"], "index": plan_a["best"]["index"]}

@@ -26,9 +26,16 @@ def spy_on_moves(monkeypatch: pytest.MonkeyPatch, cell: Any) -> list[list[Pose]]
     calls: list[list[Pose]] = []
     move_to = cell.move_to
 
-    def spy(T_table_camera: Pose, plate_angle: float | None = None, then: Any = (), motion: Any = None) -> Any:
+    def spy(
+        T_table_camera: Pose,
+        plate_angle: float | None = None,
+        then: Any = (),
+        motion: Any = None,
+        capture_hz: float = 0.0,
+        on_frame: Any = None,
+    ) -> Any:
         calls.append(list(then))
-        return move_to(T_table_camera, plate_angle, then, motion)
+        return move_to(T_table_camera, plate_angle, then, motion, capture_hz=capture_hz, on_frame=on_frame)
 
     monkeypatch.setattr(cell, "move_to", spy)
     return calls
