@@ -7,7 +7,9 @@ and closes the camera while images keep arriving, ``--closes`` times. A trial th
 
     PYTHONPATH=$PWD .venv/bin/python benchmarks/crash_ros2_close.py --trials 6 --closes 20
 
-Prints one line per trial (exit status, seconds) and the crash count.
+Prints one line per trial (exit status, seconds, frames decoded, DDS entities other than topics left on the
+participant after the closes) and the crash count. ``--collect`` runs the garbage collector after each close
+(without it the crash waits for the collector's own time).
 """
 
 from __future__ import annotations
@@ -28,15 +30,40 @@ INFO_TOPIC = "/camera/camera/depth/camera_info"
 
 
 def publish(domain: int, width: int, height: int, rate_hz: float) -> int:
-    """Publish depth images and camera info on ``domain`` until stdin closes."""
+    """Publish depth images and camera info on ``domain`` until stdin closes: a plain cyclonedds participant with
+    our ROS 2 message types, the module loaded by path (importing ``devices`` would cost seconds)."""
+    import importlib.util
+
     import numpy as np
+    from cyclonedds.core import Policy
+    from cyclonedds.domain import Domain, DomainParticipant
+    from cyclonedds.pub import DataWriter
+    from cyclonedds.qos import Qos
+    from cyclonedds.topic import Topic
 
-    from devices.drivers.ros2.dds import DdsConfig, acquire
-    from devices.drivers.ros2.messages import CameraInfo, Header, Image, RegionOfInterest, stamp_of
-
-    node = acquire(DdsConfig(domain, "lo", ("127.0.0.1",)))
-    image_writer = node.sensor_writer(DEPTH_TOPIC, Image)
-    info_writer = node.sensor_writer(INFO_TOPIC, CameraInfo)
+    spec = importlib.util.spec_from_file_location("ros2_messages", ROOT / "devices/drivers/ros2/messages.py")
+    assert spec is not None and spec.loader is not None
+    m = importlib.util.module_from_spec(spec)
+    sys.modules["ros2_messages"] = m
+    spec.loader.exec_module(m)
+    CameraInfo, Header, Image, RegionOfInterest, stamp_of = (
+        m.CameraInfo,
+        m.Header,
+        m.Image,
+        m.RegionOfInterest,
+        m.stamp_of,
+    )
+    xml = (
+        '<CycloneDDS><Domain><General><Interfaces><NetworkInterface name="lo"/></Interfaces>'
+        "<AllowMulticast>false</AllowMulticast></General><Discovery><ParticipantIndex>auto</ParticipantIndex>"
+        '<MaxAutoParticipantIndex>64</MaxAutoParticipantIndex><Peers><Peer address="127.0.0.1"/></Peers>'
+        "</Discovery></Domain></CycloneDDS>"
+    )  # DdsConfig(domain, "lo", ("127.0.0.1",)).xml()
+    _domain = Domain(domain, xml)
+    participant = DomainParticipant(domain)
+    qos = Qos(Policy.Reliability.BestEffort, Policy.Durability.Volatile, Policy.History.KeepLast(5))  # a sensor's
+    image_writer = DataWriter(participant, Topic(participant, "rt" + DEPTH_TOPIC, Image), qos=qos)
+    info_writer = DataWriter(participant, Topic(participant, "rt" + INFO_TOPIC, CameraInfo), qos=qos)
     stop = threading.Event()
     fx = 0.8 * width
     mm = np.full((height, width), 800, dtype="<u2")
@@ -75,19 +102,21 @@ def publish(domain: int, width: int, height: int, rate_hz: float) -> int:
 def consume(domain: int, closes: int, hold_s: float, collect: bool) -> int:
     """Open, stream from and close a camera ``closes`` times (a draining thread running at each close)."""
     from devices.drivers.ros2.camera import Ros2Camera, Ros2CameraConfig
-
     from devices.drivers.ros2.dds import acquire, release
+    from devices.movestream import FrameQueue
 
     config = Ros2CameraConfig(domain_id=domain, interface="lo", peers=("127.0.0.1",), timeout_s=3.0)
     # the cell's other ros2 devices (arm, turntable) share the participant: it outlives each camera
     others = acquire(config.dds)
+    gc.freeze()  # the imports' objects are never garbage: a collection then looks at the cameras' objects alone
     frames_seen = 0
+    began = time.monotonic()
     for _ in range(closes):
         camera = Ros2Camera(config)
         frames = camera.stream()
         stop = threading.Event()
 
-        def drain() -> None:
+        def drain(frames: FrameQueue = frames, stop: threading.Event = stop) -> None:
             nonlocal frames_seen
             while not stop.is_set():
                 frame = frames.get(0.01)
@@ -105,13 +134,16 @@ def consume(domain: int, closes: int, hold_s: float, collect: bool) -> int:
         stop.set()
         thread.join()
         frames.close()
+    from cyclonedds.topic import Topic
+
+    left = [e for e in others.participant.children if not isinstance(e, Topic)]
     release(others)
-    print(f"frames {frames_seen}", flush=True)
+    print(f"frames {frames_seen} left {len(left)} loop {time.monotonic() - began:.2f} s", flush=True)
     return 0
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     parser.add_argument("--trials", type=int, default=6, help="consumer processes")
     parser.add_argument("--closes", type=int, default=20, help="camera closes per consumer")
     parser.add_argument("--hold", type=float, default=0.1, help="seconds each camera streams before it closes")
@@ -137,7 +169,8 @@ def main() -> int:
         for trial in range(args.trials):
             began = time.monotonic()
             run = subprocess.run(
-                [*me, "--role", "consume", "--closes", str(args.closes), "--hold", str(args.hold)] + (["--collect"] if args.collect else []),
+                [*me, "--role", "consume", "--closes", str(args.closes), "--hold", str(args.hold)]
+                + (["--collect"] if args.collect else []),
                 env=env,
                 capture_output=True,
                 text=True,
