@@ -195,8 +195,10 @@ class RealSenseCamera:
                     sensor.set_option(rs.option.global_time_enabled, 1)
 
     def close(self) -> None:
-        """Stop the pipeline (harmless when already stopped)."""
+        """Stop the pipeline (harmless when already stopped). Nothing of ours holds a frame of the device when it
+        stops: the stream's reader has ended, and the filters (which keep frames they processed) are dropped."""
         self._end_stream()
+        self._filters, self._moving_filters = [], []
         if self._pipeline is not None:
             pipeline, self._pipeline = self._pipeline, None
             with contextlib.suppress(RuntimeError):
