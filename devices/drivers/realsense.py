@@ -130,7 +130,6 @@ class RealSenseCamera:
         self._rs: Any = import_vendor("pyrealsense2", "realsense", "RealSense camera")
         self.captures = 0
         self._pipeline: Any = None
-        self._playback: Any = None
         self._stream_thread: threading.Thread | None = None
         self._stream_frames: FrameQueue | None = None
         self._open()
@@ -150,7 +149,6 @@ class RealSenseCamera:
             rs_config.enable_device(cfg.serial)
         rs_config.enable_stream(rs.stream.depth, cfg.width, cfg.height, rs.format.z16, cfg.fps)
         source = f"recording {Path(cfg.playback).name!r}" if cfg.playback else f"camera {cfg.serial or '(first)'}"
-        self._playback_ended = threading.Event()
         try:
             if cfg.playback:
                 # Not real time from the first frame: resolving loads the playback device, which the
@@ -158,14 +156,6 @@ class RealSenseCamera:
                 resolved = rs_config.resolve(rs.pipeline_wrapper(pipeline))
                 resolved.get_device().as_playback().set_real_time(False)
             profile = pipeline.start(rs_config)
-            if cfg.playback:
-                # the end of the recording, told once the playback's own stop there has finished (see _drain); on
-                # the started device (a callback set on the resolved one is never called). Not real time, the
-                # playback waits for us to take frames: it cannot have reached its end yet.
-                # The callback lives as long as this playback object: kept until the pipeline is stopped.
-                self._playback = profile.get_device().as_playback()
-                ended, stopped = self._playback_ended, rs.playback_status.stopped
-                self._playback.set_status_changed_callback(lambda status: ended.set() if status == stopped else None)
         except RuntimeError as exc:
             raise DeviceError(
                 f"RealSense: cannot start a {cfg.width}x{cfg.height} z16 depth stream at {cfg.fps} fps "
@@ -205,21 +195,25 @@ class RealSenseCamera:
                 if self.config.playback:
                     self._drain(pipeline)
                 pipeline.stop()
-            self._playback = None
 
     def _drain(self, pipeline: Any) -> None:
-        """Read a playback to its end, and wait for the playback's own stop there, before stopping the pipeline.
+        """Read a playback to its end, and past the playback's own stop there, before stopping the pipeline.
 
-        librealsense 2.59 aborts now and then ("pure virtual method called") or segfaults when a pipeline is stopped
-        (1) while its non-real-time playback still has frames to hand over (librealsense#3126 is the same race as a
-        hang), or (2) while the playback's reader thread is still in its own stop at the end of the recording
-        (``playback_device::stop_internal``: it marks the playback stopped, so ``current_status()`` says
-        ``stopped``, then resets the file reader and raises the status change, which the pipeline subscribed to
-        and ``pipeline.stop()`` unsubscribes from, concurrently). Our status-changed callback, subscribed after the
-        pipeline's, comes once that is done; so this reads frames (each frame set dropped at once) until it came."""
+        librealsense 2.59 aborts now and then ("pure virtual method called") when a pipeline is stopped while its
+        non-real-time playback still has frames to hand over (librealsense#3126 is the same race as a hang). At the
+        end of the recording the playback's reader thread stops itself (``playback_device::stop_internal``): it
+        marks the playback stopped first, so ``current_status()`` says ``stopped`` while the thread still resets the
+        file reader and raises the status change the pipeline subscribed to (``pipeline.stop()`` unsubscribes and
+        the pipeline is freed right after). So one more wait for frames follows the first ``stopped`` seen (each
+        frame set dropped at once). (A status-changed callback of ours would say when that stop is done, but a
+        Python callback called from librealsense's thread is one more hazard: 1 abort in 355 cycles with it,
+        ``benchmarks/crash_realsense_stop.py``.)"""
+        rs = self._rs
+        playback = pipeline.get_active_profile().get_device().as_playback()
         deadline = time.monotonic() + 10.0 + self.config.timeout_s
-        while not self._playback_ended.is_set() and time.monotonic() < deadline:
+        while playback.current_status() != rs.playback_status.stopped and time.monotonic() < deadline:
             pipeline.try_wait_for_frames(100)
+        pipeline.try_wait_for_frames(100)  # the reader thread's own stop finishes meanwhile
 
     def __enter__(self) -> RealSenseCamera:
         return self
