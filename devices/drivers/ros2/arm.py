@@ -155,10 +155,12 @@ class Ros2Arm:
         self._recording = False
         self._lock = threading.Lock()
         self._held = False
+        self._subscriptions: list[Subscription] = []
         self.node = acquire(config.dds)
         self._held = True
         try:
             self.states = Subscription(self.node, config.state_topic, JointState, self._on_state)
+            self._subscriptions.append(self.states)
             self.writer = self.node.writer(config.command_topic, Message)
             if self.states.wait(lambda m: joints_of(m, config.joint_names) is not None, config.state_timeout_s) is None:
                 seen = "none arrived" if self.states.latest is None else f"they name {list(self.states.latest.name)}"
@@ -311,7 +313,9 @@ class Ros2Arm:
         )
 
     def close(self) -> None:
-        """Release this device's share of the DDS participant (idempotent)."""
+        """Delete this device's readers, then release its share of the DDS participant (idempotent)."""
+        for subscription in self._subscriptions:
+            subscription.close()
         if self._held:
             self._held = False
             release(self.node)

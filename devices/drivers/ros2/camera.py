@@ -129,13 +129,16 @@ class Ros2Camera:
 
         self.config = config
         self._held = False
+        self._subscriptions: list[Subscription] = []
         self._streams: list[FrameQueue] = []
         self._streams_lock = threading.Lock()
         self.node = acquire(config.dds)
         self._held = True
         try:
             self.info = Subscription(self.node, config.info_topic, CameraInfo)
+            self._subscriptions.append(self.info)
             self.depth = Subscription(self.node, config.depth_topic, Image, self._on_depth)
+            self._subscriptions.append(self.depth)
             info = self.info.wait(lambda m: True, config.timeout_s)
             if info is None:
                 raise DeviceError(
@@ -214,7 +217,9 @@ class Ros2Camera:
         return f"ROS 2 camera {self.config.depth_topic} ({k.width}x{k.height}, fx {k.fx:.1f})"
 
     def close(self) -> None:
-        """Release this device's share of the DDS participant (idempotent)."""
+        """Delete this device's readers, then release its share of the DDS participant (idempotent)."""
+        for subscription in self._subscriptions:
+            subscription.close()
         if self._held:
             self._held = False
             release(self.node)

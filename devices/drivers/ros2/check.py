@@ -80,8 +80,8 @@ def topic_report(cell: CellFile, listen_s: float = 1.5) -> list[TopicCheck]:
             reads.append(("turntable", c.state_topic, JointState, (c.joint_name,)))
             commands.append(("turntable", c.command_topic, Float64 if c.command == "float64" else JointTrajectory))
     node = acquire(specs[0].config.dds)
+    subscriptions: dict[str, Subscription] = {}
     try:
-        subscriptions: dict[str, Subscription] = {}
         for _, topic, message, _ in reads:
             if topic not in subscriptions:
                 subscriptions[topic] = Subscription(node, topic, message)
@@ -117,4 +117,6 @@ def topic_report(cell: CellFile, listen_s: float = 1.5) -> list[TopicCheck]:
                 )
         return report
     finally:
+        for sub in subscriptions.values():
+            sub.close()
         release(node)

@@ -9,12 +9,23 @@ like a controller's subscription expects.
 :class:`DdsConfig` is the network part of a device's cell-file section (``domain_id``, ``interface``,
 ``peers``); every ``ros2`` device of a process with the same settings shares one :class:`Node` (one DDS
 participant), released when the last device closes.
+
+Deleting readers (cyclonedds-python 11): a ``DataReader`` deletes its DDS reader only when Python frees it by
+reference count. A reader freed by the cyclic garbage collector (it is in, or hangs off, a reference cycle, as a
+reader whose listener calls back into its owner always does) keeps its DDS reader: the collector clears the weak
+entity registry first, so ``Entity.__del__`` skips ``dds_delete``, then frees the listener's ctypes thunk, and
+the next sample's listener call jumps into freed memory (a segfault; ``benchmarks/crash_ros2_close.py``). So
+every reader here is deleted explicitly: :meth:`Subscription.close` marks it closed, deletes the DDS reader
+(``dds_delete`` waits for a listener call in progress; the GIL is released meanwhile) and only then drops the
+listener; a device closes its subscriptions before it releases the node, and :func:`release` closes the
+subscriptions left open on the node (it keeps every one alive until then) before it deletes the participant.
 """
 
 from __future__ import annotations
 
 import threading
 import time
+import weakref
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -98,7 +109,7 @@ class Subscription:
     """A ROS 2 topic read in the background: the latest sample, arrival times for the rate, and waiting.
 
     on_sample (optional) is called in the reader's thread for every sample (keep it short). qos: the reader's
-    (default :func:`sensor_qos`).
+    (default :func:`sensor_qos`). :meth:`close` deletes the reader (the owner's close; else the node's release).
     """
 
     def __init__(
@@ -118,24 +129,46 @@ class Subscription:
         self.latest: Any = None
         self.count = 0
         self.arrivals: deque[float] = deque(maxlen=50)
-        listener = core.Listener(on_data_available=self._on_data)
-        self._reader = sub.DataReader(
+        self.closed = False
+        self._node = node
+        # the listener holds this subscription weakly: no reference cycle through the reader
+        listener = core.Listener(on_data_available=_weak_on_data(self))
+        self._reader: Any = sub.DataReader(
             node.participant,
             node.topic(topic, message),
             qos=qos if qos is not None else sensor_qos(),
             listener=listener,
         )
+        node.subscriptions.append(self)
+
+    def close(self) -> None:
+        """Delete the reader (idempotent): no sample is handed over after this returns. Not from ``on_sample``."""
+        if self.closed:
+            return
+        self.closed = True
+        reader, self._reader = self._reader, None
+        if reader is not None:
+            delete_entity(reader)  # waits for a listener call in progress, then no more calls
+        self._on_sample = None
+        with _nodes_lock:
+            if self in self._node.subscriptions:
+                self._node.subscriptions.remove(self)
+        with self._cond:
+            self._cond.notify_all()
 
     def _on_data(self, reader: Any) -> None:
+        if self.closed or reader is None:  # None: the reader is being deleted
+            return
         try:
             samples = reader.take(N=64)
         except Exception:  # the reader is being deleted (the device closed): nothing to take
             return
+        on_sample = self._on_sample
         for sample in samples:
             if not isinstance(sample, self.message):  # an invalid sample (a writer's dispose)
                 continue
-            if self._on_sample is not None:
-                self._on_sample(sample)
+            if on_sample is not None:
+                on_sample(sample)
             with self._cond:
                 self.latest = sample
                 self.count += 1
@@ -171,6 +204,24 @@ class Subscription:
             return (len(self.arrivals) - 1) / (self.arrivals[-1] - self.arrivals[0])
 
 
+def _weak_on_data(subscription: Subscription) -> Callable[[Any], None]:
+    """A listener callback that reaches ``subscription`` through a weak reference."""
+    ref = weakref.ref(subscription)
+
+    def on_data(reader: Any) -> None:
+        target = ref()
+        if target is not None:
+            target._on_data(reader)
+
+    return on_data
+
+
+def delete_entity(entity: Any) -> None:
+    """Delete a cyclonedds entity's DDS entity now (idempotent; its children with it). cyclonedds-python deletes one
+    only in ``Entity.__del__`` (which does nothing after the first call), so that is called here explicitly."""
+    entity.__del__()
+
+
 class Node:
     """One DDS participant on a domain, shared by the ``ros2`` devices of a process (see :func:`acquire`).
 
@@ -186,6 +237,8 @@ class Node:
         self._topics: dict[str, Any] = {}
         self.settled_stamp = 0.0
         self.users = 0
+        self.subscriptions: list[Subscription] = []
+        """The open subscriptions on this participant (closed at the last release, if their owner has not)."""
         xml = config.xml()
         try:
             self._domain = domain.Domain(config.domain_id, xml) if xml else None
@@ -238,6 +291,11 @@ def release(node: Node) -> None:
         if node.users > 0:
             return
         _nodes.pop(node.config, None)
+        left = list(node.subscriptions)
+    for subscription in left:  # readers first, while the participant lives (never by the garbage collector)
+        subscription.close()
+    if node.participant is not None:
+        delete_entity(node.participant)  # the writers and topics with it
     node._topics.clear()
     node.participant = None
     node._domain = None

@@ -87,10 +87,12 @@ class Ros2Turntable:
         self._recorders: list[StampedSeries] = []
         self._lock = threading.Lock()
         self._held = False
+        self._subscriptions: list[Subscription] = []
         self.node = acquire(config.dds)
         self._held = True
         try:
             self.states = Subscription(self.node, config.state_topic, JointState, self._on_state)
+            self._subscriptions.append(self.states)
             self.writer = self.node.writer(
                 config.command_topic, Float64 if config.command == "float64" else JointTrajectory
             )
@@ -220,7 +222,9 @@ class Ros2Turntable:
         return f"ROS 2 turntable {self.config.joint_name}: plate at {math.degrees(self.angle):.2f} deg"
 
     def close(self) -> None:
-        """Release this device's share of the DDS participant (idempotent)."""
+        """Delete this device's readers, then release its share of the DDS participant (idempotent)."""
+        for subscription in self._subscriptions:
+            subscription.close()
         if self._held:
             self._held = False
             release(self.node)
