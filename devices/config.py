@@ -106,6 +106,15 @@ class CellConfig:
     """First view: distance from the camera to the look-at point, metres."""
     initial_target_height: float = 0.1
     """First view: the camera looks at the point this high above the plate centre, metres."""
+    move_capture_hz: float = 0.0
+    """Capture during moves: depth frames taken per second while the arm and the plate move, integrated into the
+    map like views (0 = off). docs/experiments/move-capture.md measures the rate."""
+    move_capture_min_new: float = 0.02
+    """Capture during moves: a move frame is integrated only when at least this share of its points on the object
+    lies farther than one voxel from the map's occupied voxels (0: every frame)."""
+    move_capture_wait: float = 0.1
+    """Capture during moves: integrating a move's frames may outlast the move by at most this share of its
+    modelled duration (frames that would make it wait longer are left out)."""
 
     def __post_init__(self) -> None:
         require(
@@ -151,6 +160,18 @@ class CellConfig:
         require(
             finite(self.initial_target_height),
             f"cell.initial_target_height: must be finite, got {self.initial_target_height!r}",
+        )
+        require(
+            finite(self.move_capture_hz) and 0 <= self.move_capture_hz <= 60,
+            f"cell.move_capture_hz: must be in [0, 60] frames per second, got {self.move_capture_hz!r}",
+        )
+        require(
+            finite(self.move_capture_min_new) and 0 <= self.move_capture_min_new <= 1,
+            f"cell.move_capture_min_new: must be in [0, 1], got {self.move_capture_min_new!r}",
+        )
+        require(
+            finite(self.move_capture_wait) and self.move_capture_wait >= 0,
+            f"cell.move_capture_wait: must be >= 0, got {self.move_capture_wait!r}",
         )
 
 

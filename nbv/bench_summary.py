@@ -44,8 +44,23 @@ def run_metrics_of(
         timed = [float(s) for s in seconds if isinstance(s, int | float)]  # runs of older benches lack it
         if o.error is None and coverage and ceiling:
             robot = timed if len(timed) == len(coverage) else None
-            out[(o.label, o.planner, o.seed, o.yaw)] = run_metrics(coverage, ceiling, views, robot)
+            moves = [move_points(r.get("move_coverage")) for r in rows]
+            out[(o.label, o.planner, o.seed, o.yaw)] = run_metrics(coverage, ceiling, views, robot, moves)
     return out
+
+
+def move_points(cell: object) -> list[tuple[float, float]]:
+    """The (t, coverage) of a row's move frames from its ``move_coverage`` column (a JSON list; empty or missing in
+    runs without capture during moves and in older benches)."""
+    if isinstance(cell, list):
+        values = cell
+    elif isinstance(cell, str) and cell.strip():
+        import json
+
+        values = json.loads(cell)
+    else:
+        return []
+    return [(float(t), float(c)) for t, c in values]
 
 
 def _pm(values: Sequence[float], digits: int) -> str:

@@ -4,6 +4,7 @@ import it and not each other."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -96,6 +97,14 @@ def add_scan_options(p: argparse.ArgumentParser, *, model_required: bool = True,
         help=f"the cell's arm: {ARM_CHOICES_HELP} (default: the --config file's [devices.cell.arm], else ur5)",
     )
     p.add_argument(
+        "--move-capture",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help="capture during moves: depth frames per second taken while the arm and the plate move, integrated like "
+        "views (devices.cell.move_capture_hz; default: the --config file's, else 0 = off)",
+    )
+    p.add_argument(
         "--turn-while-moving",
         action="store_true",
         help="the arm cell turns the plate while the arm moves when the arm's path stays clear of the turning "
@@ -158,6 +167,9 @@ def cell_config_from_args(args: argparse.Namespace) -> CellConfig:
     if path:
         _, data = read_config_file(path)
         cell = merge(cell, data, "devices.cell.")
+    hz = getattr(args, "move_capture", None)
+    if hz is not None:
+        cell = dataclasses.replace(cell, move_capture_hz=float(hz))  # validated: cell.move_capture_hz
     return cell_with_arm(cell, getattr(args, "arm", None))
 
 

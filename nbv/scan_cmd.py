@@ -46,8 +46,12 @@ def metrics_json(scan: SimScan, planner_name: str) -> dict[str, Any]:
     time_to: dict[str, float | None] = {f"time_to_{round(100 * t)}": None for t in TIME_THRESHOLDS}
     coverage = [r.coverage for r in records]
     if scan.reachable_coverage and records and all(c is not None for c in coverage):
-        ratios = [float(c) / scan.reachable_coverage for c in coverage if c is not None]
-        time_to = {f"time_to_{round(100 * t)}": time_to_reach(ratios, seconds, t) for t in TIME_THRESHOLDS}
+        ceiling = scan.reachable_coverage
+        ratios = [float(c) / ceiling for c in coverage if c is not None]
+        moves = [
+            [(f["t"], f["coverage"] / ceiling) for f in r.move_frames if f["coverage"] is not None] for r in records
+        ]
+        time_to = {f"time_to_{round(100 * t)}": time_to_reach(ratios, seconds, t, moves) for t in TIME_THRESHOLDS}
     return {
         "model": scan.model,
         "planner": planner_name,
@@ -67,6 +71,7 @@ def metrics_json(scan: SimScan, planner_name: str) -> dict[str, Any]:
         "seconds": scan.result.seconds,
         "robot_seconds": scan.result.robot_seconds,
         "cumulative_robot_seconds": cumulative_seconds(seconds),
+        "move_capture_hz": scan.cell.config.move_capture_hz,
         **time_to,
     }
 
@@ -175,6 +180,7 @@ def run_and_report(args: argparse.Namespace, profile: bool) -> dict[str, Any]:
         cell=cell_config_from_args(args),
         turn_while_moving=args.turn_while_moving,
         on_frame=per_view.add,
+        on_move_frame=integrator.integrate,
         sensor=args.sensor,
         calibration=args.calibration,
     )

@@ -34,6 +34,7 @@ SERVE_ALIASES: dict[str, list[str]] = {
     "devices.model": ["--model"],
     "devices.camera.sensor": ["--sensor"],
     "devices.camera.calibration": ["--calibration"],
+    "devices.cell.move_capture_hz": ["--move-capture"],
 }
 """The flags ``nbv serve`` had before every setting had its own: aliases of the generated ones."""
 

@@ -117,18 +117,21 @@ class Planner:
 
     # ------------------------------------------------------------------ integrate
 
-    def integrate(self, frame: DepthFrame) -> IntegrationReport:
+    def integrate(self, frame: DepthFrame, *, move_frame: bool = False) -> IntegrationReport:
         """Preprocess, register and integrate one frame.
 
+        move_frame: the frame was taken while the cell moved between views (capture during moves): it goes into the
+        map and the cloud like a view's, but it is no view (``views``, ``iteration`` and the per-view point counts
+        stay; the next view's growth counts its points).
         Raises ValueError (state unchanged) for an empty frame, a frame with no
         point on the object after preprocessing, or intrinsics that differ from
         the first frame's. BLAS runs on one thread meanwhile (:func:`planner.clustering.single_thread_blas`: the
         same results, half the CPU; the other core stays with the server and the other sessions).
         """
         with single_thread_blas():
-            return self._integrate(frame)
+            return self._integrate(frame, move_frame)
 
-    def _integrate(self, frame: DepthFrame) -> IntegrationReport:
+    def _integrate(self, frame: DepthFrame, move_frame: bool = False) -> IntegrationReport:
         if not isinstance(frame, DepthFrame):
             raise ValueError(f"frame: expected a DepthFrame, got {type(frame).__name__}")
         if self.intrinsics is not None and frame.intrinsics != self.intrinsics:
@@ -184,9 +187,10 @@ class Planner:
         if self.point_counts:
             prev = self.point_counts[-1]
             growth = (len(self.cloud) - prev) / prev if prev > 0 else None
-        self.point_counts.append(len(self.cloud))
-        self.views.append(frame.T_world_camera)
         self.intrinsics = frame.intrinsics
+        if not move_frame:
+            self.point_counts.append(len(self.cloud))
+            self.views.append(frame.T_world_camera)
         return IntegrationReport(
             iteration=self.iteration,
             n_points_frame=len(points),

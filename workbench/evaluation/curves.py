@@ -79,14 +79,29 @@ def cumulative_seconds(seconds: Sequence[float]) -> list[float]:
     return out
 
 
-def time_to_reach(ratios: Sequence[float], seconds: Sequence[float], threshold: float) -> float:
+MovePoints = Sequence[Sequence[tuple[float, float]]]
+"""Per view taken, the (t, value) of each frame integrated during the move to it (t: seconds since that move
+started; value: coverage / ceiling, or coverage before :func:`run_metrics` divides it)."""
+
+
+def time_to_reach(
+    ratios: Sequence[float], seconds: Sequence[float], threshold: float, moves: MovePoints | None = None
+) -> float:
     """Cumulative robot seconds at the first view whose coverage / ceiling (``ratios`` (n,), the views actually
     taken) is >= ``threshold``; ``seconds`` (n,) the robot seconds of each view. Never reached: the total plus the
-    mean per view (documented penalty: one more view). ValueError for no view or lengths that differ."""
+    mean per view (documented penalty: one more view). ValueError for no view or lengths that differ.
+    moves: capture during moves: (n,) per view the (t, ratio) of the frames taken on the way to it; a frame counts
+    at its time, the robot seconds before its view's move plus t (the move comes first in a view's seconds)."""
     if not ratios or len(ratios) != len(seconds):
         raise ValueError(f"ratios, seconds: need the same number (>= 1) of views, got {len(ratios)} and {len(seconds)}")
+    if moves is not None and len(moves) != len(ratios):
+        raise ValueError(f"moves: need one list per view ({len(ratios)}), got {len(moves)}")
     cumulative = cumulative_seconds(seconds)
-    for ratio, t in zip(ratios, cumulative, strict=True):
+    for i, (ratio, t) in enumerate(zip(ratios, cumulative, strict=True)):
+        before = cumulative[i - 1] if i > 0 else 0.0
+        for t_move, move_ratio in moves[i] if moves is not None else ():
+            if move_ratio >= threshold - 1e-12:
+                return before + min(float(t_move), float(seconds[i]))
         if ratio >= threshold - 1e-12:
             return t
     return cumulative[-1] * (1.0 + 1.0 / len(cumulative))
@@ -108,15 +123,23 @@ class RunMetrics:
 
 
 def run_metrics(
-    coverage: Sequence[float], ceiling: float, views: int, robot_seconds: Sequence[float] | None = None
+    coverage: Sequence[float],
+    ceiling: float,
+    views: int,
+    robot_seconds: Sequence[float] | None = None,
+    move_coverage: MovePoints | None = None,
 ) -> RunMetrics:
     """:class:`RunMetrics` of one run (see :func:`ratio_curve` for the arguments; ``robot_seconds``: (n,) per
-    view taken, for the robot time to coverage)."""
+    view taken, for the robot time to coverage; ``move_coverage``: (n,) per view the (t, coverage) of the frames
+    taken on the way to it, counted at their times in the robot time to coverage)."""
     curve = ratio_curve(coverage, ceiling, views)
     time_to: tuple[float, ...] = ()
     if robot_seconds is not None:
         taken = [float(c) / ceiling for c in coverage]
-        time_to = tuple(time_to_reach(taken, robot_seconds, t) for t in TIME_THRESHOLDS)
+        moves = None
+        if move_coverage is not None:
+            moves = [[(float(t), float(c) / ceiling) for t, c in points] for points in move_coverage]
+        time_to = tuple(time_to_reach(taken, robot_seconds, t, moves) for t in TIME_THRESHOLDS)
     return RunMetrics(curve[-1], area_under_curve(curve), tuple(views_to_reach(curve, t) for t in THRESHOLDS), time_to)
 
 

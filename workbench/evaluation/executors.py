@@ -18,6 +18,7 @@ finished runs and a failed run is reported without losing the others.
 
 from __future__ import annotations
 
+import json
 import multiprocessing
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -95,6 +96,7 @@ def _execute(task: RunTask, mesh: MeshPayload | None, t0: float) -> RunOutcome:
         sensor=task.sensor,
         calibration=task.calibration,
         on_frame=surface.integrate,
+        on_move_frame=surface.integrate,
     )
     outcome = RunOutcome(
         task.label, task.run_planner, task.seed, task.yaw_deg, terminated=scan.result.terminated, arm=task.arm_label
@@ -122,6 +124,12 @@ def _execute(task: RunTask, mesh: MeshPayload | None, t0: float) -> RunOutcome:
                 "capture_seconds": r.capture_seconds,
                 "motion_planning_seconds": r.motion_planning_seconds,
                 "plan_cpu_seconds": r.plan_cpu_seconds,
+                "move_frames": len(r.move_frames),
+                "move_integration_seconds": None if r.move_capture is None else r.move_capture["integration_seconds"],
+                "move_wait_seconds": None if r.move_capture is None else r.move_capture["wait_seconds"],
+                "move_coverage": json.dumps(
+                    [[f["t"], f["coverage"]] for f in r.move_frames if f["coverage"] is not None]
+                ),
                 **{k: None if r.accuracy is None else r.accuracy[k] for k in ACCURACY_COLUMNS},
                 "surface_fscore_5mm": None,
             }

@@ -15,9 +15,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from devices.cell import Motion, ScanCell
+from devices.move_capture import MoveFrame, OnFrame
 from planner import DepthFrame, Planner, PlanResult, Pose
 from planner.planner import IntegrationReport
 from workbench.evaluation.accuracy import ACCURACY_COLUMNS, GroundTruth, coverage_and_accuracy
+from workbench.evaluation.coverage import coverage
+from workbench.move_frames import KeepRule, KeptFrame, MoveIntegration, integrate_move_frames
 from workbench.planning import plan_in
 from workbench.session.summaries import voxel_counts
 
@@ -57,6 +60,12 @@ class IterationRecord:
     accuracy: dict[str, Any] | None = None
     """The cloud's precision / recall / F at 2 and 5 mm, distances and chamfer after this view
     (``workbench.evaluation.Accuracy.to_json``; None without a ground truth)."""
+    move_capture: dict[str, Any] | None = None
+    """Capture during the move to this view (``MoveIntegration.to_json``: frames taken, kept, left out, integration
+    and wait seconds against the move's duration); None when off."""
+    move_frames: list[dict[str, Any]] = field(default_factory=list)
+    """The move frames integrated on the way to this view, in stamp order: ``t`` (seconds since the move
+    started), ``coverage`` after it (None without ground truth), ``points`` (the cloud's size after it)."""
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -78,6 +87,8 @@ class IterationRecord:
             "plan_cpu_seconds": self.plan_cpu_seconds,
             "refused_moves": self.refused_moves,
             "accuracy": self.accuracy,
+            "move_capture": self.move_capture,
+            "move_frames": self.move_frames,
         }
 
     @property
@@ -151,14 +162,19 @@ class ScanResult:
 
 
 def _move(
-    cell: ScanCell, pose: Pose, plan: PlanResult | None, skip: set[int]
+    cell: ScanCell,
+    pose: Pose,
+    plan: PlanResult | None,
+    skip: set[int],
+    capture_hz: float = 0.0,
+    on_frame: OnFrame | None = None,
 ) -> tuple[int | None, Pose | None, Motion | None, list[dict[str, Any]]]:
     """Move to ``pose`` (``plan``'s best view, or the first view without a plan); while the cell refuses
     (UnreachableError: e.g. no collision-free path), try the next best eligible candidate of ``plan``, every one
     in turn, leaving out the candidates in ``skip`` (tried already). Returns (the candidate index reached or
     None, the pose reached or None when every eligible view was refused, the cell's Motion or None, the
     refusals: ``candidate`` index, ``reason``, ``message``). Without a plan (the first view) a refusal is raised:
-    there is nothing else to try."""
+    there is nothing else to try. ``capture_hz``, ``on_frame``: capture during the move (``Cell.move_to``)."""
     from devices.protocols import UnreachableError
 
     tries: list[tuple[int | None, Pose]] = []
@@ -173,7 +189,8 @@ def _move(
     for index, target in tries:
         then = [] if plan is None else plan.then_poses(index)  # the views the tour expects next, if any
         try:
-            return index, target, cell.move_to(target, then=then), refused
+            motion = cell.move_to(target, then=then, capture_hz=capture_hz, on_frame=on_frame)
+            return index, target, motion, refused
         except UnreachableError as exc:
             if plan is None:
                 raise
@@ -190,6 +207,7 @@ def run_scan(
     first_pose: Pose | None = None,
     on_frame: Callable[[DepthFrame], None] | None = None,
     truth: GroundTruth | None = None,
+    on_move_frame: Callable[[DepthFrame], None] | None = None,
 ) -> ScanResult:
     """Run Algorithm 1 until the planner's termination rule or no eligible view is left.
 
@@ -203,6 +221,12 @@ def run_scan(
     a plan time. ``surface_samples`` (M, 3) enables coverage per iteration, ``truth`` the accuracy
     (precision, recall, F, chamfer: ``IterationRecord.accuracy``). ``on_frame`` hears each integrated frame
     with its registered pose (e.g. a surface integrator), before the plan.
+
+    Capture during moves (``cell.config.move_capture_hz`` > 0): the frames the cell takes on the way to a view are
+    integrated before the view (in stamp order, :func:`workbench.move_frames.integrate_move_frames` under the cell's
+    keep rule; ``on_move_frame`` hears each kept one with its registered pose), each kept frame's coverage recorded at its stamp
+    (``IterationRecord.move_frames``). A move whose view turns out unusable keeps its frames in the map (they were
+    seen): they are recorded with the next view taken.
     """
     t_start = time.perf_counter()
     pose = first_pose if first_pose is not None else cell.initial_pose()
@@ -213,8 +237,22 @@ def run_scan(
     refusals: list[dict[str, Any]] = []
     tried: set[int] = set()  # candidates of the current plan refused or unusable
     pending: list[dict[str, Any]] = []  # the refusals since the last view taken
+    hz = float(cell.config.move_capture_hz)
+    rule = KeepRule.of(cell.config)
+    moved: list[dict[str, Any]] = []  # the move frames kept since the last view taken
+    move_blocks: list[MoveIntegration] = []
+
+    def kept(frame: KeptFrame) -> None:
+        if on_move_frame is not None:
+            on_move_frame(frame.frame.with_pose(frame.T_world_camera))
+        cov = None if surface_samples is None else coverage(surface_samples, planner.cloud)
+        moved.append({"t": frame.t, "coverage": cov, "points": len(planner.cloud)})
+
     while True:
-        index, reached, motion, refused = _move(cell, pose, plan, tried)
+        taken: list[MoveFrame] = []
+        index, reached, motion, refused = _move(cell, pose, plan, tried, hz, taken.append)
+        if taken and motion is not None:
+            move_blocks.append(integrate_move_frames(planner, taken, motion.duration, rule, kept))
         refusals += [{"after_view": len(records), **r} for r in refused]
         pending += refused
         tried |= {r["candidate"] for r in refused if r["candidate"] is not None}
@@ -249,6 +287,9 @@ def run_scan(
         if measured is not None:
             record.accuracy = measured.to_json()
         record.move = None if motion is None else motion.to_json()
+        if move_blocks:
+            record.move_capture = _merged(move_blocks)
+        record.move_frames, moved, move_blocks = moved, [], []
         records.append(record)
         if keep_plans:
             plans.append(plan)
@@ -262,6 +303,15 @@ def run_scan(
             break
         pose = plan.best.T_world_camera
     return ScanResult(records, plans, terminated, time.perf_counter() - t_start, refusals)
+
+
+def _merged(blocks: list[MoveIntegration]) -> dict[str, Any]:
+    """One ``move_capture`` block of the moves since the last view (usually one; more when a view was unusable)."""
+    out = blocks[-1].to_json()
+    for block in blocks[:-1]:
+        for key, value in block.to_json().items():
+            out[key] += value
+    return out
 
 
 def final_accuracy(records: list[IterationRecord]) -> dict[str, Any]:

@@ -57,6 +57,7 @@ def simulate(
     calibration: str = "none",
     turn_while_moving: bool = False,
     cell: Any = None,
+    on_move_frame: Callable[[DepthFrame], None] | None = None,
 ) -> SimScan:
     """Load ``model``, build the simulated cell, run Algorithm 1, measure coverage.
 
@@ -69,7 +70,8 @@ def simulate(
     iteration with its record and plan. ``arm``: an arm preset ('ur5', 'panda', ...: ``devices/arm/presets.py``) or the
     path of a URDF file (IK, collision checks and joint trajectories), 'urdf' (the arm of ``cell``, the UR5 by
     default) or 'reach_sphere' (``devices.config.cell_with_arm``). ``cell``: the cell's settings
-    (``devices.config.CellConfig``, e.g. a config file's ``[devices.cell]``; default the default cell). ``on_frame``: hears each frame with its registered pose (``run_scan``).
+    (``devices.config.CellConfig``, e.g. a config file's ``[devices.cell]``; default the default cell). ``on_frame``: hears each frame with its registered pose (``run_scan``); ``on_move_frame``: each frame kept from
+    the moves (capture during moves: ``cell.move_capture_hz``).
     ``turn_while_moving``: the UR5 cell turns the plate while the arm moves when the arm's path stays clear of the
     turning object (``ArmConfig.turn_while_moving``).
     ``sensor``, ``calibration``: the camera's sensor model and the cell's calibration error by name
@@ -112,7 +114,14 @@ def simulate(
         on_start(name)
     truth = GroundTruth.of(mesh, samples)
     result = run_scan(
-        planner, cell, samples, on_iteration=on_iteration, keep_plans=keep_plans, on_frame=on_frame, truth=truth
+        planner,
+        cell,
+        samples,
+        on_iteration=on_iteration,
+        keep_plans=keep_plans,
+        on_frame=on_frame,
+        truth=truth,
+        on_move_frame=on_move_frame,
     )
     ceiling, ceiling_seconds = None, 0.0
     if reachable:
