@@ -232,6 +232,13 @@ class SessionCreate(BaseModel):
         description="the simulated cell's arm: a preset (ur5, ur10, panda, xarm7, z1) or reach_sphere "
         "(GET /api/arms lists them; default the server's)",
     )
+    move_capture: float | None = Field(
+        default=None,
+        ge=0,
+        le=60,
+        description="capture during moves: depth frames per second taken while the cell moves, integrated like views "
+        "(0: off; default the server's devices.cell.move_capture_hz)",
+    )
     planner: str = Field(
         default="projection",
         max_length=40,
@@ -577,6 +584,7 @@ class TimelineStepOut(BaseModel):
     voxels: dict[str, int] = Field(description="voxel counts by class after this view")
     points: int
     coverage: float | None
+    move_frames: int = Field(default=0, description="frames kept from the move to this view (capture during moves)")
     n_candidates: int | None
     n_eligible: int | None
     terminated: str | None

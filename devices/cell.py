@@ -419,7 +419,8 @@ class Cell:
         self._run(motion)
         if path is not None and on_frame is not None and self.move_capture is not None:
             for taken in self.move_capture.frames(path, capture_hz):
-                on_frame(MoveFrame(taken.frame.with_pose(self._perturb(taken.frame.T_world_camera)), taken.t))
+                reported = taken.frame.with_pose(self._perturb(taken.frame.T_world_camera))
+                on_frame(MoveFrame(reported, taken.t, taken.speed))
         return motion
 
     def _run(self, motion: Motion) -> None:

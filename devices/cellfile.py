@@ -57,7 +57,7 @@ from planner.types import Pose
 from planner.validate import finite
 
 POSE_SECTIONS = ("hand_eye", "arm_base")
-TOP_KEYS = (*KINDS, *POSE_SECTIONS, "turntable_axis", "allow_auto")
+TOP_KEYS = (*KINDS, *POSE_SECTIONS, "turntable_axis", "allow_auto", "move_capture_hz")
 MAX_AXIS_TILT_DEG = 5.0
 """A turntable axis tilted more than this from the base frame's vertical is refused (level the turntable)."""
 
@@ -94,6 +94,9 @@ class CellFile:
     turntable_axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
     allow_auto: bool = False
     source: str = ""
+    move_capture_hz: float | None = None
+    """Capture during moves on this cell (``[devices] move_capture_hz``, frames per second, 0 = off); None: the
+    server's ``devices.cell.move_capture_hz``."""
 
     def devices(self) -> list[DeviceSpec]:
         """The configured devices in the order camera, arm, turntable."""
@@ -221,6 +224,9 @@ def parse_cell(data: dict[str, Any], folder: str | Path = ".", source: str = "")
     allow_auto = devices.get("allow_auto", False)
     if not isinstance(allow_auto, bool):
         raise ValueError(f"devices.allow_auto: expected true/false, got {allow_auto!r}")
+    hz = devices.get("move_capture_hz")
+    if hz is not None and (isinstance(hz, bool) or not isinstance(hz, int | float) or not 0 <= hz <= 60):
+        raise ValueError(f"devices.move_capture_hz: frames per second in [0, 60], got {hz!r}")
     folder = Path(folder)
     specs = {kind: _device(kind, devices[kind], folder) for kind in KINDS if kind in devices}
     poses = {name: _pose(name, devices[name]) for name in POSE_SECTIONS if name in devices}
@@ -233,6 +239,7 @@ def parse_cell(data: dict[str, Any], folder: str | Path = ".", source: str = "")
         turntable_axis=_axis(devices["turntable_axis"]) if "turntable_axis" in devices else (0.0, 0.0, 1.0),
         allow_auto=allow_auto,
         source=source,
+        move_capture_hz=None if hz is None else float(hz),
     )
 
 

@@ -112,6 +112,13 @@ class CellConfig:
     move_capture_min_new: float = 0.02
     """Capture during moves: a move frame is integrated only when at least this share of its points on the object
     lies farther than one voxel from the map's occupied voxels (0: every frame)."""
+    move_capture_max_speed: float = 0.8
+    """Capture during moves: integrate a move frame only when the view moved slower than this at its stamp, m/s (the
+    camera's speed plus its turn rate times 0.4 m; a stamp error of dt misplaces the frame by about speed * dt; the
+    plate's turn alone moves it about 0.6-0.7 m/s); 0: any speed. docs/experiments/move-capture.md measured 0.8."""
+    move_capture_registered: bool = False
+    """Capture during moves: integrate a move frame only when ICP accepted its pose (a frame taken at speed carries
+    the stamp's timing error)."""
     move_capture_wait: float = 0.1
     """Capture during moves: integrating a move's frames may outlast the move by at most this share of its
     modelled duration (frames that would make it wait longer are left out)."""
@@ -168,6 +175,14 @@ class CellConfig:
         require(
             finite(self.move_capture_min_new) and 0 <= self.move_capture_min_new <= 1,
             f"cell.move_capture_min_new: must be in [0, 1], got {self.move_capture_min_new!r}",
+        )
+        require(
+            finite(self.move_capture_max_speed) and self.move_capture_max_speed >= 0,
+            f"cell.move_capture_max_speed: must be >= 0 (m/s, 0: any), got {self.move_capture_max_speed!r}",
+        )
+        require(
+            isinstance(self.move_capture_registered, bool),
+            f"cell.move_capture_registered: true or false, got {self.move_capture_registered!r}",
         )
         require(
             finite(self.move_capture_wait) and self.move_capture_wait >= 0,

@@ -99,6 +99,8 @@ def arm_cell_config(cell: CellFile, base: CellConfig) -> CellConfig:
         changes["joint_upper_deg"] = tuple(config.joint_upper_deg)
     if config is not None and hasattr(config, "max_joint_acceleration_deg"):
         changes["acceleration_limit_deg"] = min(base.arm.acceleration_limit_deg, config.max_joint_acceleration_deg)
+    if cell.move_capture_hz is not None:  # the cell file's rate of capture during moves wins over the server's
+        base = dataclasses.replace(base, move_capture_hz=cell.move_capture_hz)
     return dataclasses.replace(base, kinematics="urdf", arm=dataclasses.replace(base.arm, **changes))
 
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,10 +35,49 @@ from devices.motion import Motion, rz
 from planner.types import DepthFrame, Pose
 
 if TYPE_CHECKING:
+    from devices.arm.kinematics import ArmKinematics
     from devices.calibration_error import CellErrors
-    from devices.cell import Cell
-    from devices.sim import SimulatedCamera
+    from devices.config import CameraConfig, CellConfig
+    from devices.sensors import SensorModel
+    from planner.types import Intrinsics
 
+
+class MovingCell(Protocol):
+    """What a path needs of the cell that runs the move (:class:`devices.cell.Cell`): its state before the move."""
+
+    @property
+    def kinematics(self) -> ArmKinematics | None: ...
+
+    @property
+    def config(self) -> CellConfig: ...
+
+    @property
+    def angle(self) -> float: ...
+
+    @property
+    def T_base_camera(self) -> Pose: ...
+
+
+class RenderingCamera(Protocol):
+    """What the frames of a move need of the simulated camera (:class:`devices.sim.SimulatedCamera`)."""
+
+    @property
+    def sensor(self) -> SensorModel: ...
+
+    @property
+    def config(self) -> CameraConfig: ...
+
+    @property
+    def intrinsics(self) -> Intrinsics: ...
+
+    def render(self, T_table_camera: Pose) -> NDArray[np.float32]: ...
+
+    def render_sensor(self, T_table_camera: Pose) -> NDArray[np.float32]: ...
+
+
+VIEW_REACH = 0.4
+"""The distance ahead of the camera at which :meth:`MovePath.speed_at` counts its turning, metres (the working
+distance of a scan)."""
 BLUR_SUBFRAMES = 3
 """Renders across a frame's exposure (its start, middle and end) when the sensor's exposure is > 0."""
 
@@ -50,16 +89,21 @@ class MoveFrame:
     frame: the depth as captured; ``frame.T_world_camera`` is the pose the cell REPORTS for the frame's stamp (table
     frame), what a real cell knows; the true pose may differ (the sensor's timing model, calibration errors).
     t: the frame's stamp, seconds since the move started.
+    speed: how fast the view moved at the stamp (:meth:`MovePath.speed_at`, m/s), None when the cell does not say:
+    a stamp error of dt misplaces the frame by about speed * dt.
     """
 
     frame: DepthFrame
     t: float
+    speed: float | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.frame, DepthFrame):
             raise ValueError(f"frame: expected a DepthFrame, got {type(self.frame).__name__}")
         if not (isinstance(self.t, int | float) and math.isfinite(self.t) and self.t >= 0):
             raise ValueError(f"t: must be a finite number of seconds >= 0, got {self.t!r}")
+        if self.speed is not None and not (math.isfinite(self.speed) and self.speed >= 0):
+            raise ValueError(f"speed: must be a finite number of m/s >= 0, got {self.speed!r}")
 
 
 OnFrame = Callable[[MoveFrame], None]
@@ -93,7 +137,7 @@ class MovePath:
     turn_speed: float
 
     @classmethod
-    def of(cls, cell: Cell, motion: Motion) -> MovePath:
+    def of(cls, cell: MovingCell, motion: Motion) -> MovePath:
         """The path of ``motion`` run by ``cell`` from its current state (call it before the move)."""
         if cell.kinematics is not None:
             speed = cell.kinematics.config.turntable_speed_deg
@@ -170,12 +214,22 @@ class MovePath:
         t = min(max(float(t), 0.0), self.duration)
         return rz(-self.angle_at(t)) @ self.base_camera_at(t)
 
+    def speed_at(self, t: float, reach: float = VIEW_REACH, dt: float = 0.01) -> float:
+        """How fast the view moves at time ``t`` (table frame), m/s: the camera's speed plus its turn rate times
+        ``reach`` (a point that far ahead of the camera), by central differences over ``dt`` seconds."""
+        a, b = self.T_table_camera(t - dt), self.T_table_camera(t + dt)
+        span = min(t + dt, self.duration) - max(t - dt, 0.0)
+        if span <= 0:
+            return 0.0
+        turn = Rotation.from_matrix(a.rotation.T @ b.rotation).magnitude()
+        return float((np.linalg.norm(b.translation - a.translation) + turn * reach) / span)
+
     def poses(self, times: Sequence[float] | NDArray[np.float64]) -> list[Pose]:
         """The nominal ``T_table_camera`` at each time."""
         return [self.T_table_camera(float(t)) for t in np.asarray(times, dtype=np.float64).reshape(-1)]
 
 
-def camera_path(cell: Cell, motion: Motion, times: Sequence[float] | NDArray[np.float64]) -> list[Pose]:
+def camera_path(cell: MovingCell, motion: Motion, times: Sequence[float] | NDArray[np.float64]) -> list[Pose]:
     """``T_table_camera`` at each time (s since the move started) along ``motion`` as ``cell`` executes it from its
     current state: retract, plate turn (or the turn overlapped with the trajectory) and the arm's trajectory, by
     forward kinematics of the trajectory's joints at t and the plate's angle at t (reach sphere: the plate turn, then
@@ -191,7 +245,7 @@ class SimulatedMoveCapture:
     seed: seeds the stamp jitter.
     """
 
-    def __init__(self, camera: SimulatedCamera, errors: CellErrors | None = None, seed: int = 0) -> None:
+    def __init__(self, camera: RenderingCamera, errors: CellErrors | None = None, seed: int = 0) -> None:
         self.camera = camera
         self.errors = errors
         self._rng = np.random.default_rng(seed)
@@ -253,7 +307,7 @@ class SimulatedMoveCapture:
     def frames(self, path: MovePath, hz: float) -> Iterator[MoveFrame]:
         """The frames at ``hz`` along ``path`` (:func:`capture_times`), in stamp order."""
         for t in capture_times(path.duration, hz):
-            yield MoveFrame(self.render(path, float(t)), float(t))
+            yield MoveFrame(self.render(path, float(t)), float(t), path.speed_at(float(t)))
 
 
 def blurred(plain: NDArray[np.float32], measured: NDArray[np.float32] | None, jump: float) -> NDArray[np.float32]:

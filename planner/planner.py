@@ -117,21 +117,23 @@ class Planner:
 
     # ------------------------------------------------------------------ integrate
 
-    def integrate(self, frame: DepthFrame, *, move_frame: bool = False) -> IntegrationReport:
+    def integrate(self, frame: DepthFrame, *, move_frame: bool = False, registered: bool = False) -> IntegrationReport:
         """Preprocess, register and integrate one frame.
 
         move_frame: the frame was taken while the cell moved between views (capture during moves): it goes into the
         map and the cloud like a view's, but it is no view (``views``, ``iteration`` and the per-view point counts
         stay; the next view's growth counts its points).
+        registered: refuse the frame (ValueError, state unchanged) when registration ran and did not accept it (a
+        move frame is worth its pose only when ICP confirmed it).
         Raises ValueError (state unchanged) for an empty frame, a frame with no
         point on the object after preprocessing, or intrinsics that differ from
         the first frame's. BLAS runs on one thread meanwhile (:func:`planner.clustering.single_thread_blas`: the
         same results, half the CPU; the other core stays with the server and the other sessions).
         """
         with single_thread_blas():
-            return self._integrate(frame, move_frame)
+            return self._integrate(frame, move_frame, registered)
 
-    def _integrate(self, frame: DepthFrame, move_frame: bool = False) -> IntegrationReport:
+    def _integrate(self, frame: DepthFrame, move_frame: bool = False, registered: bool = False) -> IntegrationReport:
         if not isinstance(frame, DepthFrame):
             raise ValueError(f"frame: expected a DepthFrame, got {type(frame).__name__}")
         if self.intrinsics is not None and frame.intrinsics != self.intrinsics:
@@ -159,6 +161,8 @@ class Planner:
                 points = registration.correction.apply(points)
                 dense = registration.correction.apply(dense)
                 plane = plane_moved(plane, registration.correction)
+            elif registered:
+                raise ValueError(f"registration not accepted: {registration.reason}")
         timings["register"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()

@@ -10,13 +10,16 @@ started). :func:`integrate_move_frames` takes them in stamp order through ``Plan
   (less than ``move_capture_min_new`` of them new) is left out (:func:`new_share`, a cheap look-up);
 - time: integration runs beside the move on a real cell (frame k can start at its stamp, or when frame k - 1 is
   done); a frame whose integration would end later than ``(1 + move_capture_wait)`` times the move's modelled
-  duration is left out, so no move waits for integration by more than that share of its time. A simulated move is
+  duration (its start, plus the slowest integration of the move so far, or of the move before) is left out, so no move waits for
+  integration by more than that share of its time (a frame slower than every earlier one may still overrun: the
+  wait is reported). A simulated move is
   instant: the integration seconds are measured and accounted against the move's modelled duration
   (:class:`MoveIntegration` reports both).
 """
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -28,6 +31,7 @@ import numpy as np
 from devices.config import CellConfig
 from devices.move_capture import MoveFrame
 from planner import DepthFrame, Planner, Pose, VoxelClass
+from planner.planner import IntegrationReport
 
 NEW_SHARE_STRIDE = 4
 """:func:`new_share` looks at every this-many-th pixel in both directions (1/16 of a frame's points)."""
@@ -42,10 +46,16 @@ class KeepRule:
 
     min_new: float = 0.02
     wait: float = 0.1
+    registered: bool = False
+    """Keep a frame only when ICP accepted its pose (a frame ICP cannot confirm counts as rejected)."""
+    max_speed: float = 0.0
+    """Keep a frame only when its view moved slower than this at its stamp, m/s (``MoveFrame.speed``; 0: any)."""
 
     @classmethod
     def of(cls, cell: CellConfig) -> KeepRule:
-        return cls(cell.move_capture_min_new, cell.move_capture_wait)
+        return cls(
+            cell.move_capture_min_new, cell.move_capture_wait, cell.move_capture_registered, cell.move_capture_max_speed
+        )
 
 
 def new_share(planner: Planner, frame: DepthFrame, stride: int = NEW_SHARE_STRIDE) -> float:
@@ -103,6 +113,8 @@ class MoveIntegration:
     kept: list[KeptFrame] = field(default_factory=list)
     seen: int = 0
     """Left out: too little new (``min_new``)."""
+    fast: int = 0
+    """Left out: taken while the view moved faster than ``max_speed``."""
     late: int = 0
     """Left out: integration would have outlasted the move by more than ``wait`` of its duration."""
     rejected: int = 0
@@ -111,6 +123,8 @@ class MoveIntegration:
     """Wall seconds spent on the move's frames (the new-share look-ups and the integrations)."""
     wait_seconds: float = 0.0
     """How long a real move would wait for its frames' integration at its end (stamps + measured seconds)."""
+    slowest: float = 0.0
+    """The slowest integration of a kept frame, seconds (the next move's first estimate)."""
 
     def to_json(self) -> dict[str, Any]:
         """The ``move_capture`` block of a view (journal, metrics)."""
@@ -119,6 +133,7 @@ class MoveIntegration:
             "taken": self.taken,
             "kept": len(self.kept),
             "seen": self.seen,
+            "fast": self.fast,
             "late": self.late,
             "rejected": self.rejected,
             "integration_seconds": self.integration_seconds,
@@ -133,16 +148,21 @@ def integrate_move_frames(
     rule: KeepRule,
     on_kept: Callable[[KeptFrame], None] | None = None,
     clock: Callable[[], float] = time.perf_counter,
+    prior: float = 0.0,
 ) -> MoveIntegration:
     """Integrate the frames of one move (``move_seconds`` long) into ``planner`` in stamp order under ``rule``;
-    ``on_kept`` hears each frame that went in (e.g. the surface, the coverage at its stamp)."""
+    ``on_kept`` hears each frame that went in (e.g. the surface, the coverage at its stamp). prior: the seconds one
+    integration is expected to take before this move's first (the previous move's ``slowest``)."""
     out = MoveIntegration(float(move_seconds), taken=len(frames))
     limit = (1.0 + rule.wait) * move_seconds
     finish = 0.0
     costs: list[float] = []
     for mf in sorted(frames, key=lambda f: f.t):
+        if rule.max_speed > 0 and mf.speed is not None and mf.speed > rule.max_speed:
+            out.fast += 1
+            continue
         start = max(mf.t, finish)
-        estimate = sum(costs) / len(costs) if costs else 0.0
+        estimate = max(costs, default=prior)  # the slowest so far: a loaded machine's spikes are kept in the bound
         if start + estimate > limit:
             out.late += 1
             continue
@@ -153,7 +173,7 @@ def integrate_move_frames(
             out.seen += 1
         else:
             try:
-                report = planner.integrate(mf.frame, move_frame=True)
+                report = planner.integrate(mf.frame, move_frame=True, registered=rule.registered)
             except ValueError:
                 out.rejected += 1
             else:
@@ -167,4 +187,24 @@ def integrate_move_frames(
         finish = start + cost
         out.integration_seconds += cost
     out.wait_seconds = max(0.0, finish - move_seconds) if math.isfinite(finish) else 0.0
+    out.slowest = max(costs, default=prior)
     return out
+
+
+Moving = tuple[list[MoveFrame], float, KeepRule, float]
+"""The frames of a move, its modelled seconds, the keep rule, the prior estimate of one integration's seconds."""
+
+
+def integrate_step(
+    planner: Planner, frame: DepthFrame, moving: Moving | None
+) -> tuple[IntegrationReport, Planner, MoveIntegration | None]:
+    """Integrate one view into ``planner`` (the session's, or a worker's copy): first the frames of the move to it
+    (``moving``: the frames, the move's modelled seconds, the keep rule, the prior; :func:`integrate_move_frames`), then the
+    view. Atomic: with move frames the work is done on a copy, so a ValueError of the view leaves ``planner`` as it
+    was. Returns (report, the planner after the view, what became of the frames)."""
+    if moving is None:
+        return planner.integrate(frame), planner, None
+    frames, move_seconds, rule, prior = moving
+    work = copy.deepcopy(planner)
+    moves = integrate_move_frames(work, frames, move_seconds, rule, prior=prior)
+    return work.integrate(frame), work, moves

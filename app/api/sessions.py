@@ -52,6 +52,7 @@ def create_session(
         camera=None if body.camera is None else body.camera.model_dump(exclude_none=True),
         guided=body.guided,
         arm=body.arm,
+        move_capture=body.move_capture,
     )
     return {"id": session.id}
 

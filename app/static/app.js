@@ -128,7 +128,7 @@ async function action(label, fn, errorBox) {
 
 // ------------------------------------------------------------------ form (restored on reload)
 
-const FORM_IDS = ["model", "planner", "arm-preset", "sensor", "calibration", "p-resolution", "p-parallels", "p-count", "p-sectors", "p-revisit", "p-gamma",
+const FORM_IDS = ["model", "planner", "arm-preset", "sensor", "calibration", "move-capture", "p-resolution", "p-parallels", "p-count", "p-sectors", "p-revisit", "p-gamma",
   "p-dc", "p-tmin", "p-tmax", "p-views", "p-seed", "auto-count"];
 
 function saveForm() {
@@ -575,7 +575,8 @@ function wire() {
     const camera = { sensor: $("sensor").value || null, calibration: $("calibration").value || null };
     const body = { ...objectChoice($("model").value), planner: $("planner").value, config: paramConfig(),
       seed: Number($("p-seed").value), progress_id: progressId,
-      camera: camera.sensor || camera.calibration ? camera : null, arm: $("arm-preset").value || null };
+      camera: camera.sensor || camera.calibration ? camera : null, arm: $("arm-preset").value || null,
+      move_capture: $("move-capture").value === "" ? null : Number($("move-capture").value) };
     const follow = await followCreate(progressId);
     try {
       const r = await api("POST", "/api/sessions", body);
@@ -967,7 +968,7 @@ function renderStep(step) {
   showNotice("");
   $("iteration").textContent = step.view;
   $("coverage").textContent = step.coverage !== null ? (100 * step.coverage).toFixed(1) + " %" : "–";
-  $("points").textContent = step.points;
+  $("points").textContent = step.move_frames ? `${step.points} (${step.move_frames} move frames)` : step.points;
   $("plan-id").textContent = step.plan_id ? `plan ${step.plan_id} · after view ${step.view}` : `no plan after view ${step.view}`;
   $("selected-label").textContent = step.approved !== null ? `candidate ${step.approved} (approved)` : "no selection";
   if (!$("arm").hidden) {

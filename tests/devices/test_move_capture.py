@@ -85,6 +85,14 @@ def _hold(cell: Cell):
     return JointTrajectory.hold(cell.kinematics.joint_names, q)
 
 
+def test_the_views_speed_during_a_plate_turn_is_the_turn_rate_times_radius_plus_reach(bunny_cell: Cell) -> None:
+    path = _plate_path(bunny_cell, 45.0)
+    radius = float(np.hypot(*bunny_cell.pose.translation[:2]))
+    rate = math.radians(45.0)
+    assert path.speed_at(path.duration / 2) == pytest.approx(rate * (radius + 0.4), rel=1e-3)
+    assert path.speed_at(path.duration + 1.0) == 0.0  # after the move: still
+
+
 def test_the_reach_sphere_turns_then_travels_straight() -> None:
     cell = make_sim_cell(None, SMALL, CellConfig(kinematics="reach_sphere"), seed=0)
     start = cell.pose
@@ -113,8 +121,8 @@ def test_capture_times_are_strictly_inside_the_move() -> None:
 class _TimedCamera:
     """A stand-in for the simulated camera with a chosen timing model (only its sensor is read here)."""
 
-    def __init__(self, latency: float) -> None:
-        self.sensor = SensorModel("timed", stamp_latency=latency)
+    def __init__(self, latency: float, sensor: SensorModel | None = None) -> None:
+        self.sensor = sensor if sensor is not None else SensorModel("timed", stamp_latency=latency)
 
 
 def _plate_path(cell: Cell, speed_deg: float) -> MovePath:
@@ -149,8 +157,8 @@ def test_no_latency_no_error_and_jitter_spreads_the_exposure(bunny_cell: Cell) -
     ideal = SimulatedMoveCapture(_TimedCamera(0.0))  # type: ignore[arg-type]
     (t,) = ideal.exposure_times(1.0)
     assert t == 1.0 and _pose_gap(ideal.true_pose(path, t), path.T_table_camera(1.0)) < 1e-12
-    jittery = SimulatedMoveCapture(_TimedCamera(0.0), seed=3)  # type: ignore[arg-type]
-    jittery.camera.sensor = SensorModel("jitter", stamp_latency=0.01, stamp_jitter=0.004, exposure=0.008)
+    sensor = SensorModel("jitter", stamp_latency=0.01, stamp_jitter=0.004, exposure=0.008)
+    jittery = SimulatedMoveCapture(_TimedCamera(0.0, sensor), seed=3)  # type: ignore[arg-type]
     draws = np.array([jittery.exposure_times(1.0) for _ in range(400)])  # (400, 3): start, middle, end
     assert draws.shape == (400, 3)
     np.testing.assert_allclose(draws[:, 2] - draws[:, 0], 0.008, atol=1e-12)

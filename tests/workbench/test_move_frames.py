@@ -13,7 +13,7 @@ from devices.config import CameraConfig, CellConfig
 from devices.move_capture import MoveFrame
 from devices.sim import make_sim_cell
 from planner import Planner, PlannerConfig
-from planner.types import DepthFrame
+from planner.types import DepthFrame, Pose
 from tests.helpers import orbit_view
 from workbench.evaluation.curves import run_metrics, time_to_reach
 from workbench.move_frames import KeepRule, integrate_move_frames, new_share
@@ -62,6 +62,15 @@ def test_a_frame_of_what_the_map_holds_is_left_out_and_a_new_side_is_kept(scene)
     assert out.to_json()["kept"] == 1
 
 
+def test_frames_taken_faster_than_the_limit_are_left_out(scene) -> None:
+    planner = Planner(PlannerConfig())
+    planner.integrate(scene(0.0))
+    frames = [MoveFrame(scene(90.0), 0.2, 1.2), MoveFrame(scene(180.0), 0.4, 0.3), MoveFrame(scene(270.0), 0.6)]
+    out = integrate_move_frames(planner, frames, 5.0, KeepRule(min_new=0.0, wait=1.0, max_speed=0.5))
+    assert ([k.t for k in out.kept], out.fast) == ([0.4, 0.6], 1)  # a frame without a speed is not judged by it
+    assert out.to_json()["fast"] == 1
+
+
 def test_frames_that_would_make_the_move_wait_are_left_out(scene) -> None:
     planner = Planner(PlannerConfig())
     planner.integrate(scene(0.0))
@@ -77,3 +86,18 @@ def test_frames_that_would_make_the_move_wait_are_left_out(scene) -> None:
     ticks = itertools.count(0.0, 0.3)
     out = integrate_move_frames(unbounded, frames, 1.0, KeepRule(min_new=0.0, wait=10.0), clock=lambda: next(ticks))
     assert len(out.kept) == 4 and out.wait_seconds == pytest.approx(0.3)  # 1.3 s: the move waits 0.3 s
+
+
+def test_a_frame_icp_cannot_confirm_is_refused_when_the_rule_asks_for_registration(scene) -> None:
+    planner = Planner(PlannerConfig())
+    planner.integrate(scene(0.0))
+    good = scene(20.0)
+    off = good.with_pose(
+        Pose(good.T_world_camera.rotation, good.T_world_camera.translation + np.array([0.0, 0.0, 0.06]))
+    )
+    points = len(planner.cloud)
+    with pytest.raises(ValueError, match="registration"):
+        planner.integrate(off, move_frame=True, registered=True)
+    assert len(planner.cloud) == points  # nothing changed
+    out = integrate_move_frames(planner, [MoveFrame(off, 0.2), MoveFrame(good, 0.4)], 1.0, KeepRule(0.0, 1.0, True))
+    assert (len(out.kept), out.rejected) == (1, 1) and out.kept[0].t == 0.4

@@ -241,6 +241,7 @@ def run_scan(
     rule = KeepRule.of(cell.config)
     moved: list[dict[str, Any]] = []  # the move frames kept since the last view taken
     move_blocks: list[MoveIntegration] = []
+    last_slowest = 0.0  # the slowest move frame of the last move: the next move's first estimate
 
     def kept(frame: KeptFrame) -> None:
         if on_move_frame is not None:
@@ -252,7 +253,9 @@ def run_scan(
         taken: list[MoveFrame] = []
         index, reached, motion, refused = _move(cell, pose, plan, tried, hz, taken.append)
         if taken and motion is not None:
-            move_blocks.append(integrate_move_frames(planner, taken, motion.duration, rule, kept))
+            prior = move_blocks[-1].slowest if move_blocks else last_slowest
+            move_blocks.append(integrate_move_frames(planner, taken, motion.duration, rule, kept, prior=prior))
+            last_slowest = move_blocks[-1].slowest
         refusals += [{"after_view": len(records), **r} for r in refused]
         pending += refused
         tried |= {r["candidate"] for r in refused if r["candidate"] is not None}

@@ -2,7 +2,8 @@
 
 The planner's state after a frame depends on every earlier integrate *and plan*
 (the fits are warm-started, the fits' RNG advances), so the events are replayed
-in their journaled order: ``capture`` -> ``Planner.integrate`` of the stored frame,
+in their journaled order: ``capture`` -> ``Planner.integrate`` of the frames kept from the move to it (capture
+during moves, ``move_frames``), then of the stored frame,
 ``plan`` -> ``Planner.plan`` with the cell's reachability, ``config`` -> the same
 change; a discarded view (workbench/journal/discard.py) is left out. Every step is checked against what the journal recorded (points, voxel
 counts, iteration, coverage, best view and its score); differences are listed
@@ -215,7 +216,10 @@ def _replay_one(
         record.apply(ev)
     elif kind == "capture":
         it = int(ev["iteration"])
-        report = planner.integrate(journal.frame(ev))
+        frame = journal.frame(ev)
+        for move_frame, _ in journal.move_frames(ev):  # capture during moves: the move's frames, then the view
+            planner.integrate(move_frame, move_frame=True)
+        report = planner.integrate(frame)
         voxels = voxel_counts(planner)
         cov = float(coverage(planner.cloud)) if coverage is not None else None
         if report.iteration != it:

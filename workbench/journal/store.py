@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from devices.frames import fsync_dir, load_frame, save_frame
-from planner import DepthFrame
+from planner import DepthFrame, Pose
 from workbench.journal.storage import write_failure
 from workbench.jsonable import jsonable
 
@@ -137,6 +137,15 @@ class JournalWriter:
             raise OSError(exc.errno, write_failure(exc, self.directory, frame.depth.nbytes + 4096)) from exc
         return name, digest
 
+    def write_move_frame(self, iteration: int, k: int, frame: DepthFrame) -> tuple[str, str]:
+        """Store the ``k``-th (1-based) frame kept from the move to capture ``iteration``; (path, sha256)."""
+        name = f"frames/{iteration:06d}-m{k:03d}.npz"
+        try:
+            digest = save_frame(self.directory / name, frame, fsync=self.fsync)
+        except OSError as exc:
+            raise OSError(exc.errno, write_failure(exc, self.directory, frame.depth.nbytes + 4096)) from exc
+        return name, digest
+
     def discard_frame(self, name: str) -> None:
         """Remove a frame that was written but then rejected (best effort)."""
         (self.directory / name).unlink(missing_ok=True)
@@ -197,6 +206,20 @@ class Journal:
         if not re.fullmatch(r"frames/\d{6}\.npz", name):
             raise ValueError(f"capture {event.get('iteration')}: bad frame name {name!r}")
         return load_frame(self.directory / name, event.get("frame_sha256"))
+
+    def move_frames(self, event: dict[str, Any]) -> list[tuple[DepthFrame, Pose]]:
+        """The frames kept from the move to a ``capture`` event's view (its ``move_frames``, each checked against its
+        sha256) with their registered poses, in stamp order; [] for a view without (and a journal of an older
+        build). ValueError if one is missing or damaged."""
+        out = []
+        for entry in event.get("move_frames") or []:
+            name = str(entry["frame"])
+            if not re.fullmatch(r"frames/\d{6}-m\d{3}\.npz", name):
+                raise ValueError(f"capture {event.get('iteration')}: bad move frame name {name!r}")
+            out.append(
+                (load_frame(self.directory / name, entry.get("frame_sha256")), Pose.from_dict(entry["pose_used"]))
+            )
+        return out
 
 
 def read_journal(directory: str | Path) -> Journal:

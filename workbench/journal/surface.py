@@ -1,7 +1,7 @@
 """A session's surface rebuilt from its journal: the kept captures' frames fused at their journaled poses.
 
 The ``capture`` events left after discards (workbench/journal/discard.py), in order, each frame at its
-``pose_used`` (the registered pose the live surface fused): the same surface as the live one, array for array.
+``pose_used`` (the registered pose the live surface fused), after the frames kept from the move to it: the same surface as the live one, array for array.
 """
 
 from __future__ import annotations
@@ -45,10 +45,13 @@ def surface_of_journal(
     for ev in captures:
         try:
             frame, pose = journal.frame(ev), Pose.from_dict(ev["pose_used"])
+            moves = journal.move_frames(ev)
         except (OSError, ValueError, KeyError) as exc:
             live.views += 1
             error = f"view {live.views}: the journal's frame cannot be read ({exc})"
             continue
+        for move_frame, move_pose in moves:  # the frames of the move to the view come first, as in the session
+            live.fuse_move_frame(move_frame, move_pose)
         live.add(frame, pose, extract=False)
     live.extract(0.0, error)
     return live

@@ -50,6 +50,8 @@ class TimelineStep:
     decision: dict[str, Any] | None
     device_state: dict[str, Any] | None
     drawn: PlanResult | None = None
+    move_frames: int = 0
+    """Capture during moves: the frames kept from the move to this view (they belong to it)."""
 
     @property
     def approved(self) -> int | None:
@@ -80,7 +82,8 @@ class TimelineStep:
 
     def summary(self) -> dict[str, Any]:
         """The step as the page shows it: ``{"view", "plan_id", "best", "approved", "decision", "voxels",
-        "points", "coverage", "n_candidates", "n_eligible", "terminated"}`` (plan fields None without a plan)."""
+        "points", "coverage", "move_frames", "n_candidates", "n_eligible", "terminated"}`` (plan fields None without a
+        plan)."""
         d = self.decision
         fields = plan_fields(self.plan) if self.plan is not None else {}
         return {
@@ -97,6 +100,7 @@ class TimelineStep:
             "voxels": dict(self.voxels),
             "points": self.points,
             "coverage": self.coverage,
+            "move_frames": self.move_frames,
             "n_candidates": fields.get("n_candidates"),
             "n_eligible": fields.get("n_eligible"),
             "terminated": fields.get("terminated"),
@@ -135,6 +139,7 @@ def steps_of(journal: Journal, rebuilt: Rebuilt) -> list[TimelineStep]:
                 decision=None if plan_id is None else decisions.get(plan_id),
                 device_state=ev.get("device_state"),
                 drawn=plan if plan is not None else (steps[-1].drawn if steps else None),
+                move_frames=len(ev.get("move_frames") or []),
             )
         )
     return steps

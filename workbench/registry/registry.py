@@ -155,6 +155,7 @@ class SessionRegistry:
         camera: dict[str, Any] | None = None,
         guided: bool = False,
         arm: str | None = None,
+        move_capture: float | None = None,
     ) -> Session:
         """A new session. 422 for a bad config, model, source, fault setting, planner or camera model; 404 for an
         unknown recording.
@@ -181,6 +182,10 @@ class SessionRegistry:
             raise Invalid(f"progress_id: {progress_id!r} starts with 'resume-', which resumes use")
         camera_models = check_camera_models(camera)
         arm = check_arm_name(arm)
+        if move_capture is not None and (
+            isinstance(move_capture, bool) or not (isinstance(move_capture, int | float) and 0 <= move_capture <= 60)
+        ):
+            raise Invalid(f"move_capture: frames per second in [0, 60], got {move_capture!r}")
         slot = self._make_room()
         try:
             with self.creations.run(progress_id) as creation:
@@ -197,6 +202,7 @@ class SessionRegistry:
                     slot,
                     guided,
                     arm,
+                    move_capture,
                 )
         finally:
             self._give_back(slot)
@@ -215,9 +221,10 @@ class SessionRegistry:
         slot: _Slot | None = None,
         guided: bool = False,
         arm: str | None = None,
+        move_capture: float | None = None,
     ) -> Session:
         name = model or self.settings.devices.model
-        devices = session_devices(self.settings, name, seed, camera, arm)
+        devices = session_devices(self.settings, name, seed, camera, arm, move_capture)
         parts = build_parts(
             self.settings, name, source, seed, devices, fault_config, creation.stage, faults_asked, bool(camera)
         )
@@ -230,7 +237,7 @@ class SessionRegistry:
         except Conflict:
             _release(parts)
             raise
-        devices = session_devices(self.settings, parts.model, seed, camera, arm)
+        devices = session_devices(self.settings, parts.model, seed, camera, arm, move_capture)
         planner_config = planner_config_for(planner_config, devices.camera)  # also what the header records
         with self._lock:
             session_id = self._new_id()

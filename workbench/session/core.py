@@ -41,7 +41,7 @@ from workbench.session.region import ObjectRegion
 from workbench.session.states import BUSY, TRANSITIONS, Action, State
 from workbench.session.summaries import capture_fields, plan_fields, session_status
 from workbench.session.values import CustomPose, Decision, FailedStep, PendingPlan, SceneData, SessionEvent
-from workbench.session.view_step import ViewOutcome, ViewStep, failure_of
+from workbench.session.view_step import ViewOutcome, ViewStep, failure_of, move_fields
 from workbench.sources.parts import SessionParts
 from workbench.surface.export import EXPORT_FORMATS, export_bytes
 from workbench.surface.live import SurfaceUpdate, update_block
@@ -439,10 +439,11 @@ class SessionCore:
                     surface_fscore_5mm=None if outcome.surface is None else outcome.surface.fscore_5mm,
                     move_seconds=outcome.move_seconds,
                     capture_seconds=outcome.capture_seconds,
+                    **move_fields(outcome),
                 )
             except OSError:
-                if stored is not None:
-                    self.step_runner.discard_frame(stored[0])
+                for name in ([] if stored is None else [stored[0]]) + [m[0] for m in outcome.move_stored]:
+                    self.step_runner.discard_frame(name)
                 raise
             self.planner = outcome.planner
             self._terminated = self.planner.terminated

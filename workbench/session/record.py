@@ -88,6 +88,8 @@ class SessionRecord:
                 "move_seconds": ev.get("move_seconds"),
                 "capture_seconds": ev.get("capture_seconds"),
                 "robot_seconds": None,
+                "move_frames": len(ev.get("move_frames") or []),
+                "move_capture": ev.get("move_capture"),
             }
         )
         self._refused_since = []

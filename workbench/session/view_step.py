@@ -1,5 +1,6 @@
 """Taking one view, the device half of an approve: move, capture (each under a deadline), store, integrate (the
-map, then the surface).
+map, then the surface). With capture during moves (``CellConfig.move_capture_hz``) the frames the cell takes on
+the way are integrated first (:func:`integrate_step`), the kept ones journaled with the view.
 
 :class:`ViewStep` runs outside the session's lock after the session claimed a busy state; it touches no
 session field, so the session publishes its :class:`ViewOutcome` under its lock. ``Planner.integrate`` is
@@ -20,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from devices.cell import Motion, ScanCell
+from devices.move_capture import MoveFrame
 from devices.protocols import DeviceError, UnreachableError
 from devices.timeout import DeviceTimeoutError, call_with_timeout
 from planner import DepthFrame, Planner, Pose, VoxelClass
@@ -28,6 +30,7 @@ from workbench.errors import DeviceFault, Unreachable, WorkbenchError
 from workbench.evaluation.accuracy import GroundTruth, coverage_and_accuracy
 from workbench.journal.store import JournalWriter
 from workbench.journal.surface import in_step
+from workbench.move_frames import KeepRule, MoveIntegration, integrate_step
 from workbench.session.summaries import voxel_counts
 from workbench.surface.live import LiveSurface, SurfaceUpdate
 from workbench.workers.client import JobKilled, SessionWorker
@@ -62,6 +65,10 @@ class ViewOutcome:
     """The robot seconds of the move to the view (``Motion.duration``: plate turn + trajectory), None unknown."""
     capture_seconds: float | None = None
     """Wall seconds of the capture."""
+    moves: MoveIntegration | None = None
+    """Capture during moves: what became of the frames taken on the way (None: the cell took none)."""
+    move_stored: tuple[tuple[str, str], ...] = ()
+    """The kept move frames in the journal: (path, sha256) each, in stamp order."""
 
 
 @dataclass
@@ -82,6 +89,8 @@ class ViewStep:
     process it also scores the surface (a worker has its own)."""
     _moving: threading.Event | None = field(default=None, repr=False)
     """Set when the last move that timed out has really ended (None: no such move)."""
+    _move_prior: float = field(default=0.0, repr=False)
+    """The slowest move frame's integration seconds of the last move (the next move's first estimate)."""
     _surface: LiveSurface | None = field(default=None, repr=False)
     """The surface when integration runs in this process (a worker keeps its own)."""
 
@@ -103,13 +112,18 @@ class ViewStep:
         :func:`failure_of`).
         """
         stored: tuple[str, str] | None = None
+        move_stored: list[tuple[str, str]] = []
+        hz = float(self.cell.config.move_capture_hz)
+        taken: list[MoveFrame] = []  # capture during moves: the cell's frames of the move (from its thread)
         try:
             if self.worker is not None:
                 self.worker.start()  # a worker that is (re)starting does not count against the device deadlines
             self._wait_for_the_last_move()
             try:
                 ran = call_with_timeout(
-                    lambda: self.cell.move_to(pose, then=then, motion=motion),
+                    lambda: self.cell.move_to(
+                        pose, then=then, motion=motion, capture_hz=hz, on_frame=taken.append if hz > 0 else None
+                    ),
                     self.move_timeout,
                     "cell move",
                     self.cell.stop_moving,
@@ -135,19 +149,31 @@ class ViewStep:
             if self.journal is not None:
                 stored = self.journal.write_frame(planner.iteration + 1, frame)
             journal_dir = None if self.journal is None else self.journal.directory
+            moving = None
+            if taken and move_seconds is not None:
+                moving = (list(taken), move_seconds, KeepRule.of(self.cell.config), self._move_prior)
             try:
                 if self.worker is None:
                     views = len(planner.views)
-                    report, after = planner.integrate(frame), planner  # atomic: a ValueError leaves the map as it was
+                    report, after, moves = integrate_step(planner, frame, moving)  # a ValueError: the map unchanged
                     self._surface = in_step(self._surface, views, journal_dir, self.truth)
+                    for kept in [] if moves is None else moves.kept:
+                        self._surface.fuse_move_frame(kept.frame, kept.T_world_camera)
                     surface = self._surface.add(frame, report.T_world_camera)
                 else:  # works on a copy; the worker keeps the surface
-                    report, after, surface = self.worker.integrate(planner, frame, self.capture_budget, journal_dir)
+                    report, after, surface, moves = self.worker.integrate(
+                        planner, frame, self.capture_budget, journal_dir, moving
+                    )
             except ValueError as exc:
                 raise UnusableFrame(str(exc)) from exc
+            if moves is not None:
+                self._move_prior = moves.slowest
+            if self.journal is not None and moves is not None:
+                for k, kept in enumerate(moves.kept, start=1):
+                    move_stored.append(self.journal.write_move_frame(planner.iteration + 1, k, kept.frame))
         except Exception:
-            if stored is not None:
-                self.discard_frame(stored[0])
+            for name in ([] if stored is None else [stored[0]]) + [m[0] for m in move_stored]:
+                self.discard_frame(name)
             raise
         cov, measured = coverage_and_accuracy(self.surface_samples, self.truth, after.cloud)
         scores = None if measured is None else measured.to_json()
@@ -164,6 +190,8 @@ class ViewStep:
             scores,
             move_seconds,
             capture_seconds,
+            moves,
+            tuple(move_stored),
         )
 
     def discard_frame(self, name: str) -> None:
@@ -182,6 +210,31 @@ class ViewStep:
                 moving,
             )
         self._moving = None
+
+
+def move_fields(outcome: ViewOutcome) -> dict[str, Any]:
+    """The ``capture`` event's fields of capture during moves (none when the cell took no frame on the way):
+    ``move_frames`` (the kept frames: ``frame``, ``frame_sha256``, ``t`` seconds into the move, ``pose_used`` the
+    registered pose, ``points_frame``, ``new_share``; a rebuild integrates them before the view) and
+    ``move_capture`` (:meth:`MoveIntegration.to_json`)."""
+    moves = outcome.moves
+    if moves is None:
+        return {}
+    stored = outcome.move_stored if outcome.move_stored else ((None, None),) * len(moves.kept)
+    return {
+        "move_frames": [
+            {
+                "frame": name,
+                "frame_sha256": digest,
+                "t": kept.t,
+                "pose_used": kept.T_world_camera.to_dict(),
+                "points_frame": kept.points_frame,
+                "new_share": kept.new_share,
+            }
+            for kept, (name, digest) in zip(moves.kept, stored, strict=True)
+        ],
+        "move_capture": moves.to_json(),
+    }
 
 
 def failure_of(exc: Exception, session_id: str, restored_plan: bool) -> tuple[str, WorkbenchError | None]:

@@ -309,15 +309,21 @@ def session_devices(
     seed: int,
     camera: dict[str, str] | None = None,
     arm: str | None = None,
+    move_capture: float | None = None,
 ) -> DeviceConfig:
     """The server's device config for one session: its model and seed, the ``camera`` models it asked for
-    (``{"sensor", "calibration"}``, checked by ``workbench.sources.camera_models.check_camera_models``) and the
-    ``arm`` (a preset or 'reach_sphere', :func:`check_arm_name`; None = the server's)."""
+    (``{"sensor", "calibration"}``, checked by ``workbench.sources.camera_models.check_camera_models``), the
+    ``arm`` (a preset or 'reach_sphere', :func:`check_arm_name`; None = the server's) and the rate of capture
+    during moves (``move_capture`` frames per second; None = the server's ``devices.cell.move_capture_hz``)."""
     from devices.config import cell_with_arm
 
     devices = dataclasses.replace(settings.devices, model=model, seed=seed)
     if arm is not None:
         devices = dataclasses.replace(devices, cell=cell_with_arm(devices.cell, arm))
+    if move_capture is not None:
+        devices = dataclasses.replace(
+            devices, cell=dataclasses.replace(devices.cell, move_capture_hz=float(move_capture))
+        )
     if camera:
         devices = dataclasses.replace(devices, camera=dataclasses.replace(devices.camera, **camera))
     return devices

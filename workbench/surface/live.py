@@ -75,6 +75,16 @@ class LiveSurface:
         """Views offered (a frame the surface could not use counts: it follows the session's views)."""
         self.update = SurfaceUpdate(0, None, None, "no view captured yet", 0.0)
 
+    def fuse_move_frame(self, frame: DepthFrame, T_world_camera: Pose) -> None:
+        """Fuse a frame taken during a move (capture during moves) at its registered pose: no view of its own, no
+        extraction (the view the move led to extracts). Never raises: a failure is logged."""
+        try:
+            self.integrator.integrate(frame.with_pose(journaled_pose(T_world_camera)))
+        except Exception as exc:  # a surface never fails a capture
+            log.warning(
+                "surface: a move frame before view %d not fused: %s: %s", self.views + 1, type(exc).__name__, exc
+            )
+
     def add(self, frame: DepthFrame, T_world_camera: Pose, extract: bool = True) -> SurfaceUpdate:
         """Fuse ``frame`` at its registered pose ``T_world_camera``; with ``extract`` the surface and its layer
         are extracted (a rebuild extracts once, after its last frame). Never raises: a failure is the update's

@@ -12,7 +12,7 @@ and a fresh worker takes up the next job. Jobs:
   ``(PlanResult, planner)``, reachability by the cell's geometry
   and, for an arm model, its kinematics with the arm at joints ``q`` and the plate at ``angle`` (the same
   verdicts as the server's cell: reachability is a pure function of the view and the object box);
-- ``("integrate", (planner, frame, journal_dir))``: ``(IntegrationReport, planner, SurfaceUpdate)``: the frame
+- ``("integrate", (planner, frame, journal_dir, moving))``: ``(IntegrationReport, planner, SurfaceUpdate, moves)``: the frame
   at its registered pose fused into the session's surface, which this process keeps between jobs (a new
   process rebuilds it from the journal in ``journal_dir`` first, workbench/journal/surface.py);
 - ``("rebuild", (journal, cell_config, q, angle, surface_samples))``: ``("progress", (stage, done, total))``
@@ -293,11 +293,15 @@ class _Worker:
         if kind == "timeline":
             return self.timeline(payload, send)
         if kind == "integrate":
-            planner, frame, journal_dir = cast(tuple[Planner, DepthFrame, Any], payload)
+            from workbench.move_frames import integrate_step
+
+            planner, frame, journal_dir, moving = cast(tuple[Planner, DepthFrame, Any, Any], payload)
             views = len(planner.views)
-            report = planner.integrate(frame)  # a rejected frame raises here: the surface does not see it
+            report, after, moves = integrate_step(planner, frame, moving)  # a rejected frame raises: no surface
             self.surface = in_step(self.surface, views, journal_dir, self.truth)
-            return report, planner, self.surface.add(frame, report.T_world_camera)
+            for kept in [] if moves is None else moves.kept:
+                self.surface.fuse_move_frame(kept.frame, kept.T_world_camera)
+            return report, after, self.surface.add(frame, report.T_world_camera), moves
         if kind == "fit":
             from planner.ellipsoids import fit_at_t
 

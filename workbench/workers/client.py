@@ -163,11 +163,18 @@ class SessionWorker:
         return self.call(kind, (journal, cell, q, angle, samples), 0.0, kind, report)
 
     def integrate(
-        self, planner: Planner, frame: DepthFrame, budget: float, journal_dir: Path | None = None
-    ) -> tuple[IntegrationReport, Planner, SurfaceUpdate]:
+        self,
+        planner: Planner,
+        frame: DepthFrame,
+        budget: float,
+        journal_dir: Path | None = None,
+        moving: Any = None,
+    ) -> tuple[IntegrationReport, Planner, SurfaceUpdate, Any]:
         """``planner.integrate(frame)`` in the worker: (report, the planner after it, the session's surface after
-        it, which the worker keeps; a new worker rebuilds it from the journal in ``journal_dir`` first)."""
-        return self.call("integrate", (planner, frame, journal_dir), budget, "integration")
+        it, which the worker keeps; a new worker rebuilds it from the journal in ``journal_dir`` first; what became
+        of the move's frames). moving: capture during moves, the frames of the move to the view, its seconds and
+        the keep rule (:func:`workbench.session.view_step.integrate_step`), None: none."""
+        return self.call("integrate", (planner, frame, journal_dir, moving), budget, "integration")
 
     def renderer(self, budget: float) -> Callable[[Pose], NDArray[np.float32]]:
         """A ``render(T_table_camera)`` for the simulated camera that runs in the worker."""

@@ -97,7 +97,10 @@ def test_a_sim_rehearsal_cell_and_the_defaults(tmp_path):
         ("[voxel]\nresolution = 0.01\n", r"^devices: the cell file needs a \[devices\] table"),
         ("[devices]\nspeed = 1\n", r"^devices.speed: unknown setting \(known: camera, arm, turntable, hand_eye"),
         ("[devices]\nallow_auto = 1\n", r"^devices.allow_auto: expected true/false, got 1$"),
-        ("[devices.camera]\nwidth = 640\n", r"^devices.camera.driver: required \(one of realsense, replay, ros2, sim\)$"),
+        (
+            "[devices.camera]\nwidth = 640\n",
+            r"^devices.camera.driver: required \(one of realsense, replay, ros2, sim\)$",
+        ),
         ('[devices.arm]\ndriver = "kuka"\n', r"^devices.arm.driver: unknown driver 'kuka' \(known: ros2, ur\)$"),
         ('[devices.arm]\ndriver = "ur"\n', r"^devices.arm.host: required"),
         ('[devices.arm]\ndriver = "ur"\nhost = "a"\nspeed = 2\n', r"^devices.arm.speed: unknown setting \(known: "),
@@ -124,12 +127,27 @@ def test_a_sim_rehearsal_cell_and_the_defaults(tmp_path):
         ),
         ("[devices.arm_base]\nyaw = 3\n", r"^devices.arm_base.yaw: unknown setting"),
         ("[devices\n", r"cell.toml: invalid TOML"),
+        ("[devices]\nmove_capture_hz = -1\n", r"^devices.move_capture_hz: frames per second in \[0, 60\], got -1$"),
+        ('[devices]\nmove_capture_hz = "fast"\n', r"^devices.move_capture_hz: frames per second"),
     ],
 )
 def test_bad_cell_files_are_one_line_naming_the_field(tmp_path, text, message):
     with pytest.raises(ValueError, match=message) as info:
         load_cell_file(write(tmp_path, text))
     assert "\n" not in str(info.value)
+
+
+def test_the_cell_files_rate_of_capture_during_moves_wins_over_the_servers(tmp_path):
+    from devices.config import CellConfig
+    from devices.hwcell import arm_cell_config
+
+    mount = "[devices.arm_base]\ntranslation = [-0.45, 0.0, 0.0]\n"
+    cell = load_cell_file(write(tmp_path, "[devices]\nmove_capture_hz = 2.5\n" + mount))
+    assert cell.move_capture_hz == 2.5
+    assert arm_cell_config(cell, CellConfig(move_capture_hz=5.0)).move_capture_hz == 2.5
+    unset = load_cell_file(write(tmp_path, "[devices]\nallow_auto = false\n" + mount))
+    assert unset.move_capture_hz is None
+    assert arm_cell_config(unset, CellConfig(move_capture_hz=5.0)).move_capture_hz == 5.0
 
 
 def test_a_missing_file_is_a_value_error(tmp_path):
