@@ -45,7 +45,7 @@ from devices.move_capture import MoveFrame, MovePath, OnFrame, SimulatedMoveCapt
 from devices.protocols import Arm, Camera, JointArm, Turntable
 from devices.trajectory import JointTrajectory
 from planner.config import PlannerConfig
-from planner.types import BoundingBox, DepthFrame, Intrinsics, Pose
+from planner.types import BoundingBox, CameraPath, DepthFrame, Intrinsics, Pose
 
 if TYPE_CHECKING:
     from devices.arm.kinematics import ArmKinematics
@@ -120,6 +120,11 @@ class ScanCell(Protocol):
         self, candidates: Sequence[Any], indices: Sequence[int], *, exact: bool = False
     ) -> NDArray[np.float64]:
         """(K + 1, K + 1) seconds of the moves between the current state and the views ``indices``."""
+        ...
+
+    def move_paths(self, candidates: Sequence[Any], indices: Sequence[int], hz: float) -> list[CameraPath | None]:
+        """Per view ``candidates[i]``, the camera's path on the move from the current state, frames at ``hz``
+        (None: unreachable): the ``move_paths`` of ``Planner.plan``."""
         ...
 
     def plan_motion(self, T_table_camera: Pose, plate_angle: float | None = None, then: Sequence[Pose] = ()) -> Motion:
@@ -341,6 +346,16 @@ class Cell:
         times[:, ~ok] = math.inf
         np.fill_diagonal(times, 0.0)
         return times
+
+    def move_paths(self, candidates: Sequence[Any], indices: Sequence[int], hz: float) -> list[CameraPath | None]:
+        """Per view ``candidates[i]`` (``.T_world_camera``) for i in ``indices``: the camera's path on the move from
+        the current state, ``T_table_camera`` where each frame taken at ``hz`` during the move would be
+        (``devices.move_capture.capture_times``) and the move's seconds; None for a view the cell cannot reach. The
+        ``move_paths`` of ``Planner.plan``: an estimate for planning, no motion planned (:meth:`Reach.move_paths`:
+        exact for the reach sphere; the URDF arm's cached target, plate turn, then a straight joint path). ValueError
+        for a bad rate."""
+        capture_times(1.0, hz)  # a bad rate raises
+        return self.reach.move_paths([candidates[int(i)].T_world_camera for i in indices], hz)
 
     def is_reachable(self, T_table_camera: Pose) -> bool:
         """Whether the view is reachable (:meth:`reachability`; for the sphere in closed form, no Pose built)."""

@@ -26,7 +26,7 @@ from devices.angles import wrap_angle
 from devices.config import CellConfig
 from devices.motion import Motion, rz
 from devices.protocols import Arm, JointArm, Turntable, UnreachableError
-from planner.types import BoundingBox, Pose
+from planner.types import BoundingBox, CameraPath, Pose
 
 if TYPE_CHECKING:
     from devices.arm.kinematics import ArmKinematics
@@ -35,6 +35,31 @@ SPHERE_CAMERA_SPEED = 0.25
 """Reach sphere: the camera's straight-line speed assumed for a move's duration estimate, m/s."""
 STALE_JOINTS = 1e-3
 """A prepared motion whose start is farther than this from the arm's joints (radians, any joint) is stale."""
+
+
+def trapezoid_fraction(t: float, distance: float, velocity: float, acceleration: float) -> float:
+    """The fraction (0..1) of ``distance`` a rest-to-rest trapezoid (triangle when short) at ``velocity`` and
+    ``acceleration`` has covered ``t`` seconds after it started (0 before it starts, 1 after it ends)."""
+    if t <= 0.0 or distance <= 0.0:
+        return 0.0 if distance > 0.0 else 1.0
+    if distance > velocity * velocity / acceleration:
+        ramp = velocity / acceleration
+        total = distance / velocity + ramp
+        if t >= total:
+            return 1.0
+        if t < ramp:
+            done = 0.5 * acceleration * t * t
+        elif t <= total - ramp:
+            done = 0.5 * velocity * ramp + velocity * (t - ramp)
+        else:
+            done = distance - 0.5 * acceleration * (total - t) ** 2
+    else:
+        total = 2.0 * math.sqrt(distance / acceleration)
+        if t >= total:
+            return 1.0
+        half = total / 2.0
+        done = 0.5 * acceleration * t * t if t <= half else distance - 0.5 * acceleration * (total - t) ** 2
+    return min(1.0, max(0.0, done / distance))
 
 
 class Reach(Protocol):
@@ -84,6 +109,11 @@ class Reach(Protocol):
     def move_times(self, poses: Sequence[Pose], exact: bool) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
         """((K + 1, K + 1) seconds between the current state and the K views, (K + 1,) which of them are
         reachable; entry 0 the current state). The cell sets the unreachable rows and columns to inf."""
+        ...
+
+    def move_paths(self, poses: Sequence[Pose], hz: float) -> list[CameraPath | None]:
+        """Per view, the camera's path on the move from now to it, frames at ``hz`` (None: unreachable): a planning
+        estimate, no motion planned (:meth:`devices.cell.Cell.move_paths`)."""
         ...
 
     def arm_state(self) -> dict[str, Any] | None:
@@ -212,6 +242,26 @@ class SphereReach:
         times = turn / math.radians(self.config.arm.turntable_speed_deg) + travel / SPHERE_CAMERA_SPEED
         return times, ok
 
+    def move_paths(self, poses: Sequence[Pose], hz: float) -> list[CameraPath | None]:
+        """The moves as the reach sphere makes them (:meth:`plan`: the plate's turn, then the camera's straight
+        travel), sampled at the frames' times (``devices.move_capture.capture_times``): exact, not an estimate."""
+        from devices.move_capture import MovePath, capture_times
+
+        out: list[CameraPath | None] = []
+        start = self._arm_pose()
+        angle = self._angle()
+        speed = math.radians(self.config.arm.turntable_speed_deg)
+        for T in poses:
+            try:
+                motion = self.plan(T, None, ())
+            except UnreachableError:
+                out.append(None)
+                continue
+            path = MovePath(motion, angle, start, None, speed)
+            times = capture_times(path.duration, hz)
+            out.append(CameraPath.of_poses(path.duration, times, path.poses(times)))
+        return out
+
     def arm_state(self) -> dict[str, Any] | None:
         return None
 
@@ -226,6 +276,7 @@ class UrdfArm:
         self.kinematics = kinematics
         self.arm = arm
         self.turntable = turntable
+        self._fk_data: Any = None  # pinocchio's buffers of the path estimate's forward kinematics, made on first use
 
     def set_config(self, config: CellConfig) -> None:
         """Nothing to change: the arm model keeps the geometry it was built with (``ArmKinematics``)."""
@@ -349,6 +400,73 @@ class UrdfArm:
             :, 0
         ]
         return times
+
+    def move_paths(self, poses: Sequence[Pose], hz: float) -> list[CameraPath | None]:
+        """An estimate of each move as the cell would make it from the current state, without planning its path:
+        the target a move would take (every plate angle and IK branch, :meth:`ArmReach.best_target`, as
+        :meth:`move_times` with ``exact``: about 2.5 ms a view with the UR5's closed-form IK); a retract to home
+        first when the turn would sweep the object into the standing arm (:meth:`ArmKinematics.turn_collision`);
+        the plate's turn the short way at its speed, arm still; then a straight joint path, every joint on the
+        slowest joint's trapezoid (as ruckig's phase-synchronised timing), or turn and path together when the cell
+        overlaps them (:meth:`ArmReach.move_seconds`). The camera at each frame's time
+        (``devices.move_capture.capture_times``) is ``Rz(-angle(t)) @ FK(q(t))``. Not modelled: a path around an
+        obstacle (the move planned then goes another way, and takes longer)."""
+        from devices.move_capture import capture_times
+
+        kinematics = self.kinematics
+        reach, model = kinematics.reach, kinematics.model
+        if self._fk_data is None:
+            self._fk_data = model.model.createData()
+        q0, a0 = self._state()
+        speed = math.radians(kinematics.config.turntable_speed_deg)
+        v, acc = np.asarray(model.velocity, dtype=np.float64), np.asarray(model.acceleration, dtype=np.float64)
+
+        def turn_check(a: float) -> str | None:
+            return kinematics.turn_blocked(q0, a0, a)
+
+        def joint_leg(q_from: NDArray[np.float64], q_to: NDArray[np.float64]) -> tuple[float, int]:
+            """(seconds, the slowest joint) of a straight rest-to-rest joint move."""
+            dq = np.abs(q_to - q_from)
+            per_joint = np.where(dq > v * v / acc, dq / v + v / acc, 2.0 * np.sqrt(dq / acc))
+            slowest = int(np.argmax(per_joint))
+            return float(per_joint[slowest]), slowest
+
+        def along(q_from: NDArray[np.float64], q_to: NDArray[np.float64], t: float, joint: int) -> NDArray[np.float64]:
+            u = trapezoid_fraction(t, abs(float(q_to[joint] - q_from[joint])), float(v[joint]), float(acc[joint]))
+            return q_from + u * (q_to - q_from)
+
+        out: list[CameraPath | None] = []
+        for T in poses:
+            target, _ = reach.best_target(T, q0, a0, turn_check)
+            if target is None:
+                out.append(None)
+                continue
+            q1, a1 = target.q, target.angle
+            turn = wrap_angle(a1 - a0)
+            turn_s = abs(turn) / speed
+            retract = turn != 0 and kinematics.turn_collision(q0, a0, turn) is not None
+            start = kinematics.home if retract else q0
+            retract_s, retract_joint = joint_leg(q0, start) if retract else (0.0, 0)
+            arm_s, arm_joint = joint_leg(start, q1)
+            overlapped = not retract and reach.move_seconds(start, q1, a0, a1) < turn_s + arm_s - 1e-9
+            duration = retract_s + (max(turn_s, arm_s) if overlapped else turn_s + arm_s)
+            arm_start = retract_s + (0.0 if overlapped else turn_s)
+            times = capture_times(duration, hz)
+            rotations = np.empty((len(times), 3, 3))
+            translations = np.empty((len(times), 3))
+            for k, t in enumerate(times):
+                if t < retract_s:
+                    q, angle = along(q0, start, t, retract_joint), a0
+                else:
+                    angle = a0 + turn * (min(1.0, (t - retract_s) / turn_s) if turn_s > 0 else 1.0)
+                    q = along(start, q1, t - arm_start, arm_joint)
+                T_base = model.camera_pose(q, self._fk_data)
+                c, s = math.cos(angle), math.sin(angle)
+                R = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # Rz(-angle)
+                rotations[k] = R @ T_base.rotation
+                translations[k] = R @ T_base.translation
+            out.append(CameraPath(duration, times, rotations, translations))
+        return out
 
     def arm_state(self) -> dict[str, Any] | None:
         """The joints and the plate angle (a resumed session moves on from the same configuration, so it picks the

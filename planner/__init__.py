@@ -15,6 +15,7 @@ Read top-down against the paper:
 - ``projection``, ``scoring``                          §III-E dual quadric -> conic, rank weights, F
 - ``partitions``                                       §III-F global longitude partitions
 - ``evaluators``, ``planner``                          Algorithm 1
+- ``tour``, ``paths``                                   planners of robot time: a tour of views, moves that count the way
 - ``progress``                                         where a running plan is (stage k of n), for a caller
 - ``deferred_imports``                                 open3d's plotly drawing (dash) imported on use
 """
@@ -25,6 +26,7 @@ from planner.config import PlannerConfig
 from planner.deferred_imports import defer
 from planner.types import (
     BoundingBox,
+    CameraPath,
     Candidate,
     ClusterFit,
     DepthFrame,
@@ -56,6 +58,7 @@ def __getattr__(name: str) -> Any:
 
 __all__ = [
     "BoundingBox",
+    "CameraPath",
     "Candidate",
     "ClusterFit",
     "DepthFrame",

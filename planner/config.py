@@ -325,6 +325,11 @@ class TourConfig:
     cover_max_elevation_deg: float = 25.0
     """The cover takes views at most this high (degrees, about the object's box centre) while any of them sees
     frontier (then any eligible view); 90 = no limit. Measured with the ring opening, after it (docs/experiments/tour.md)."""
+    path_coverage: bool = True
+    """When the cell captures during moves: the cover counts, for the views whose moves are estimated (``path.*``),
+    the frontier the frames of the move from the current state see too, so the next view may be chosen for its way
+    there (``planner.tour.TourEvaluator._with_paths``; docs/experiments/scan-while-moving.md). No effect without
+    capture during moves."""
 
     def __post_init__(self) -> None:
         require(
@@ -374,6 +379,44 @@ class TourConfig:
         require(
             finite(self.cover_max_elevation_deg) and -90 <= self.cover_max_elevation_deg <= 90,
             f"tour.cover_max_elevation_deg: must be in [-90, 90], got {self.cover_max_elevation_deg!r}",
+        )
+        require(isinstance(self.path_coverage, bool), f"tour.path_coverage: true or false, got {self.path_coverage!r}")
+
+
+@dataclass(frozen=True)
+class PathConfig:
+    """The ``path`` planner (``planner.paths``), and the moves the ``tour`` counts with ``tour.path_coverage``: the
+    next view chosen for the frontier it and the frames along its move see, per second of robot time."""
+
+    sample_hz: float = 2.5
+    """Frames per second the planner places along each estimated move (the frames the cell will take are counted at
+    this rate, whatever rate it captures at: 2.5 Hz covered within 3 % of 5 Hz, docs/experiments/scan-while-moving.md)."""
+    candidates: int = 12
+    """How many views have their moves estimated: those that see the most frontier (each costs the cell's search
+    for the move's target, a few ms of IK with the UR5)."""
+    sweep_views: int = 6
+    """And up to this many views of the lowest parallel, spread around the object: their moves turn the plate with
+    the camera low, the sweep that sees the most."""
+    overhead_seconds: float = 1.0
+    """Seconds each view costs besides its move (capture, plan, motion planning) in the rate frontier / (move +
+    overhead): larger favours longer moves that see more."""
+
+    def __post_init__(self) -> None:
+        require(
+            finite(self.sample_hz) and 0 < self.sample_hz <= 30,
+            f"path.sample_hz: must be in (0, 30], got {self.sample_hz!r}",
+        )
+        require(
+            integer(self.candidates) and 1 <= self.candidates <= 400,
+            f"path.candidates: an integer in [1, 400], got {self.candidates!r}",
+        )
+        require(
+            integer(self.sweep_views) and 0 <= self.sweep_views <= 100,
+            f"path.sweep_views: an integer in [0, 100], got {self.sweep_views!r}",
+        )
+        require(
+            finite(self.overhead_seconds) and self.overhead_seconds >= 0,
+            f"path.overhead_seconds: must be >= 0, got {self.overhead_seconds!r}",
         )
 
 
@@ -554,6 +597,7 @@ class PlannerConfig:
     partitions: PartitionConfig = field(default_factory=PartitionConfig)
     selection: SelectionConfig = field(default_factory=SelectionConfig)
     tour: TourConfig = field(default_factory=TourConfig)
+    path: PathConfig = field(default_factory=PathConfig)
     termination: TerminationConfig = field(default_factory=TerminationConfig)
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
     registration: RegistrationConfig = field(default_factory=RegistrationConfig)

@@ -186,7 +186,7 @@ def _load_plugins() -> None:
     """Import modules that register further evaluators (baselines), if present."""
     import importlib
 
-    for module in ("planner.baselines", "planner.tour"):
+    for module in ("planner.baselines", "planner.tour", "planner.paths"):
         try:
             importlib.import_module(module)
         except ModuleNotFoundError as exc:

@@ -17,7 +17,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import cast
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -51,9 +51,13 @@ from planner.registration import RegistrationResult, register
 from planner.types import BoundingBox, Candidate, DepthFrame, Intrinsics, PlanResult, Pose, TourPlan, VoxelClass
 from planner.voxel_map import VoxelMap
 
+if TYPE_CHECKING:
+    from planner.paths import MovePaths
+
 ChooseFn = Callable[..., tuple[int | None, TourPlan | None]]
 """An evaluator's own choice (``planner.tour.TourEvaluator.choose``): (scores, candidates, the last view, move_times,
-taken=the views taken, center=the candidates' centre) -> (the next view, the predicted tour)."""
+taken=the views taken, center=the candidates' centre[, move_paths=the cell's path estimate]) -> (the next view, the
+predicted tour)."""
 
 
 @dataclass(frozen=True)
@@ -278,6 +282,7 @@ class Planner:
         progress: ProgressFn | None = None,
         move_times: Callable[[Sequence[Candidate], Sequence[int]], NDArray[np.float64]] | None = None,
         candidate_poses: Sequence[Pose] | None = None,
+        move_paths: MovePaths | None = None,
     ) -> PlanResult:
         """Score every candidate and pick the next best view.
 
@@ -297,10 +302,14 @@ class Planner:
         :func:`planner.candidates.candidates_from_poses`): each view taken rules out the given view nearest it
         (a registered pose is not the recorded one to the bit), and when the longitude partitions leave no view
         eligible the partitions are dropped (a few given views can leave a sector empty).
+        move_paths: (candidates, K indices, hz) -> the camera's path on the move from the current state to each
+        (:data:`planner.paths.MovePaths`), given when the cell captures frames during its moves: the ``path``
+        planner counts what those frames see, and so does the ``tour`` (``tour.path_coverage``); the other planners
+        ignore it.
         Raises ValueError before the first frame. BLAS runs on one thread meanwhile (as in :meth:`integrate`).
         """
         with single_thread_blas():
-            return self._plan(reachable, move_cost, progress, move_times, candidate_poses)
+            return self._plan(reachable, move_cost, progress, move_times, candidate_poses, move_paths)
 
     def _plan(
         self,
@@ -309,6 +318,7 @@ class Planner:
         progress: ProgressFn | None,
         move_times: Callable[[Sequence[Candidate], Sequence[int]], NDArray[np.float64]] | None,
         candidate_poses: Sequence[Pose] | None = None,
+        move_paths: MovePaths | None = None,
     ) -> PlanResult:
         if self.iteration == 0 or self.voxel_map.bbox is None or self.intrinsics is None:
             raise ValueError("plan: no frame has been integrated yet; capture one first")
@@ -369,8 +379,9 @@ class Planner:
         choose = getattr(self.evaluator, "choose", None)
         if callable(choose):
             stages("tour", 0, 1)
+            extra = {"move_paths": move_paths} if move_paths is not None else {}
             best, tour = cast(ChooseFn, choose)(
-                evaluation.scores, candidates, self.views[-1], move_times, taken=self.views, center=center
+                evaluation.scores, candidates, self.views[-1], move_times, taken=self.views, center=center, **extra
             )
             timed: dict[int, float] = getattr(self.evaluator, "last_move_seconds", {})  # the views it timed itself
             if lazy:  # only the views it timed have a move (and a reachability answer: inf = unreachable)

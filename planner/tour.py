@@ -37,6 +37,7 @@ import itertools
 import math
 import time
 from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,6 +46,9 @@ from planner.config import PlannerConfig, TourConfig
 from planner.evaluators import EVALUATORS, Evaluation, EvaluationContext, ProjectionEvaluator
 from planner.partitions import TWO_PI, azimuth_of
 from planner.types import Candidate, Intrinsics, Pose, TourPlan, ViewScore, VoxelClass
+
+if TYPE_CHECKING:
+    from planner.paths import MovePaths
 
 MoveTimes = Callable[..., NDArray[np.float64]]
 """(candidates, K indices[, exact=bool]) -> (K + 1, K + 1) seconds of the move between every two states; state 0 is
@@ -356,6 +360,11 @@ class TourEvaluator:
     def __init__(self, config: PlannerConfig) -> None:
         self.config = config
         self.last_seen: NDArray[np.bool_] = np.zeros((0, 0), dtype=bool)
+        self.last_frontier: NDArray[np.float64] = np.zeros((0, 3))
+        """(F, 3) the frontier voxel centres of the last evaluation (the columns of ``last_seen``)."""
+        self.last_occluders: NDArray[np.float64] = np.zeros((0, 3))
+        """(N, 3) the occupied voxel centres that hid them."""
+        self.last_intrinsics: Intrinsics | None = None
         self._projection: ProjectionEvaluator | None = None
         self.last_move_seconds: dict[int, float] = {}
         """The move seconds from the current state of every view the last :meth:`choose` timed (inf: unreachable)."""
@@ -378,6 +387,14 @@ class TourEvaluator:
             if self._projection is None:
                 self._projection = ProjectionEvaluator(self.config)
             return self._projection.evaluate(ctx)
+        return self.frontier_visibility(ctx, t0)
+
+    def frontier_visibility(self, ctx: EvaluationContext, t0: float) -> Evaluation:
+        """Scores by the frontier voxels each eligible candidate sees (:func:`visible_frontier`, ``tour.width`` x
+        ``tour.height``, ``tour.depth_tolerance_voxels``); keeps ``last_seen`` and the voxels and camera it was made
+        with (``last_frontier``, ``last_occluders``, ``last_intrinsics``: what a path's frames are tested against).
+        t0: ``time.perf_counter()`` when the evaluation started (its "score" timing)."""
+        cfg: TourConfig = self.config.tour
         ctx.progress("visibility", 0, len(ctx.candidates))
         eligible = np.asarray(ctx.eligible, dtype=bool)
         frontier = ctx.voxel_map.centers(VoxelClass.FRONTIER)
@@ -388,6 +405,7 @@ class TourEvaluator:
         poses = [ctx.candidates[int(i)].T_world_camera for i in idx]
         seen[idx] = visible_frontier(frontier, occupied, poses, ctx.intrinsics, cfg.width, cfg.height, tolerance)
         self.last_seen = seen
+        self.last_frontier, self.last_occluders, self.last_intrinsics = frontier, occupied, ctx.intrinsics
         values = seen.sum(axis=1).astype(np.float64)
         from planner.baselines.evaluators import gain_scores
 
@@ -403,13 +421,18 @@ class TourEvaluator:
         *,
         taken: Sequence[Pose] = (),
         center: NDArray[np.float64] | None = None,
+        move_paths: MovePaths | None = None,
     ) -> tuple[int | None, TourPlan | None]:
         """(the next view, the tour) from the last :meth:`evaluate`: the cover of its frontier, ordered by move
         time from the current state (``start``: the last view, for the straight-line fallback without
         ``move_times``). (None, None) when no view is eligible; without any frontier to cover, the eligible view
         with the largest score and no tour. With ``tour.opening = "ring"``, in the scan's first plans, the ring's
         next view first (:meth:`_choose_ring`; ``taken``: the views taken so far, ``T_world_camera``, the scan's
-        first one first; ``center`` (3,): the object's box centre the candidates are about)."""
+        first one first; ``center`` (3,): the object's box centre the candidates are about).
+        move_paths: the cell's estimate of the camera's path on a move from here (:data:`planner.paths.MovePaths`,
+        given when the cell captures during moves); with ``tour.path_coverage`` the cover counts, for the views
+        whose paths are estimated (:func:`planner.paths.path_pool`), the frontier their move from here sees too
+        (:meth:`_with_paths`)."""
         cfg: TourConfig = self.config.tour
         eligible = np.array([s.eligible for s in scores], dtype=bool)
         if not np.any(eligible):
@@ -422,10 +445,13 @@ class TourEvaluator:
             if best is not None:
                 return best, plan
         allowed = low_views(eligible, self.last_seen, candidates, cfg.cover_max_elevation_deg)
+        seen = self.last_seen
+        if move_paths is not None and cfg.path_coverage:
+            seen = self._with_paths(allowed, candidates, move_paths)
         if self.lazy_reach:  # a ring view the cell cannot reach from here is no view for the cover either
             allowed[[v for v, t in self.last_move_seconds.items() if not math.isfinite(t)]] = False
         while True:  # with lazy_reach: a view of the cover the cell cannot reach is left out and the cover made again
-            views, gains = greedy_cover(self.last_seen, allowed, cfg.horizon, cfg.min_gain)
+            views, gains = greedy_cover(seen, allowed, cfg.horizon, cfg.min_gain)
             if not views:  # nothing gains: the best score among the views not known to be unreachable
                 left = [s for s in scores if s.eligible and allowed[s.index]]
                 if not left:
@@ -463,6 +489,43 @@ class TourEvaluator:
             method=method,
         )
         return plan.views[0], plan
+
+    def _with_paths(
+        self, allowed: NDArray[np.bool_], candidates: Sequence[Candidate], move_paths: MovePaths
+    ) -> NDArray[np.bool_]:
+        """(C, F) ``last_seen`` with, for each view of the pool of the ``allowed`` (C,) views
+        (:func:`planner.paths.path_pool`, ``path.candidates`` and ``path.sweep_views``), the frontier the frames of its
+        move from here see too (``path.sample_hz``). Only the first move of a tour starts here, but only the first
+        runs before the next plan (the receding horizon), and the cover's first view is the one the path decides. A
+        pool view the cell cannot reach is timed inf (``last_move_seconds``: with ``lazy_reach`` it leaves the
+        cover)."""
+        from planner.paths import frames_seen, path_pool
+
+        path = self.config.path
+        seen = self.last_seen.copy()
+        counts = seen.sum(axis=1).astype(np.float64)
+        pool = path_pool(counts, allowed, candidates, path.candidates, path.sweep_views)
+        if not pool or seen.shape[1] == 0 or self.last_intrinsics is None:
+            return seen
+        paths = move_paths(candidates, pool, path.sample_hz)
+        known = [(v, p) for v, p in zip(pool, paths, strict=True) if p is not None]
+        self.last_move_seconds.update((v, math.inf) for v, p in zip(pool, paths, strict=True) if p is None)
+        cfg = self.config.tour
+        tolerance = cfg.depth_tolerance_voxels * self.config.voxel.resolution
+        frames = frames_seen(
+            self.last_frontier,
+            self.last_occluders,
+            [p for _, p in known],
+            self.last_intrinsics,
+            cfg.width,
+            cfg.height,
+            tolerance,
+        )
+        start = 0
+        for v, p in known:
+            seen[v] |= frames[start : start + len(p)].any(axis=0)
+            start += len(p)
+        return seen
 
     def _choose_ring(
         self,

@@ -12,6 +12,8 @@ Conventions (see ARCHITECTURE.md):
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
 from functools import cached_property
@@ -580,3 +582,53 @@ class PlanResult:
     @property
     def frontier_ellipsoids(self) -> tuple[Ellipsoid, ...]:
         return tuple(e for e in self.ellipsoids if e.kind == "frontier")
+
+
+@dataclass(frozen=True, eq=False)
+class CameraPath:
+    """The camera along one move as the cell expects to run it: where it will be when each frame is taken.
+
+    seconds: the move's duration (s, finite, >= 0). times: (S,) float64 the frames' times since the move started,
+    in [0, seconds], increasing (S may be 0: a move too short for a frame). rotations: (S, 3, 3) and translations:
+    (S, 3) float64, ``T_world_camera`` (table frame) of each frame.
+    """
+
+    seconds: float
+    times: NDArray[np.float64]
+    rotations: NDArray[np.float64]
+    translations: NDArray[np.float64]
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.seconds, int | float) and math.isfinite(self.seconds) and self.seconds >= 0):
+            raise ValueError(f"seconds: must be a finite number >= 0, got {self.seconds!r}")
+        times = checked_array("times", self.times, (None,))
+        n = len(times)
+        object.__setattr__(self, "times", times)
+        object.__setattr__(self, "rotations", checked_array("rotations", self.rotations, (n, 3, 3)))
+        object.__setattr__(self, "translations", checked_array("translations", self.translations, (n, 3)))
+        if n and (times[0] < 0 or times[-1] > self.seconds + 1e-9 or np.any(np.diff(times) <= 0)):
+            raise ValueError(f"times: must increase within [0, seconds = {self.seconds}], got {times!r}")
+
+    @staticmethod
+    def of_poses(seconds: float, times: Sequence[float] | NDArray[np.float64], poses: Sequence[Pose]) -> CameraPath:
+        """The path of ``poses`` (``T_world_camera`` each) at ``times`` in a move of ``seconds``."""
+        if len(poses) == 0:
+            return CameraPath(float(seconds), np.zeros(0), np.zeros((0, 3, 3)), np.zeros((0, 3)))
+        return CameraPath(
+            float(seconds),
+            np.asarray(times, dtype=np.float64),
+            np.stack([p.rotation for p in poses]),
+            np.stack([p.translation for p in poses]),
+        )
+
+    def __len__(self) -> int:
+        return len(self.times)
+
+    def poses(self) -> list[Pose]:
+        """The frames' ``T_world_camera``."""
+        return [Pose.trusted(R, t) for R, t in zip(self.rotations, self.translations, strict=True)]
+
+
+MovePaths = Callable[[Sequence[Candidate], Sequence[int], float], list[CameraPath | None]]
+"""(candidates, K indices, hz) -> per index the path of the move from the current state to that candidate, frames at
+``hz`` (:class:`CameraPath`), None when the cell cannot reach it (``devices.cell.Cell.move_paths``)."""
