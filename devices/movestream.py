@@ -22,7 +22,9 @@ of its own) turns them into posed frames:
   seconds since the move started (``t0``, the stamp of the last joint state before the move). A fault in it is
   counted (``failed``) and logged; it never reaches the move. :meth:`MoveStreamer.stop` (a halt) ends delivery at
   once; :meth:`MoveStreamer.finish` after the move delivers the frames stamped up to the move's end (waiting at
-  most ``wait_s`` for them to arrive).
+  most ``wait_s`` for them to arrive). The move's end is the last joint state when the move returned, marked on
+  the joints' history first (:meth:`StampedSeries.end_move`: the readings go on after it): a frame stamped after
+  it is ``after_move`` even when the streamer reaches it before :meth:`MoveStreamer.finish` is called.
 
 Stamps are seconds on the joint states' clock (ROS time, or the host's ``time.time()``): the camera and the arm
 must stamp with the same clock (one machine, or machines synchronised by NTP/PTP).
