@@ -98,23 +98,31 @@ def test_a_hardware_cell_places_the_realsense_frames_of_a_ur_move_by_its_polled_
     read ahead: each frame waits until the arm's readings pass its stamp), the fake UR read 200 times a second, the
     fake GRBL's status reports. Each delivered pose against the fake controller's true joints at the frame's stamp."""
     from devices.cellfile import load_cell_file
-    from devices.hwcell import hardware_cell
+    from devices.config import CellConfig
+    from devices.hwcell import configured_arm, hardware_cell
     from devices.motion import Motion
     from devices.move_capture import MoveFrame
     from devices.rig import open_rig
     from devices.trajectory import JointTrajectory
-    from tests.devices.drivers.rigfixtures import fake_hardware_cell
+    from tests.devices.drivers.rigfixtures import cell_toml, fake_hardware_cell
 
-    # Frames at 15 fps over four seconds from 0.3 s on: the move starts once the cell is open (up to ~3 s on a
-    # loaded machine) and the recording must still cover it; the frames the streamer holds stay below its queue's 64.
+    arm_speed = "max_joint_speed_deg = 60"
+    # The arm model is built once per process (about 1 s, measured over 2.5 s on a loaded machine): built here,
+    # before the recording is stamped, so the cell opens well within the recording's lead.
+    warm = tmp_path / "arm.toml"
+    warm.write_text(cell_toml("/dev/null", SMALL.intrinsics, arm_speed=arm_speed))
+    configured_arm(load_cell_file(warm), CellConfig())
+    # Frames at 20 fps (two per tick of the 10 Hz capture, so each tick inside the move has a frame of its own) over
+    # three seconds from 0.3 s on: the move starts once the cell is open and the recording must still cover it; all
+    # 60 frames fit the streamer's queue of 64.
     start = time.time() + 0.3
-    stamps_ms = [(start + i / 15.0) * 1000.0 for i in range(60)]
+    stamps_ms = [(start + i / 20.0) * 1000.0 for i in range(60)]
     depths = [np.full((SMALL.height, SMALL.width), 0.5, dtype=np.float32)] * len(stamps_ms)
     with fake_hardware_cell(
         tmp_path,
         depths,
         SMALL.intrinsics,
-        arm_speed="max_joint_speed_deg = 60",
+        arm_speed=arm_speed,
         camera="move_capture_wait_s = 3.0\nmove_capture_gap_s = 0.3",  # room for a loaded machine's scheduling
         timestamps_ms=stamps_ms,
         domains=["global_time"] * len(stamps_ms),
