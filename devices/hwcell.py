@@ -336,7 +336,8 @@ class HardwareCell(Cell):
         if streamer is None:
             return
         try:
-            end = None if self.stop_requested.is_set() else streamer.joints.last_stamp
+            # the end marked on the history first: the streamer then knows it before finish() tells it
+            end = None if self.stop_requested.is_set() else streamer.joints.end_move()
             stats = streamer.finish(end)
             log.info("%s", stats.summary())
         except Exception:  # never breaks the move

@@ -22,7 +22,9 @@ of its own) turns them into posed frames:
   seconds since the move started (``t0``, the stamp of the last joint state before the move). A fault in it is
   counted (``failed``) and logged; it never reaches the move. :meth:`MoveStreamer.stop` (a halt) ends delivery at
   once; :meth:`MoveStreamer.finish` after the move delivers the frames stamped up to the move's end (waiting at
-  most ``wait_s`` for them to arrive).
+  most ``wait_s`` for them to arrive). The move's end is the last joint state when the move returned, marked on
+  the joints' history first (:meth:`StampedSeries.end_move`: the readings go on after it): a frame stamped after
+  it is ``after_move`` even when the streamer reaches it before :meth:`MoveStreamer.finish` is called.
 
 Stamps are seconds on the joint states' clock (ROS time, or the host's ``time.time()``): the camera and the arm
 must stamp with the same clock (one machine, or machines synchronised by NTP/PTP).
@@ -162,6 +164,9 @@ class StampedSeries:
     polled plate angle): the interpolation takes the short way round. A value added with ``rest`` (a device that
     reports only while it moves, seen standing still) holds until the next value: no gap limit after it, and it
     covers every later stamp while it is the last.
+
+    :meth:`end_move` marks the move's end at the last value (the driver goes on adding after it): a value that was
+    here before the mark is stamped at or before the move's end, so a frame placed by it is a frame of the move.
     """
 
     def __init__(self, angle: bool = False) -> None:
@@ -170,6 +175,7 @@ class StampedSeries:
         self._rest: list[bool] = []
         self._angle = angle
         self._cond = threading.Condition()
+        self._end: float | None = None
         self.out_of_order = 0
 
     def add(self, stamp: float, value: NDArray[np.float64] | float, rest: bool = False) -> None:
@@ -197,6 +203,20 @@ class StampedSeries:
     def last_stamp(self) -> float | None:
         with self._cond:
             return self._stamps[-1] if self._stamps else None
+
+    def end_move(self) -> float | None:
+        """The move ended now: its end is the stamp of the last value (None: no value); returns it. Values added
+        later are not of the move (:attr:`end`)."""
+        with self._cond:
+            if self._end is None and self._stamps:
+                self._end = self._stamps[-1]
+            return self._end
+
+    @property
+    def end(self) -> float | None:
+        """The move's end marked by :meth:`end_move` (None: not yet, the move goes on)."""
+        with self._cond:
+            return self._end
 
     def wait_past(self, stamp: float, timeout: float) -> bool:
         """Whether a value stamped at or after ``stamp`` is here, or the last one rests (waiting at most ``timeout``
@@ -381,6 +401,14 @@ class MoveStreamer:
 
     # ------------------------------------------------------------------ the thread
 
+    def _move_end(self) -> float | None:
+        """The move's end as known now: given to :meth:`finish`, else marked on the joints' history
+        (:meth:`StampedSeries.end_move`, before :meth:`finish` is called), else None (the move goes on).
+
+        A frame is handled once a joint state past its stamp is here; a state that came before the end was marked
+        is stamped at or before it, so a frame handled while the end is unknown is a frame of the move."""
+        return self._end if self._end is not None else self.joints.end
+
     def _run(self) -> None:
         try:
             while not self._stopped.is_set():
@@ -409,7 +437,8 @@ class MoveStreamer:
             self.stats.drop("clock")
             return False
         s = frame.stamp
-        if self._end is not None and s > self._end:
+        end = self._move_end()
+        if end is not None and s > end:
             self.stats.after_move += 1
             return True
         if s < self.t0:
@@ -422,7 +451,8 @@ class MoveStreamer:
         wait = max(0.0, self.limits.wait_s - (time.monotonic() - frame.arrival))
         self.joints.wait_past(s, wait)
         self.plate.wait_past(s, max(0.0, self.limits.wait_s - (time.monotonic() - frame.arrival)))
-        if self._end is not None and s > self._end:  # the move ended while it waited
+        end = self._move_end()
+        if end is not None and s > end:  # the move ended while it waited (the joint states past it came after)
             self.stats.after_move += 1
             return True
         q, why = self.joints.at(s, self.limits.max_gap_s)
@@ -441,9 +471,10 @@ class MoveStreamer:
     def _select(self, s: float, frame: StampedFrame, pose: Pose) -> None:
         """The rate: the placed frame nearest each tick, each at most once (``frame`` is stamped ``s``, after every
         frame before it)."""
+        end = self._move_end()
         while self.t0 + self._tick * self.period <= s:
             tick = self.t0 + self._tick * self.period
-            if self._end is not None and tick >= self._end:
+            if end is not None and tick >= end:
                 break
             if self._pending is not None and tick - self._pending[0] <= s - tick:
                 self._send(*self._pending)  # a no-op when it went to the tick before

@@ -211,7 +211,9 @@ def test_a_polled_series_stamps_with_the_host_clock_and_skips_failed_reads() -> 
 
     before = time.time()
     polled = PolledSeries(read, hz=200.0)
-    time.sleep(0.1)
+    deadline = time.monotonic() + 5.0  # 0.1 s at 200 Hz, or longer when a loaded machine schedules the poller late
+    while len(polled.series) < 5 and time.monotonic() < deadline:
+        time.sleep(0.02)
     polled.close()
     stamps, values = polled.series.snapshot()
     assert len(stamps) >= 5 and before <= stamps[0] and stamps[-1] <= time.time()
@@ -233,3 +235,33 @@ def test_a_resting_value_holds_until_the_next_one() -> None:
     assert value is not None and value[0] == pytest.approx(0.55)
     series.add(3.5, 1.0, rest=True)
     assert series.at(3.3, 0.1) == (None, "gap")  # a moving value before it: the gap rule holds
+
+
+def test_a_frame_stamped_after_the_marked_end_of_the_move_is_not_delivered_before_finish_is_called() -> None:
+    """The arm's history goes on after the move (a polled arm is read until the stream ends): once the move's end is
+    marked on it, a frame stamped later is after the move even while ``finish`` has not been called yet, and the
+    tick past the end gets no frame."""
+    stamps = np.arange(0.0, 0.5001, 0.01)
+    joints, plate = histories(stamps)
+    assert joints.end is None
+    assert joints.end_move() == pytest.approx(T0 + 0.5) and joints.end == pytest.approx(T0 + 0.5)
+    for s in np.arange(0.51, 0.8, 0.01):  # polled on after the move's end
+        joints.add(T0 + s, joints_of_t(s))
+        plate.add(T0 + s, 0.5 * s)
+    assert joints.end_move() == pytest.approx(T0 + 0.5)  # marked once
+    got: list[float] = []
+    queue = FrameQueue()
+    for s in (0.09, 0.21, 0.29, 0.41, 0.52, 0.61, 0.72):
+        queue.put(frame_at(T0 + s))
+    streamer = MoveStreamer(
+        queue, joints, plate, pose_of, T0, 10.0, lambda frame, t: got.append(t), MoveStreamLimits(wait_s=0.05)
+    )
+    deadline = time.monotonic() + 5.0
+    while streamer.stats.received < 5 and time.monotonic() < deadline:  # up to the first frame after the end
+        time.sleep(0.01)
+    time.sleep(0.05)
+    assert streamer.stats.after_move == 1 and streamer.stats.received == 5, streamer.stats
+    stats = streamer.finish(joints.end)
+    # ticks 0.1 .. 0.4 (0.5 is the end, not inside the move): each its nearest frame of the move, none after it
+    assert got == pytest.approx([0.09, 0.21, 0.29, 0.41], abs=1e-6)
+    assert stats.delivered == 4 and stats.placed == 4 and stats.after_move == 1 and stats.end == T0 + 0.5

@@ -33,12 +33,19 @@ class FakeController:
     connect_delay_s: float = 0.0
     start_delay_s: float = 0.0
     """An async path starts this long after moveJ returns (its progress stays negative until then)."""
+    hold_after_s: float | None = None
+    """The next path stops advancing this many seconds in and keeps running (progress >= 0, the joints still)
+    until it is stopped: a real arm slowed down, so that a stop certainly finds its move in flight."""
     calls: list[tuple] = field(default_factory=list)
+    paths: list[list[tuple[float, float, np.ndarray, np.ndarray]]] = field(default_factory=list)
+    """Every path it ran: its segments (start, end on the monotonic clock, joints at start, at end), kept after the
+    path ends (the running path's segments are cleared when it ends)."""
     _segments: list[tuple[float, float, np.ndarray, np.ndarray]] = field(default_factory=list)
     _progress: int = -1
     _idle: int = -1  # the negative progress while no async operation runs: toggles -1 / -2 at each end
     _fault: tuple[str, float] | None = None
     _fault_at: float | None = None
+    _hold_at: float | None = None
     _lock: threading.RLock = field(default_factory=threading.RLock)
 
     def inject(self, kind: str, after_s: float) -> None:
@@ -78,6 +85,8 @@ class FakeController:
                     self.program_running = False
                 return
             if self._segments:
+                if self._hold_at is not None:
+                    now = min(now, self._hold_at)
                 self.q = self._position(now)
                 ends = [t1 for _, t1, _, _ in self._segments]
                 if now >= ends[-1]:
@@ -89,6 +98,8 @@ class FakeController:
         with self._lock:
             now = time.monotonic()
             self._arm_fault(now)
+            if self.hold_after_s is not None:
+                self._hold_at, self.hold_after_s = now + self.start_delay_s + self.hold_after_s, None
             t, q = now + self.start_delay_s, self.q.copy()
             self._segments = []
             for entry in path:
@@ -96,12 +107,19 @@ class FakeController:
                 duration = float(np.max(np.abs(target - q))) / speed
                 self._segments.append((t, t + duration, q, target))
                 t, q = t + duration, target
+            self.paths.append(list(self._segments))
             self._progress = self._idle if self.start_delay_s else 0
 
     def _finish(self) -> None:
         """The async operation ended (done, stopped or aborted): its progress becomes the other negative value."""
         self._idle = -2 if self._idle == -1 else -1
-        self._segments, self._progress = [], self._idle
+        self._segments, self._progress, self._hold_at = [], self._idle, None
+
+    @property
+    def holding(self) -> bool:
+        """A path held by ``hold_after_s`` has reached its hold (it runs on, the joints still, until stopped)."""
+        with self._lock:
+            return self._hold_at is not None and time.monotonic() >= self._hold_at
 
     def halt(self) -> None:
         with self._lock:

@@ -98,21 +98,31 @@ def test_a_hardware_cell_places_the_realsense_frames_of_a_ur_move_by_its_polled_
     read ahead: each frame waits until the arm's readings pass its stamp), the fake UR read 200 times a second, the
     fake GRBL's status reports. Each delivered pose against the fake controller's true joints at the frame's stamp."""
     from devices.cellfile import load_cell_file
-    from devices.hwcell import hardware_cell
+    from devices.config import CellConfig
+    from devices.hwcell import configured_arm, hardware_cell
     from devices.motion import Motion
     from devices.move_capture import MoveFrame
     from devices.rig import open_rig
     from devices.trajectory import JointTrajectory
-    from tests.devices.drivers.rigfixtures import fake_hardware_cell
+    from tests.devices.drivers.rigfixtures import cell_toml, fake_hardware_cell
 
+    arm_speed = "max_joint_speed_deg = 60"
+    # The arm model is built once per process (about 1 s, measured over 2.5 s on a loaded machine): built here,
+    # before the recording is stamped, so the cell opens well within the recording's lead.
+    warm = tmp_path / "arm.toml"
+    warm.write_text(cell_toml("/dev/null", SMALL.intrinsics, arm_speed=arm_speed))
+    configured_arm(load_cell_file(warm), CellConfig())
+    # Frames at 20 fps (two per tick of the 10 Hz capture, so each tick inside the move has a frame of its own) over
+    # three seconds from 0.3 s on: the move starts once the cell is open and the recording must still cover it; all
+    # 60 frames fit the streamer's queue of 64.
     start = time.time() + 0.3
-    stamps_ms = [(start + i / FPS) * 1000.0 for i in range(60)]  # two seconds of frames, from 0.3 s on
+    stamps_ms = [(start + i / 20.0) * 1000.0 for i in range(60)]
     depths = [np.full((SMALL.height, SMALL.width), 0.5, dtype=np.float32)] * len(stamps_ms)
     with fake_hardware_cell(
         tmp_path,
         depths,
         SMALL.intrinsics,
-        arm_speed="max_joint_speed_deg = 60",
+        arm_speed=arm_speed,
         camera="move_capture_wait_s = 3.0\nmove_capture_gap_s = 0.3",  # room for a loaded machine's scheduling
         timestamps_ms=stamps_ms,
         domains=["global_time"] * len(stamps_ms),
@@ -127,32 +137,28 @@ def test_a_hardware_cell_places_the_realsense_frames_of_a_ur_move_by_its_polled_
             times = np.array([0.0, 0.5])
             trajectory = JointTrajectory(hw.arm.joint_names, times, np.vstack([q0, q1]), np.zeros((2, 6)))
             motion = Motion(hw.angle, hw.kinematics.camera_pose(q1), q=q1, trajectory=trajectory, duration=0.5)
-            truth: list[list] = []
             got: list[MoveFrame] = []
-
-            def on_frame(frame: MoveFrame) -> None:
-                if not truth:
-                    truth.append(list(fake.controller._segments))  # the controller's path, monotonic clock
-                got.append(frame)
-
             offset = time.time() - time.monotonic()
             while time.time() < start + 0.1:
                 time.sleep(0.01)
-            hw.move_to(motion.T_base_camera, motion=motion, capture_hz=10.0, on_frame=on_frame)
+            hw.move_to(motion.T_base_camera, motion=motion, capture_hz=10.0, on_frame=got.append)
             stats = hw.last_move_stream
+            # the controller's path (monotonic clock), read after the move: a frame may be delivered before the
+            # path starts (the arm still at q0) or after it ended (the controller then forgets its segments)
+            assert len(fake.controller.paths) == 1
+            segments = fake.controller.paths[0]
     assert stats is not None and stats.t0 is not None and stats.end is not None, stats
     assert stats.error == "" and stats.failed == 0 and set(stats.dropped) <= {"before_history"}, stats.summary()
     moved = stats.end - stats.t0
     assert stats.end < stamps_ms[-1] / 1000.0 - 0.1  # the recording covers the move
     assert stats.delivered == len(got) == math.ceil(moved * 10.0) - 1 >= 4, stats.summary()
-    segments = truth[0]
     errors = []
     for frame in got:
         t = stats.t0 + frame.t - offset  # the stamp on the controller's (monotonic) clock
         q = segments[-1][3]
-        for a, b, qa, qb in segments:
-            if t <= b:
-                q = qa + min(max((t - a) / (b - a), 0.0), 1.0) * (qb - qa)
+        for a, b, qa, qb in segments:  # the first one has no length (from the joints the arm is at)
+            if t <= b:  # a frame stamped before the path started: the arm still at the path's first joints
+                q = qa if b == a else qa + min(max((t - a) / (b - a), 0.0), 1.0) * (qb - qa)
                 break
         true = T_table_base(0.0) @ hw.kinematics.camera_pose(q)
         errors.append(float(np.linalg.norm(frame.frame.T_world_camera.translation - true.translation)))
