@@ -36,8 +36,7 @@ from pathlib import Path
 
 from scipy import stats
 
-from nbv.bench_summary import move_points
-from workbench.evaluation import run_metrics
+from workbench.evaluation import move_points, run_metrics
 
 WAIT_LIMIT = 0.1
 """A move may wait for the integration of its frames by at most this share of its time (the issue's bound)."""

@@ -24,15 +24,13 @@ from numpy.typing import NDArray
 
 from devices.angles import wrap_angle
 from devices.config import CellConfig
-from devices.motion import Motion, rz
+from devices.motion import SPHERE_CAMERA_SPEED, Motion, rz
 from devices.protocols import Arm, JointArm, Turntable, UnreachableError
 from planner.types import BoundingBox, CameraPath, Pose
 
 if TYPE_CHECKING:
     from devices.arm.kinematics import ArmKinematics
 
-SPHERE_CAMERA_SPEED = 0.25
-"""Reach sphere: the camera's straight-line speed assumed for a move's duration estimate, m/s."""
 STALE_JOINTS = 1e-3
 """A prepared motion whose start is farther than this from the arm's joints (radians, any joint) is stale."""
 

@@ -14,6 +14,9 @@ import numpy as np
 from devices.trajectory import JointTrajectory
 from planner.types import Pose
 
+SPHERE_CAMERA_SPEED = 0.25
+"""Reach sphere: the camera's straight-line speed assumed for a move's duration estimate, m/s."""
+
 
 def rz(theta: float) -> Pose:
     """``Rz(theta)``: rotation by ``theta`` radians about +z (counter-clockwise seen from above)."""
@@ -27,7 +30,7 @@ class Motion:
 
     With a URDF arm also: ``q`` (n,) the joint target, ``trajectory`` the timed joint trajectory from the
     current configuration, ``duration`` seconds of the whole move (plate turn + trajectory; for the reach
-    sphere: the plate turn plus the camera's straight travel at ``devices.cellreach.SPHERE_CAMERA_SPEED``), ``path_method``
+    sphere: the plate turn plus the camera's straight travel at ``SPHERE_CAMERA_SPEED``), ``path_method``
     ('straight' or 'rrt_connect') and ``planning_seconds``.
     """
 

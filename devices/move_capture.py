@@ -30,8 +30,7 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation, Slerp
 
 from devices.angles import wrap_angle
-from devices.cellreach import SPHERE_CAMERA_SPEED
-from devices.motion import Motion, rz
+from devices.motion import SPHERE_CAMERA_SPEED, Motion, rz
 from planner.types import DepthFrame, Pose
 
 if TYPE_CHECKING:

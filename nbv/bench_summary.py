@@ -18,6 +18,7 @@ from workbench.evaluation import (
     RunMetrics,
     RunOutcome,
     mean_std,
+    move_points,
     paired_comparison,
     run_metrics,
 )
@@ -47,20 +48,6 @@ def run_metrics_of(
             moves = [move_points(r.get("move_coverage")) for r in rows]
             out[(o.label, o.planner, o.seed, o.yaw)] = run_metrics(coverage, ceiling, views, robot, moves)
     return out
-
-
-def move_points(cell: object) -> list[tuple[float, float]]:
-    """The (t, coverage) of a row's move frames from its ``move_coverage`` column (a JSON list; empty or missing in
-    runs without capture during moves and in older benches)."""
-    if isinstance(cell, list):
-        values = cell
-    elif isinstance(cell, str) and cell.strip():
-        import json
-
-        values = json.loads(cell)
-    else:
-        return []
-    return [(float(t), float(c)) for t, c in values]
 
 
 def _pm(values: Sequence[float], digits: int) -> str:

@@ -34,37 +34,12 @@ from numpy.typing import NDArray
 
 from planner.config import PathConfig, PlannerConfig
 from planner.evaluators import EVALUATORS
-from planner.tour import TourEvaluator, straight_move_times, visible_frontier
-from planner.types import CameraPath, Candidate, Intrinsics, MovePaths, Pose, TourPlan, ViewScore
+from planner.tour import TourEvaluator, frames_seen, path_pool, straight_move_times
+from planner.types import CameraPath, Candidate, MovePaths, Pose, TourPlan, ViewScore
 
 if TYPE_CHECKING:
     from planner.evaluators import Evaluation, EvaluationContext
     from planner.tour import MoveTimes
-
-
-def path_pool(
-    counts: NDArray[np.float64],
-    eligible: NDArray[np.bool_],
-    candidates: Sequence[Candidate],
-    top: int,
-    sweep_views: int,
-) -> list[int]:
-    """The candidates whose moves a plan estimates, in increasing index order: the ``top`` eligible ones that see the
-    most frontier (``counts`` (C,), those seeing none left out; the lower index on a tie) and up to ``sweep_views``
-    eligible views of the lowest parallel among the eligible, spread evenly over its azimuths (the first of each
-    share in azimuth order). eligible: (C,) bool."""
-    eligible = np.asarray(eligible, dtype=bool)
-    counts = np.asarray(counts, dtype=np.float64)
-    idx = np.flatnonzero(eligible & (counts > 0))
-    ranked = idx[np.lexsort((idx, -counts[idx]))][:top]
-    chosen = {int(i) for i in ranked}
-    ok = np.flatnonzero(eligible)
-    if sweep_views > 0 and len(ok) and len(candidates) == len(eligible):
-        low = min(candidates[int(i)].parallel for i in ok)
-        ring = sorted((int(i) for i in ok if candidates[int(i)].parallel == low), key=lambda i: candidates[i].azimuth)
-        step = max(1, math.ceil(len(ring) / sweep_views))
-        chosen.update(ring[::step][:sweep_views])
-    return sorted(chosen)
 
 
 def path_gains(
@@ -97,21 +72,6 @@ def path_rates(gains: NDArray[np.float64], seconds: NDArray[np.float64], overhea
     out = np.full(len(gains), -math.inf)
     out[ok] = gains[ok] / np.maximum(seconds[ok] + overhead, 1e-9)
     return out
-
-
-def frames_seen(
-    frontier: NDArray[np.float64],
-    occluders: NDArray[np.float64],
-    paths: Sequence[CameraPath],
-    intrinsics: Intrinsics,
-    width: int,
-    height: int,
-    tolerance: float,
-) -> NDArray[np.bool_]:
-    """(S, F) bool: frontier voxel f seen from frame s of ``paths`` (all their frames, in order), by the tour's
-    visibility test (:func:`planner.tour.visible_frontier`: ``width`` x ``height`` raster, ``tolerance`` metres)."""
-    poses = [p for path in paths for p in path.poses()]
-    return visible_frontier(frontier, occluders, poses, intrinsics, width, height, tolerance)
 
 
 class PathEvaluator(TourEvaluator):

@@ -37,7 +37,6 @@ import itertools
 import math
 import time
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,10 +44,7 @@ from numpy.typing import NDArray
 from planner.config import PlannerConfig, TourConfig
 from planner.evaluators import EVALUATORS, Evaluation, EvaluationContext, ProjectionEvaluator
 from planner.partitions import TWO_PI, azimuth_of
-from planner.types import Candidate, Intrinsics, Pose, TourPlan, ViewScore, VoxelClass
-
-if TYPE_CHECKING:
-    from planner.paths import MovePaths
+from planner.types import CameraPath, Candidate, Intrinsics, MovePaths, Pose, TourPlan, ViewScore, VoxelClass
 
 MoveTimes = Callable[..., NDArray[np.float64]]
 """(candidates, K indices[, exact=bool]) -> (K + 1, K + 1) seconds of the move between every two states; state 0 is
@@ -494,13 +490,11 @@ class TourEvaluator:
         self, allowed: NDArray[np.bool_], candidates: Sequence[Candidate], move_paths: MovePaths
     ) -> NDArray[np.bool_]:
         """(C, F) ``last_seen`` with, for each view of the pool of the ``allowed`` (C,) views
-        (:func:`planner.paths.path_pool`, ``path.candidates`` and ``path.sweep_views``), the frontier the frames of its
+        (:func:`path_pool`, ``path.candidates`` and ``path.sweep_views``), the frontier the frames of its
         move from here see too (``path.sample_hz``). Only the first move of a tour starts here, but only the first
         runs before the next plan (the receding horizon), and the cover's first view is the one the path decides. A
         pool view the cell cannot reach is timed inf (``last_move_seconds``: with ``lazy_reach`` it leaves the
         cover)."""
-        from planner.paths import frames_seen, path_pool
-
         path = self.config.path
         seen = self.last_seen.copy()
         counts = seen.sum(axis=1).astype(np.float64)
@@ -603,3 +597,43 @@ class TourEvaluator:
 
 
 EVALUATORS["tour"] = TourEvaluator
+
+
+def path_pool(
+    counts: NDArray[np.float64],
+    eligible: NDArray[np.bool_],
+    candidates: Sequence[Candidate],
+    top: int,
+    sweep_views: int,
+) -> list[int]:
+    """The candidates whose moves a plan estimates, in increasing index order: the ``top`` eligible ones that see the
+    most frontier (``counts`` (C,), those seeing none left out; the lower index on a tie) and up to ``sweep_views``
+    eligible views of the lowest parallel among the eligible, spread evenly over its azimuths (the first of each
+    share in azimuth order). eligible: (C,) bool."""
+    eligible = np.asarray(eligible, dtype=bool)
+    counts = np.asarray(counts, dtype=np.float64)
+    idx = np.flatnonzero(eligible & (counts > 0))
+    ranked = idx[np.lexsort((idx, -counts[idx]))][:top]
+    chosen = {int(i) for i in ranked}
+    ok = np.flatnonzero(eligible)
+    if sweep_views > 0 and len(ok) and len(candidates) == len(eligible):
+        low = min(candidates[int(i)].parallel for i in ok)
+        ring = sorted((int(i) for i in ok if candidates[int(i)].parallel == low), key=lambda i: candidates[i].azimuth)
+        step = max(1, math.ceil(len(ring) / sweep_views))
+        chosen.update(ring[::step][:sweep_views])
+    return sorted(chosen)
+
+
+def frames_seen(
+    frontier: NDArray[np.float64],
+    occluders: NDArray[np.float64],
+    paths: Sequence[CameraPath],
+    intrinsics: Intrinsics,
+    width: int,
+    height: int,
+    tolerance: float,
+) -> NDArray[np.bool_]:
+    """(S, F) bool: frontier voxel f seen from frame s of ``paths`` (all their frames, in order), by the tour's
+    visibility test (:func:`visible_frontier`: ``width`` x ``height`` raster, ``tolerance`` metres)."""
+    poses = [p for path in paths for p in path.poses()]
+    return visible_frontier(frontier, occluders, poses, intrinsics, width, height, tolerance)

@@ -18,6 +18,7 @@ Pure functions over numbers, no files and no runs:
 
 from __future__ import annotations
 
+import json
 import math
 import statistics
 from collections.abc import Mapping, Sequence
@@ -234,3 +235,15 @@ def ceiling_metrics(iterations: Sequence[Mapping[str, object]], ceiling: float |
     out |= {f"views_to_{round(100 * t)}": v for t, v in zip(THRESHOLDS, metrics.views_to, strict=True)}
     out |= {f"time_to_{round(100 * t)}": v for t, v in zip(TIME_THRESHOLDS, metrics.time_to, strict=False)}
     return out
+
+
+def move_points(cell: object) -> list[tuple[float, float]]:
+    """The (t, coverage) of a row's move frames from its ``move_coverage`` column (a JSON list; empty or missing in
+    runs without capture during moves and in older benches)."""
+    if isinstance(cell, list):
+        values = cell
+    elif isinstance(cell, str) and cell.strip():
+        values = json.loads(cell)
+    else:
+        return []
+    return [(float(t), float(c)) for t, c in values]
