@@ -16,7 +16,8 @@ import httpx
 import numpy as np
 
 from app.settings import AppSettings
-from tests.e2e.conftest import CHROMIUM_ARGS, chromium_path, free_port, running_server, save_screenshot
+from tests.e2e.conftest import free_port, running_server, save_screenshot
+from tests.e2e.pages import scanned_page
 
 HIDDEN = ("unknown", "candidates", "sectors", "ellipsoids")
 """Layers the screenshot hides (the path among the views, the next view, the map's occupied and frontier voxels)."""
@@ -29,21 +30,13 @@ def main(
     steps: int = 1,
     viewer_only: bool = True,
 ) -> None:
-    from playwright.sync_api import expect, sync_playwright
+    from playwright.sync_api import sync_playwright
 
     with tempfile.TemporaryDirectory() as tmp:
         settings = AppSettings(port=free_port(), viser_port=0, data_dir=Path(tmp))
         with running_server(settings) as server, sync_playwright() as p:
             api = httpx.Client(base_url=server.url, timeout=300)
-            sid = api.post("/api/sessions", json={"model": "l-block"}).json()["id"]
-            api.post(f"/api/sessions/{sid}/capture")
-            api.post(f"/api/sessions/{sid}/step", json={"count": steps})
-            api.post(f"/api/sessions/{sid}/plan")
-            browser = p.chromium.launch(executable_path=chromium_path(), args=CHROMIUM_ARGS)
-            page = browser.new_page(viewport={"width": width, "height": height}, device_scale_factor=1)
-            page.goto(f"{server.url}/?session={sid}")
-            expect(page.locator("#state")).to_have_text("planned", timeout=60_000)
-            viewer = page.evaluate("S.viewer")
+            browser, page, viewer, sid = scanned_page(p, api, server.url, "l-block", steps, width, height)
             for _ in range(300):
                 if "/path/frustums" in api.get(f"/api/scene/{viewer}").json()["nodes"]:
                     break
