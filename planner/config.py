@@ -400,6 +400,11 @@ class PathConfig:
     overhead_seconds: float = 1.0
     """Seconds each view costs besides its move (capture, plan, motion planning) in the rate frontier / (move +
     overhead): larger favours longer moves that see more."""
+    unknown_stride: int = 2
+    """The gain also counts the unknown voxels the view and its move's frames see (a z-buffer of the occupied ones):
+    one of every this-many in each axis (0: frontier only). The frontier is a thin rim after the first view, so a
+    long sweep past the unseen side would look barely better than a short move; the unknown space it looks into
+    tells them apart."""
 
     def __post_init__(self) -> None:
         require(
@@ -417,6 +422,10 @@ class PathConfig:
         require(
             finite(self.overhead_seconds) and self.overhead_seconds >= 0,
             f"path.overhead_seconds: must be >= 0, got {self.overhead_seconds!r}",
+        )
+        require(
+            integer(self.unknown_stride) and 0 <= self.unknown_stride <= 16,
+            f"path.unknown_stride: an integer in [0, 16], got {self.unknown_stride!r}",
         )
 
 
@@ -460,6 +469,11 @@ class PreprocessConfig:
     (0 disables). Isolated specks go; every point of a sampled surface, its edges and thin parts stay."""
     downsample: float = 0.0025
     """Voxel down-sampling edge length for the accumulated cloud, metres (0 disables)."""
+    move_point_radius: float = 0.01
+    """Capture during moves: a view's points replace the cloud points of frames taken during moves within this
+    distance, and a move frame's points within it of a view's are left out, metres (0: only within a down-sampling
+    cell). A still view is measured better than a move frame (blur, a late stamp); the voxel map takes both
+    (planner.cloud)."""
     support_min_points: int = 0
     """Opt-in (0 = off, the paper): drop the points of every cell of ``support_voxel`` that holds fewer than this
     many of the frame's points, so sparse returns (a real sensor's flying pixels at depth edges, a veil in mid-air
@@ -476,6 +490,7 @@ class PreprocessConfig:
             "plate_clearance",
             "outlier_radius",
             "downsample",
+            "move_point_radius",
             "support_voxel",
         ):
             v = getattr(self, name)

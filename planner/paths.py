@@ -34,8 +34,9 @@ from numpy.typing import NDArray
 
 from planner.config import PathConfig, PlannerConfig
 from planner.evaluators import EVALUATORS
-from planner.tour import TourEvaluator, frames_seen, path_pool, straight_move_times
-from planner.types import CameraPath, Candidate, MovePaths, Pose, TourPlan, ViewScore
+from planner.tour import TourEvaluator, frames_seen, path_pool, straight_move_times, visible_frontier
+from planner.types import CameraPath, Candidate, MovePaths, Pose, TourPlan, ViewScore, VoxelClass
+from planner.voxel_map import VoxelMap
 
 if TYPE_CHECKING:
     from planner.evaluators import Evaluation, EvaluationContext
@@ -74,6 +75,16 @@ def path_rates(gains: NDArray[np.float64], seconds: NDArray[np.float64], overhea
     return out
 
 
+def unknown_sample(voxel_map: VoxelMap, stride: int, resolution: float) -> NDArray[np.float64]:
+    """(U, 3) world centres of the UNKNOWN voxels of ``voxel_map`` (edge ``resolution``) whose lattice indices are
+    multiples of ``stride`` in every axis (one in ``stride**3``); empty for stride 0 or before the first frame."""
+    centers = np.asarray(voxel_map.centers(VoxelClass.UNKNOWN), dtype=np.float64).reshape(-1, 3)
+    if stride <= 0 or len(centers) == 0:
+        return np.zeros((0, 3))
+    idx = np.floor(centers / resolution).astype(np.int64)
+    return centers[np.all(idx % stride == 0, axis=1)]
+
+
 class PathEvaluator(TourEvaluator):
     """Scores each candidate by the frontier it sees (as ``tour``) and chooses the move with the most frontier per
     second, counting what the frames along the move see (module docstring)."""
@@ -89,11 +100,15 @@ class PathEvaluator(TourEvaluator):
         """Frontier voxels per second of every reachable move the last :meth:`choose` weighed."""
         self.last_gains: dict[int, int] = {}
         """The path gain (:func:`path_gains`) of every move the last :meth:`choose` weighed."""
+        self.last_unknown: NDArray[np.float64] = np.zeros((0, 3))
+        """(U, 3) the unknown voxel centres the last :meth:`evaluate` sampled (``path.unknown_stride``)."""
 
     def evaluate(self, ctx: EvaluationContext) -> Evaluation:
         """The tour's frontier visibility (``tour.width``, ``tour.height``, ``tour.depth_tolerance_voxels``), whatever
-        ``tour.score`` says: the path gain counts frontier voxels."""
-        return self.frontier_visibility(ctx, time.perf_counter())
+        ``tour.score`` says, and the sample of unknown voxels the path gain counts too (:func:`unknown_sample`)."""
+        evaluation = self.frontier_visibility(ctx, time.perf_counter())
+        self.last_unknown = unknown_sample(ctx.voxel_map, self.config.path.unknown_stride, self.config.voxel.resolution)
+        return evaluation
 
     def choose(
         self,
@@ -125,7 +140,18 @@ class PathEvaluator(TourEvaluator):
         if not pool:  # no frontier seen and no sweep view: the best score, as the tour
             best = max((s for s in scores if s.eligible), key=lambda s: (s.score, -s.index))
             return int(best.index), None
-        gains = counts[pool].astype(np.int64)
+        tour = self.config.tour
+        tolerance = tour.depth_tolerance_voxels * self.config.voxel.resolution
+        unknown = self.last_unknown if self.last_intrinsics is not None else np.zeros((0, 3))
+        views_seen = seen[pool]
+        if len(unknown):  # what of the unknown space each view of the pool sees
+            assert self.last_intrinsics is not None
+            poses = [candidates[i].T_world_camera for i in pool]
+            views_unknown = visible_frontier(
+                unknown, self.last_occluders, poses, self.last_intrinsics, tour.width, tour.height, tolerance
+            )
+            views_seen = np.concatenate([views_seen, views_unknown], axis=1)
+        gains = views_seen.sum(axis=1).astype(np.int64)
         if move_paths is not None:
             paths = move_paths(candidates, pool, cfg.sample_hz)
             if len(paths) != len(pool):
@@ -133,12 +159,10 @@ class PathEvaluator(TourEvaluator):
             seconds = np.array([math.inf if p is None else p.seconds for p in paths])
             known = [k for k, p in enumerate(paths) if p is not None]
             self.last_paths = {pool[k]: p for k, p in enumerate(paths) if p is not None}
-            if known and len(self.last_frontier) and self.last_intrinsics is not None:
-                tour = self.config.tour
-                tolerance = tour.depth_tolerance_voxels * self.config.voxel.resolution
+            if known and len(self.last_frontier) + len(unknown) and self.last_intrinsics is not None:
                 chosen = [p for p in paths if p is not None]
                 frames = frames_seen(
-                    self.last_frontier,
+                    np.concatenate([self.last_frontier.reshape(-1, 3), unknown]),
                     self.last_occluders,
                     chosen,
                     self.last_intrinsics,
@@ -146,8 +170,7 @@ class PathEvaluator(TourEvaluator):
                     tour.height,
                     tolerance,
                 )
-                rows = [pool[k] for k in known]
-                gains[known] = path_gains(seen[rows], frames, [len(p) for p in chosen])
+                gains[known] = path_gains(views_seen[known], frames, [len(p) for p in chosen])
         elif move_times is not None:
             seconds = np.asarray(move_times(candidates, pool), dtype=np.float64)[0, 1:]
         else:

@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.candidates import candidates_from_poses, held_aim, propose_candidates
+from planner.cloud import merge_cloud
 from planner.clustering import single_thread_blas
 from planner.config import PlannerConfig
 from planner.evaluators import Evaluation, EvaluationContext, ViewEvaluator, make_evaluator
@@ -45,7 +46,7 @@ from planner.partitions import (
     select_with_move_cost,
 )
 from planner.partitions import select_best as select_best_view
-from planner.preprocess import preprocess_frame, voxel_downsample
+from planner.preprocess import preprocess_frame
 from planner.progress import ProgressFn, Stages
 from planner.registration import RegistrationResult, register
 from planner.types import BoundingBox, Candidate, DepthFrame, Intrinsics, PlanResult, Pose, TourPlan, VoxelClass
@@ -86,6 +87,8 @@ class Planner:
         self.voxel_map = VoxelMap(self.config.voxel)
         self.views: list[Pose] = []
         self.cloud: NDArray[np.float64] = np.zeros((0, 3))
+        self.cloud_from_move: NDArray[np.bool_] = np.zeros(0, dtype=bool)
+        """(K,) the points of ``cloud`` only frames taken during moves measured (:func:`planner.cloud.merge_cloud`)."""
         self.point_counts: list[int] = []
         self.intrinsics: Intrinsics | None = None
         self.last_plan: PlanResult | None = None
@@ -184,9 +187,10 @@ class Planner:
             self._aim = held_aim(self._aim, self._content_box(), hold)
         timings["integrate"] = time.perf_counter() - t0
 
-        merged = np.concatenate([self.cloud, points]) if len(self.cloud) else points
-        size = self.config.preprocess.downsample
-        self.cloud = voxel_downsample(merged, size) if size > 0 else merged
+        pre = self.config.preprocess
+        self.cloud, self.cloud_from_move = merge_cloud(
+            self.cloud, self._from_move(), points, move_frame, pre.downsample, pre.move_point_radius
+        )
         growth = None
         if self.point_counts:
             prev = self.point_counts[-1]
@@ -204,6 +208,13 @@ class Planner:
             T_world_camera=frame.T_world_camera,
             timings=timings,
         )
+
+    def _from_move(self) -> NDArray[np.bool_]:
+        """(K,) ``cloud_from_move``, all False for a planner pickled before it existed or a cloud set directly."""
+        flags = getattr(self, "cloud_from_move", None)
+        if flags is None or len(flags) != len(self.cloud):
+            return np.zeros(len(self.cloud), dtype=bool)
+        return flags
 
     def _plate_as_free_space(self, frame: DepthFrame, plate: NDArray[np.float64] | None = None) -> DepthFrame:
         """The frame as the voxel map should carve it: pixels that hit the plate count as "no return".

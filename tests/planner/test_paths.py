@@ -149,6 +149,45 @@ def test_a_path_through_unseen_surface_beats_an_equal_time_path_through_seen_sur
         assert evaluator.last_rates[best] == pytest.approx(sheet / (3.0 + evaluator.config.path.overhead_seconds))
 
 
+class UnknownMap(SmallMap):
+    """The small map with no frontier left and, beyond the cube's +x face, a slab of unknown voxels (the space behind
+    the seen rim that no frame has looked into)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        r = 0.01
+        X, Y, Z = np.meshgrid(np.arange(0.065, 0.1, r), np.arange(-0.045, 0.05, r), np.arange(0.005, 0.1, r))
+        self.unknown = np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)
+        self.frontier = np.zeros((0, 3))
+
+    def centers(self, cls: VoxelClass) -> np.ndarray:
+        return self.unknown if cls == VoxelClass.UNKNOWN else super().centers(cls)
+
+
+def test_the_path_gain_counts_the_unknown_space_a_sweep_looks_into() -> None:
+    """With no frontier to tell two equal-time sweeps apart, the one that looks into the unknown space behind the
+    cube's +x face wins; the one past the seen -x side sees none of it (the cube hides it); stride 0 counts the
+    frontier alone (a tie, broken by the lower index)."""
+    top = Pose.look_at(np.array([0.0, 0.0, 0.45]), CENTER, up=np.array([1.0, 0.0, 0.0]))
+    candidates = [Candidate(i, top, math.radians(90.0), 0.0, 0, 0) for i in range(2)]
+    for stride in (2, 0):
+        evaluator = PathEvaluator(PlannerConfig().replace(path={"unknown_stride": stride}))
+        ctx = EvaluationContext(UnknownMap(), tuple(candidates), K, np.ones(2, dtype=bool), np.random.default_rng(0))  # type: ignore[arg-type]
+        scores = list(evaluator.evaluate(ctx).scores)
+        sampled = len(evaluator.last_unknown)
+        voxels = UnknownMap().unknown
+        assert sampled == (0 if stride == 0 else int(np.all(np.floor(voxels / 0.01) % 2 == 0, axis=1).sum()))
+        routes = {0: ring_path(SEEN_WAY, 3.0), 1: ring_path(UNSEEN_WAY, 3.0)}
+        best, _ = evaluator.choose(
+            scores, candidates, top, None, move_paths=lambda c, idx, hz, routes=routes: [routes[int(i)] for i in idx]
+        )
+        if stride:  # the way past +x sees the whole slab; the other only what the view above sees of its top
+            assert sampled > 20 and best == 1
+            assert evaluator.last_gains[1] == sampled and evaluator.last_gains[0] < 0.6 * sampled
+        else:
+            assert evaluator.last_gains == {0: 0, 1: 0}
+
+
 def test_without_the_way_there_the_rate_is_the_views_own_per_second() -> None:
     evaluator, candidates, scores = small_map_evaluator()
     times = np.array([[0.0, 4.0, 1.0], [4.0, 0.0, 3.0], [1.0, 3.0, 0.0]])  # candidate 1 is the nearer
