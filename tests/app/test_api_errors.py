@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 
 import pytest
+from apphelpers import BASE_URL, SMALL
 from fastapi.testclient import TestClient
 
 from app.main import create_app
 from app.settings import AppSettings
 from devices.protocols import DeviceError
+from tests.helpers import with_small_costs
 
 
 def detail(r) -> str:
@@ -125,6 +128,22 @@ def test_bad_session_parameters_are_422(client: TestClient, body: dict) -> None:
     assert client.get("/api/sessions").json() == []
 
 
+@pytest.fixture(scope="module")
+def bad_approve_target(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[TestClient, str, dict]]:
+    """One planned session for every bad approve body (client, id, plan): a refused body moves nothing, so each
+    case also finds the session as the cases before it left it (a capture and a plan a case cost 1-2 s)."""
+    tmp = tmp_path_factory.mktemp("bad-approve")
+    settings = with_small_costs(AppSettings(viser_port=0, scene=False, models_dir=tmp, data_dir=tmp / "data"))
+    with TestClient(create_app(settings), base_url=BASE_URL) as client:
+        r = client.post("/api/sessions", json={"model": "l-block", "config": SMALL, "seed": 0})
+        assert r.status_code == 201, r.text
+        sid = r.json()["id"]
+        assert client.post(f"/api/sessions/{sid}/capture").status_code == 200
+        r = client.post(f"/api/sessions/{sid}/plan")
+        assert r.status_code == 200, r.text
+        yield client, sid, r.json()
+
+
 @pytest.mark.parametrize(
     "body",
     [
@@ -136,8 +155,8 @@ def test_bad_session_parameters_are_422(client: TestClient, body: dict) -> None:
         {"plan_id": "PLAN", "pose": {"position": [float("nan"), 0, 0.3], "wxyz": [1, 0, 0, 0]}},
     ],
 )
-def test_bad_approve_bodies_are_422(client: TestClient, body: dict, planned_session) -> None:
-    sid, plan = planned_session(client)
+def test_bad_approve_bodies_are_422(bad_approve_target: tuple[TestClient, str, dict], body: dict) -> None:
+    client, sid, plan = bad_approve_target
     body = {**body, "plan_id": plan["plan_id"]}
     raw = json.dumps(body)  # allows NaN, which a strict JSON encoder would refuse to send
     r = client.post(f"/api/sessions/{sid}/approve", content=raw, headers={"content-type": "application/json"})

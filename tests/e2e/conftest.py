@@ -4,7 +4,8 @@ headless Debian Chromium page. The helpers are plain functions so ``tests/e2e/sc
 from __future__ import annotations
 
 import shutil
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -106,6 +107,19 @@ def draw_page(page: Any, on: bool = True) -> None:
     page.main_frame.evaluate("(on) => window.__nbvDraw && window.__nbvDraw(on)", on)
     if on:
         page.main_frame.evaluate(f"() => window.__nbvFrames && window.__nbvFrames({DRAWN_FRAMES})")
+
+
+def shot_until(page: Any, take: Callable[[], bytes], done: Callable[[bytes], bool], timeout_ms: int = 30_000) -> bytes:
+    """The first PNG of ``take()`` (a screenshot of ``page`` or of a part of it) that ``done`` accepts, or the last
+    one taken by ``timeout_ms``: a drawing page's picture once SwiftShader has rendered what was asked (a fixed
+    1.5 s sleep before one screenshot was the time of its slowest frames on a busy machine, and most waited it out
+    for nothing)."""
+    deadline = time.monotonic() + timeout_ms / 1000
+    while True:
+        png = take()
+        if done(png) or time.monotonic() > deadline:
+            return png
+        page.wait_for_timeout(250)
 
 
 def chromium_path() -> str:

@@ -16,7 +16,7 @@ import pytest
 from playwright.sync_api import BrowserContext, expect
 
 from app.scene.reachlayer import REACH_CLASSES
-from tests.e2e.conftest import draw_viewer
+from tests.e2e.conftest import draw_viewer, shot_until
 from tests.e2e.test_workbench_browser import Tab, _state
 from tests.helpers import SMALL
 from tests.servers import LiveServer
@@ -164,9 +164,13 @@ def test_arm_preview_and_approve(live_server: LiveServer, browser_context: Brows
     shown = ("turntable", "reach")  # only the plate under the points: no other layer's colours in the picture
     api.put(f"/api/scene/{viewer}/layers", json={k: False for k in tab.page.evaluate("Object.keys(S.layers)")})
     draw_viewer(tab.page)
-    tab.page.wait_for_timeout(1500)  # SwiftShader: the hidden layers rendered away
+    blank = shot_until(  # SwiftShader: the hidden layers rendered away
+        tab.page,
+        lambda: _scene_shot(tab, output_dir / "arm-blank.png"),
+        lambda png: _reachable_pixels(png) < 20 and _path_pixels(png) < 50,
+    )
     before = _reachable_pixels(tab.page.locator("#viewer").screenshot())
-    path_before = _path_pixels(_scene_shot(tab, output_dir / "arm-blank.png"))
+    path_before = _path_pixels(blank)
     tab.page.locator("#layers input[data-layer='turntable']").check()
     tab.page.locator("#layers input[data-layer='reach']").check(timeout=60_000)
     tab.wait(lambda: "/reach/points" in api.get(f"/api/scene/{viewer}").json()["nodes"], timeout_ms=60_000)
@@ -174,8 +178,8 @@ def test_arm_preview_and_approve(live_server: LiveServer, browser_context: Brows
     legend = tab.page.get_by_test_id("reach-legend")
     expect(legend).to_be_visible()
     expect(legend.locator("[data-reach-class='reachable']")).to_contain_text("reachable (", timeout=30_000)
-    tab.page.wait_for_timeout(1500)  # SwiftShader: the points rendered
-    after = _reachable_pixels(tab.page.locator("#viewer").screenshot())
+    shot = shot_until(tab.page, tab.page.locator("#viewer").screenshot, lambda png: _reachable_pixels(png) > 200)
+    after = _reachable_pixels(shot)  # once SwiftShader has rendered the points
     assert before < 20 and after > 200, (before, after)
 
     # the next plan's path in the view's pixels: its line and frustums in the path colour (the reach layer off)
@@ -184,7 +188,9 @@ def test_arm_preview_and_approve(live_server: LiveServer, browser_context: Brows
     api.post(f"/api/sessions/{sid}/plan").raise_for_status()
     tab.wait(lambda: _path_drawn(tab, mark), timeout_ms=60_000)
     api.post(f"/api/scene/{viewer}/camera", json={"position": [0.9, -0.9, 1.1], "look_at": [0.0, 0.0, 0.15]})
-    tab.page.wait_for_timeout(1500)  # SwiftShader: the path rendered
-    path_after = _path_pixels(_scene_shot(tab, output_dir / "arm-path.png"))
+    path_shot = shot_until(  # SwiftShader: the path rendered
+        tab.page, lambda: _scene_shot(tab, output_dir / "arm-path.png"), lambda png: _path_pixels(png) > 500
+    )
+    path_after = _path_pixels(path_shot)
     assert path_before < 50 and path_after > 500, (path_before, path_after)
     draw_viewer(tab.page, on=False)

@@ -30,7 +30,7 @@ import httpx
 import pytest
 
 from app.settings import AppSettings
-from tests.e2e.conftest import HOLD_VIEWER_FRAMES, draw_viewer
+from tests.e2e.conftest import HOLD_VIEWER_FRAMES, draw_viewer, shot_until
 from tests.helpers import free_port, with_small_costs
 from tests.servers import LiveServer, running_server
 
@@ -296,9 +296,8 @@ def test_a_first_time_user_reaches_an_approved_view_in_two_clicks(server: LiveSe
     if close.count():  # headless only: "software WebGL" (its orange bar is no object)
         close.first.dispatch_event("click")
     draw_viewer(page)
-    page.wait_for_timeout(1500)
-    shot = page.locator("#viewer").screenshot()
-    share = object_share(shot)
+    shot = shot_until(page, page.locator("#viewer").screenshot, lambda png: object_share(png) >= 0.02)
+    share = object_share(shot)  # once SwiftShader has drawn the layers' change
     draw_viewer(page, False)
     page.evaluate("() => ['guide', 'legend', 'layers'].forEach((id) => { $(id).style.visibility = ''; })")
     assert share >= 0.02, share  # the arm in front of it, or viser's default camera: under 1 %

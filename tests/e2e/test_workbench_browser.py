@@ -3,7 +3,7 @@
 - two tabs on two sessions: each tab's viewer websocket frames (decoded msgpack) carry only its own session's
   nodes, through create, capture, plan, approve and auto in the other tab; reload keeps a tab on its session;
   a tab without a session shows the picker;
-- the page is live from pushed events: no request to the status route during a 10-step auto run, every step
+- the page is live from pushed events: no request to the status route during a 4-step auto run, every step
   shown;
 - the loop's helpers: keyboard help, the full sortable candidate table, the confirmation of an ineligible
   approve (recorded as an override), discard, Auto disabled with its reason, delete with confirmation.
@@ -27,7 +27,7 @@ from tests.viewer_wire import decode_frame, session_labels, session_nodes
 pytestmark = pytest.mark.e2e  # tests/conftest.py: the long groups are handed out first
 
 LONG = {**SMALL, "termination": {"max_views": 30, "stop_without_frontier": False}}
-AUTO_STEPS = 6
+AUTO_STEPS = 4
 """Steps of the auto run whose every step the page must show (each one pushed, none polled)."""
 
 

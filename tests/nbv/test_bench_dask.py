@@ -40,6 +40,16 @@ TIMINGS = {
 pytestmark = pytest.mark.slow
 
 
+@pytest.fixture(scope="module", autouse=True)
+def no_plots() -> Iterator[None]:
+    """The benches of this module write every output but the plots (4 PNGs drawn by matplotlib: 2.8 s of CPU a
+    bench, a quarter of the module's): the executor hands back the outcomes, the report is drawn from them in this
+    process whatever ran them, and tests/nbv/test_bench.py checks the plots and report.html of the same grid."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr("nbv.bench_report.plot", lambda *args, **kwargs: [])
+        yield
+
+
 Rows = list[tuple[tuple[str, str], ...]]
 
 
