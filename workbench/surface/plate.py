@@ -48,35 +48,44 @@ def frame_plate_plane(points_world: NDArray[np.float64], config: SurfaceConfig) 
     tol = config.plate_clearance
     if tol <= 0 or len(points_world) == 0:
         return zero
-    x, y, z = points_world[:, 0], points_world[:, 1], points_world[:, 2]
-    candidates = (np.abs(z) <= PLATE_FIT_WINDOW) & (x * x + y * y <= config.workspace_radius**2)
-    if np.count_nonzero(candidates) < PLATE_FIT_MIN_POINTS:
+    near = np.flatnonzero(np.abs(points_world[:, 2]) <= PLATE_FIT_WINDOW)
+    cand = points_world[near]
+    cand = cand[cand[:, 0] ** 2 + cand[:, 1] ** 2 <= config.workspace_radius**2]
+    if len(cand) < PLATE_FIT_MIN_POINTS:
         return zero
-    cand = points_world[candidates]
-    zero_inliers = int(np.count_nonzero(np.abs(cand[:, 2]) <= tol))
     sample = cand[:: max(1, len(cand) // PLATE_FIT_SAMPLE)]
-    best = _best_hypothesis(sample, tol)
-    if best is None:
+    plane = _best_hypothesis(sample, tol)
+    if plane is None or not plane.any():  # z = 0 explains the sample best: the pose is right (the common case)
         return zero
-    plane = best
     for _ in range(2):  # least squares on the inliers, twice (the first fit's inliers may include a few more)
-        inliers = np.abs(cand[:, 2] - _height(plane, cand)) <= tol
-        if np.count_nonzero(inliers) < PLATE_FIT_MIN_POINTS:
+        p = cand[np.abs(cand[:, 2] - _height(plane, cand)) <= tol]
+        if len(p) < PLATE_FIT_MIN_POINTS:
             return zero
-        p = cand[inliers]
-        A = np.column_stack([p[:, 0], p[:, 1], np.ones(len(p))])
-        plane = np.linalg.lstsq(A, p[:, 2], rcond=None)[0]
-    inliers = np.abs(cand[:, 2] - _height(plane, cand)) <= tol
-    count = int(np.count_nonzero(inliers))
+        plane = _least_squares_plane(p)
+    inliers = cand[np.abs(cand[:, 2] - _height(plane, cand)) <= tol]
     if (
-        count < PLATE_FIT_MIN_POINTS
+        len(inliers) < PLATE_FIT_MIN_POINTS
         or math.hypot(plane[0], plane[1]) > PLATE_FIT_MAX_SLOPE
         or abs(plane[2]) > PLATE_FIT_MAX_OFFSET
-        or count <= zero_inliers
-        or float(np.max(_height(plane, cand[inliers]))) < 0.5 * tol
+        or len(inliers) <= np.count_nonzero(np.abs(cand[:, 2]) <= tol)
+        or float(np.max(_height(plane, inliers))) < 0.5 * tol
     ):
         return zero
-    return np.asarray(plane, dtype=np.float64)
+    return plane
+
+
+def _least_squares_plane(p: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(3,) (a, b, c) of ``z = a x + b y + c`` fitting ``p`` (K, 3) by least squares (normal equations about the
+    centroid: a 2 x 2 solve, no (K, 3) design matrix)."""
+    centroid = p.mean(axis=0)
+    d = p - centroid
+    xx, xy, yy = float(d[:, 0] @ d[:, 0]), float(d[:, 0] @ d[:, 1]), float(d[:, 1] @ d[:, 1])
+    xz, yz = float(d[:, 0] @ d[:, 2]), float(d[:, 1] @ d[:, 2])
+    det = xx * yy - xy * xy
+    if not det > 0:
+        return np.zeros(3)  # collinear points: no plane (the caller's checks then keep z = 0)
+    a, b = (yy * xz - xy * yz) / det, (xx * yz - xy * xz) / det
+    return np.array([a, b, centroid[2] - a * centroid[0] - b * centroid[1]])
 
 
 def plate_height(plane: NDArray[np.float64], points_world: NDArray[np.float64]) -> NDArray[np.float64]:
