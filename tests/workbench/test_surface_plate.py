@@ -12,7 +12,7 @@ import trimesh
 
 from devices.config import CameraConfig
 from devices.sim import SimulatedCamera
-from planner import DepthFrame, Pose
+from planner import BoundingBox, DepthFrame, Pose
 from workbench.surface import SurfaceConfig, SurfaceIntegrator, frame_plate_plane, surface_accuracy
 from workbench.surface.integrator import world_points
 
@@ -95,16 +95,17 @@ def test_a_low_view_turned_by_the_registration_keeps_the_surface_on_the_object(c
     assert after.fscore_5mm >= before.fscore_5mm  # the low view adds to the surface, it does not break it
 
 
-def test_the_plate_of_a_turned_frame_is_found_and_a_right_frame_keeps_z_zero(frames) -> None:
+def test_the_plate_of_a_turned_frame_is_found_and_a_right_frame_keeps_z_zero(cylinder, frames) -> None:
     high, low = frames
     config = SurfaceConfig()
+    box = BoundingBox(cylinder.bounds[0], cylinder.bounds[1])
     for frame in high:  # true poses: exactly z = 0, so their surface is the one without the fit
-        assert np.array_equal(frame_plate_plane(world_points(frame), config), np.zeros(3))
-    a, b, c = frame_plate_plane(world_points(low), config)
+        assert np.array_equal(frame_plate_plane(world_points(frame), config, box), np.zeros(3))
+    a, b, c = frame_plate_plane(world_points(low), config, box)
     assert math.hypot(a, b) == pytest.approx(math.tan(math.radians(TURN_DEG)), rel=0.05)
     assert abs(b) < 0.1 * abs(a)  # tilted along x: the turn was about y
     assert abs(c) < 0.002
-    assert np.array_equal(frame_plate_plane(world_points(low), config), [a, b, c])  # the same frame, the same plane
+    assert np.array_equal(frame_plate_plane(world_points(low), config, box), [a, b, c])  # the same frame, plane
 
 
 def test_no_plate_in_view_is_z_zero() -> None:
@@ -113,3 +114,17 @@ def test_no_plate_in_view_is_z_zero() -> None:
     rng = np.random.default_rng(1)
     wall = np.column_stack([np.full(2000, 0.05), rng.uniform(-0.1, 0.1, 2000), rng.uniform(0.0, 0.03, 2000)])
     assert np.array_equal(frame_plate_plane(wall, config), np.zeros(3))  # a vertical face is no plate
+
+
+def test_the_objects_own_low_face_is_no_plate_once_its_box_is_known() -> None:
+    """From a very low view the plate may be a thin strip and a low face of the object a wide patch near z = 0:
+    only the points outside the object's footprint are the plate's candidates."""
+    config = SurfaceConfig()
+    rng = np.random.default_rng(2)
+    xy = rng.uniform(-0.05, 0.05, (5000, 2))
+    face = np.column_stack([xy, 0.005 + 0.15 * xy[:, 0]])  # the object's base, sloping 8.5 degrees
+    strip = np.column_stack([rng.uniform(0.1, 0.2, 800), rng.uniform(-0.02, 0.02, 800), np.zeros(800)])
+    points = np.vstack([face, strip])
+    assert frame_plate_plane(points, config)[0] == pytest.approx(0.15)  # without the box: the face wins
+    box = BoundingBox(np.array([-0.05, -0.05, 0.0]), np.array([0.05, 0.05, 0.05]))
+    assert np.array_equal(frame_plate_plane(points, config, box), np.zeros(3))

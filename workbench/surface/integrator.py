@@ -7,7 +7,9 @@ depend on open3d's threads, and :meth:`SurfaceMesh.canonical` removes the order 
 Which pixels are fused: those whose point lies in the object's box grown by ``box_margin`` - the box given, or
 the bounds of every frame's points above the plate inside the workspace cylinder. The plate top within that
 footprint is fused too (its TSDF averages the noise of a real sensor flat; the cut at ``plate_clearance``
-removes it afterwards, not pixel by pixel), the rest of the plate and the room are not.
+removes it afterwards, not pixel by pixel), the rest of the plate and the room are not. "Above the plate" is
+above the plate as the frame's registered pose puts it (:func:`workbench.surface.plate.frame_plate_plane`: z = 0
+unless a registration tilted the frame); the plate's pixels that such a tilt lifts above the cut are not fused.
 """
 
 from __future__ import annotations
@@ -95,8 +97,10 @@ class SurfaceIntegrator:
         v, u = np.nonzero(frame.depth > 0)
         points_world = world_points(frame)  # row-major valid pixels, the order of np.nonzero
         z = points_world[:, 2]
-        plane = frame_plate_plane(points_world, cfg)
-        # the plate as this frame's pose puts it (z = 0 unless a registration tilted it: frame_plate_plane)
+        # the plate as this frame's pose puts it (z = 0 unless a registration tilted it: frame_plate_plane); none is
+        # fitted before the object's box is known (the first frame's pose is the reported one: nothing to register to)
+        box = self.box
+        plane = np.zeros(3) if box is None else frame_plate_plane(points_world, cfg, box)
         plate = z < cfg.plate_clearance + (plate_height(plane, points_world) if plane.any() else 0.0)
         lower, upper = self._lower, self._upper
         if self._fixed_box is None:

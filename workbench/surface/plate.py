@@ -16,6 +16,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from planner.types import BoundingBox
 from workbench.surface.config import SurfaceConfig
 
 PLATE_FIT_WINDOW = 0.03
@@ -34,23 +35,31 @@ PLATE_FIT_SAMPLE = 4_000
 """At most this many candidates score the hypotheses (evenly strided); the winner is refined on all of them."""
 
 
-def frame_plate_plane(points_world: NDArray[np.float64], config: SurfaceConfig) -> NDArray[np.float64]:
+def frame_plate_plane(
+    points_world: NDArray[np.float64], config: SurfaceConfig, box: BoundingBox | None = None
+) -> NDArray[np.float64]:
     """(3,) (a, b, c) of the plate's top ``z = a x + b y + c`` in a frame's points (N, 3) (world frame, at its
     registered pose); zeros (z = 0) when the plate lies there within ``plate_clearance / 2`` wherever it was seen
     (a frame whose pose is right: the same surface as without the fit), when z = 0 explains at least as many
     candidates, or when no plausible plate is found.
 
-    A plane of three candidates (RANSAC, inliers within ``plate_clearance``), z = 0 among the hypotheses, refined by
-    least squares on its inliers; rejected when steeper than :data:`PLATE_FIT_MAX_SLOPE` or farther than
+    The candidates: points within :data:`PLATE_FIT_WINDOW` of z = 0 inside the workspace cylinder and outside the
+    object's footprint (``box`` grown by ``box_margin``, in x and y; None: no object known, every point): the
+    object's own low faces are no plate (from a low view the plate may be a strip, the object's base a wider
+    patch). A plane of three candidates (RANSAC, inliers within ``plate_clearance``), z = 0 among the hypotheses,
+    refined by least squares on its inliers; rejected when steeper than :data:`PLATE_FIT_MAX_SLOPE` or farther than
     :data:`PLATE_FIT_MAX_OFFSET` from 0 on the turntable axis.
     """
     zero = np.zeros(3)
     tol = config.plate_clearance
     if tol <= 0 or len(points_world) == 0:
         return zero
-    near = np.flatnonzero(np.abs(points_world[:, 2]) <= PLATE_FIT_WINDOW)
-    cand = points_world[near]
-    cand = cand[cand[:, 0] ** 2 + cand[:, 1] ** 2 <= config.workspace_radius**2]
+    cand = points_world[np.abs(points_world[:, 2]) <= PLATE_FIT_WINDOW]
+    keep = cand[:, 0] ** 2 + cand[:, 1] ** 2 <= config.workspace_radius**2
+    if box is not None:
+        m = config.box_margin
+        keep &= ~np.all((cand[:, :2] >= box.lower[:2] - m) & (cand[:, :2] <= box.upper[:2] + m), axis=1)
+    cand = cand[keep]
     if len(cand) < PLATE_FIT_MIN_POINTS:
         return zero
     sample = cand[:: max(1, len(cand) // PLATE_FIT_SAMPLE)]
