@@ -1,5 +1,5 @@
 """The surface when a registration tilts the plate: F@5mm of the surface and of the cloud, and the frames whose plate
-the integrator found tilted (``workbench.surface.plate.frame_plate_plane``).
+the integrator finds tilted (``workbench.surface.frame_plate_plane``).
 
 Run: ``PYTHONPATH=$PWD OMP_NUM_THREADS=1 .venv/bin/python benchmarks/bench_surface_tilted_plate.py MESH [MESH ...]
 [--planner path] [--move-capture-hz 2.5] [--sensor ideal]``
@@ -20,51 +20,46 @@ import math
 import os
 from typing import Any
 
-import workbench.surface.integrator as integrator_module
+import numpy as np
+
 from devices.config import CameraConfig, CellConfig
 from planner import DepthFrame, PlannerConfig
-from workbench.evaluation.simulate import simulate
-from workbench.surface import SurfaceIntegrator, cloud_accuracy, surface_accuracy, surface_config_for
-from workbench.surface.scoring import ground_truth
+from workbench.evaluation import simulate
+from workbench.surface import (
+    SurfaceIntegrator,
+    cloud_accuracy,
+    frame_plate_plane,
+    ground_truth,
+    surface_accuracy,
+    surface_config_for,
+)
 
 
 def run(model: str, planner: str, hz: float, sensor: str, first_views: int) -> dict[str, Any]:
     """The scan of ``model`` and its surface's scores (see the module docstring)."""
     tilts: list[float] = []
-    fit = integrator_module.frame_plate_plane
+    surface = SurfaceIntegrator(surface_config_for(CameraConfig(sensor=sensor)))
+    frames: list[tuple[str, DepthFrame]] = []
 
-    def recorded(*args: Any) -> Any:  # the integrator's own call, its planes recorded
-        plane = fit(*args)
+    def fuse(kind: str, frame: DepthFrame) -> None:
+        frames.append((kind, frame))
+        box = surface.box  # the plate is fitted against the object's box before this frame, as the integrator does
+        plane = np.zeros(3) if box is None else frame_plate_plane(frame.points_world, surface.config, box)
         if plane.any():
             tilts.append(math.degrees(math.atan(math.hypot(plane[0], plane[1]))))
-        return plane
+        surface.integrate(frame)
 
-    integrator_module.frame_plate_plane = recorded
-    try:
-        surface = SurfaceIntegrator(surface_config_for(CameraConfig(sensor=sensor)))
-        frames: list[tuple[str, DepthFrame]] = []
-
-        def on_frame(frame: DepthFrame) -> None:
-            frames.append(("view", frame))
-            surface.integrate(frame)
-
-        def on_move_frame(frame: DepthFrame) -> None:
-            frames.append(("move", frame))
-            surface.integrate(frame)
-
-        cell = dataclasses.replace(CellConfig(), move_capture_hz=hz)
-        scan = simulate(
-            model,
-            PlannerConfig(),
-            planner_name=planner,
-            cell=cell,
-            reachable=False,
-            on_frame=on_frame,
-            on_move_frame=on_move_frame,
-            sensor=sensor,
-        )
-    finally:
-        integrator_module.frame_plate_plane = fit
+    cell = dataclasses.replace(CellConfig(), move_capture_hz=hz)
+    scan = simulate(
+        model,
+        PlannerConfig(),
+        planner_name=planner,
+        cell=cell,
+        reachable=False,
+        on_frame=lambda frame: fuse("view", frame),
+        on_move_frame=lambda frame: fuse("move", frame),
+        sensor=sensor,
+    )
     truth = ground_truth(scan.mesh, scan.surface_samples)
     final = surface_accuracy(surface.mesh(), truth)
     early: list[str] = []
