@@ -5,6 +5,7 @@ for the browser, export to PLY / OBJ / GLB; its accuracy against the ground-trut
 - :class:`SurfaceConfig`, :func:`surface_config_for` ``(camera)``: the settings, a real sensor's;
 - :class:`SurfaceIntegrator` ``(config, box)``: ``integrate(frame)`` after each capture, ``mesh()`` extracts;
   :func:`reconstruct` ``(frames, config, box)`` at once (a rebuild: the same frames give the same surface);
+  :func:`frame_plate_plane`: where the plate lies in a frame at its registered pose (a registration may tilt it);
 - :class:`SurfaceMesh`: the value (vertices, faces in canonical order; area, volume, watertight);
 - :func:`simplify` ``(surface, max_triangles)``, :func:`layer_bytes`, :func:`export_bytes` ``(surface, fmt)``;
 - :func:`surface_accuracy`, :func:`cloud_accuracy`: the shared ``workbench.evaluation.Accuracy`` (F at 2 and 5 mm,
@@ -25,6 +26,7 @@ from workbench.surface.export import (
 )
 from workbench.surface.integrator import SurfaceIntegrator, reconstruct
 from workbench.surface.mesh import SurfaceError, SurfaceMesh
+from workbench.surface.plate import frame_plate_plane
 from workbench.surface.report import ViewSurfaces, surface_block
 from workbench.surface.scoring import (
     GROUND_TRUTH_SAMPLES,
@@ -48,6 +50,7 @@ __all__ = [
     "ViewSurfaces",
     "cloud_accuracy",
     "export_bytes",
+    "frame_plate_plane",
     "ground_truth",
     "layer_bytes",
     "layer_mesh",

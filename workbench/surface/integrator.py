@@ -7,7 +7,9 @@ depend on open3d's threads, and :meth:`SurfaceMesh.canonical` removes the order 
 Which pixels are fused: those whose point lies in the object's box grown by ``box_margin`` - the box given, or
 the bounds of every frame's points above the plate inside the workspace cylinder. The plate top within that
 footprint is fused too (its TSDF averages the noise of a real sensor flat; the cut at ``plate_clearance``
-removes it afterwards, not pixel by pixel), the rest of the plate and the room are not.
+removes it afterwards, not pixel by pixel), the rest of the plate and the room are not. "Above the plate" is
+above the plate as the frame's registered pose puts it (:func:`workbench.surface.plate.frame_plate_plane`: z = 0
+unless a registration tilted the frame); the plate's pixels that such a tilt lifts above the cut are not fused.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from numpy.typing import NDArray
 from planner.types import BoundingBox, DepthFrame
 from workbench.surface.config import SurfaceConfig
 from workbench.surface.mesh import SurfaceError, SurfaceMesh
+from workbench.surface.plate import frame_plate_plane, plate_height
 
 BLOCK_RESOLUTION = 8
 """Voxels per block edge of the sparse grid (20 mm at 2.5 mm voxels). Open3d's default, 16, allocates twice the
@@ -93,14 +96,16 @@ class SurfaceIntegrator:
         cfg = self.config
         v, u = np.nonzero(frame.depth > 0)
         points_world = world_points(frame)  # row-major valid pixels, the order of np.nonzero
+        z = points_world[:, 2]
+        # the plate as this frame's pose puts it (z = 0 unless a registration tilted it: frame_plate_plane); none is
+        # fitted before the object's box is known (the first frame's pose is the reported one: nothing to register to)
+        box = self.box
+        plane = np.zeros(3) if box is None else frame_plate_plane(points_world, cfg, box)
+        plate = z < cfg.plate_clearance + (plate_height(plane, points_world) if plane.any() else 0.0)
         lower, upper = self._lower, self._upper
         if self._fixed_box is None:
             r2 = points_world[:, 0] ** 2 + points_world[:, 1] ** 2
-            above = (
-                (points_world[:, 2] >= cfg.plate_clearance)
-                & (points_world[:, 2] <= cfg.workspace_height)
-                & (r2 <= cfg.workspace_radius**2)
-            )
+            above = ~plate & (z <= cfg.workspace_height) & (r2 <= cfg.workspace_radius**2)
             if np.any(above):
                 lo, hi = points_world[above].min(axis=0), points_world[above].max(axis=0)
                 lower = lo if lower is None else np.minimum(lower, lo)
@@ -110,10 +115,10 @@ class SurfaceIntegrator:
             return depth, None, None, np.zeros(0, dtype=np.int64)
         m = cfg.box_margin
         inside = np.all((points_world >= lower - m) & (points_world <= upper + m), axis=1)
-        if not cfg.fuse_plate:
-            inside &= points_world[:, 2] >= cfg.plate_clearance
+        # the plate's pixels are fused where the cut at plate_clearance removes them again, never above it
+        inside &= (~plate | (z < cfg.plate_clearance)) if cfg.fuse_plate else ~plate
         depth[v[inside], u[inside]] = frame.depth[v[inside], u[inside]]
-        seen = points_world[inside & (points_world[:, 2] >= cfg.plate_clearance)]
+        seen = points_world[inside & ~plate]
         return depth, lower, upper, sorted_unique(voxel_keys(voxel_indices(seen, cfg.voxel_size)))
 
     def _fuse(self, depth: NDArray[np.float32], frame: DepthFrame, T_world_camera: NDArray[np.float64]) -> None:
