@@ -121,7 +121,8 @@ class CellConfig:
     the stamp's timing error)."""
     move_capture_wait: float = 0.1
     """Capture during moves: integrating a move's frames may outlast the move by at most this share of its
-    modelled duration (frames that would make it wait longer are left out)."""
+    modelled duration (frames that would make it wait longer are left out; the integration counted in the process's
+    CPU seconds, so a loaded machine keeps the same frames)."""
 
     def __post_init__(self) -> None:
         require(
