@@ -325,10 +325,11 @@ class TourConfig:
     cover_max_elevation_deg: float = 25.0
     """The cover takes views at most this high (degrees, about the object's box centre) while any of them sees
     frontier (then any eligible view); 90 = no limit. Measured with the ring opening, after it (docs/experiments/tour.md)."""
-    path_coverage: bool = True
+    path_coverage: bool = False
     """When the cell captures during moves: the cover counts, for the views whose moves are estimated (``path.*``),
     the frontier the frames of the move from the current state see too, so the next view may be chosen for its way
-    there (``planner.tour.TourEvaluator._with_paths``; docs/experiments/scan-while-moving.md). No effect without
+    there (``planner.tour.TourEvaluator._with_paths``). Off: on the development meshes with the D435 it made the
+    tour's robot time to 95 % longer, not shorter (docs/experiments/scan-while-moving.md). No effect without
     capture during moves."""
 
     def __post_init__(self) -> None:

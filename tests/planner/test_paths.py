@@ -230,7 +230,9 @@ def test_a_plan_with_the_cells_paths_and_the_tour_counting_the_way() -> None:
         asked.extend(indices)
         return cell.move_paths(cands, indices, hz)
 
-    tour = Planner(SMALL.replace(tour={"opening": "none"}), "tour")  # the ring's opening views come first otherwise
+    tour = Planner(
+        SMALL.replace(tour={"opening": "none", "path_coverage": True}), "tour"
+    )  # the ring's opening views come first otherwise
     tour.integrate(cell.capture())
     tour.plan(reachable=cell.is_reachable, move_times=cell.move_times, move_paths=counted)
     assert asked  # the cover counted the way there
