@@ -7,6 +7,7 @@ message naming the cause, the journal keeps every capture taken before, and the 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Iterator
@@ -143,13 +144,18 @@ def test_each_device_fault_ends_in_error_and_the_session_goes_on(tmp_path: Path,
         assert r.status_code == 201, r.text
         sid = r.json()["id"]
         assert c.post(f"/api/sessions/{sid}/capture").status_code == 200
+        camera = c.app.state.registry.get(sid).cell.rig.camera  # type: ignore[attr-defined]
+        waits = camera.config
         for fault, words in FAULTS:
             plan = c.post(f"/api/sessions/{sid}/plan").json()
             assert plan["best"] is not None, plan
             fresh.command(fault)  # while the arm moves to the planned view
+            # a silent camera is waited for its timeout: a short one here (the same wait as the cell file's 3 s)
+            camera.config = dataclasses.replace(waits, timeout_s=0.5) if fault == "silent_camera" else waits
             r = c.post(
                 f"/api/sessions/{sid}/approve", json={"plan_id": plan["plan_id"], "index": plan["best"]["index"]}
             )
+            camera.config = waits
             assert r.status_code == 503, (fault, r.text)
             status = c.get(f"/api/sessions/{sid}").json()
             assert status["state"] == "error", status
