@@ -31,7 +31,7 @@ from devices.planner_noise import planner_config_for
 from nbv.cli import main
 from planner import PlannerConfig
 from planner.types import Pose
-from tests.devices.drivers.rigfixtures import cell_toml, fake_hardware_cell
+from tests.devices.drivers.rigfixtures import cell_toml, fake_hardware_cell, play_fast
 from tests.devices.drivers.rsfixtures import DEPTH_UNIT, rendered_views
 from tests.helpers import SMALL as SMALL_PLANNER
 from workbench.journal.store import read_journal, sessions_dir
@@ -46,8 +46,7 @@ CAMERA = CameraConfig(width=160, height=120, fx=140.0, fy=140.0, cx=79.5, cy=59.
 
 def fast_cell(port: str, allow_auto: bool = False) -> str:
     """The fixture's cell file with an arm quick enough for a test (85 deg/s, a cap below the URDF's 90, at full
-    fraction, 1440 deg/s^2: the fake controller
-    moves in real time)."""
+    fraction, 1440 deg/s^2; the fixture's fake controller plays it faster still, :func:`play_fast`)."""
     k = CAMERA.intrinsics
     text = cell_toml(
         port,
@@ -92,6 +91,7 @@ def rig(tmp_path: Path):
     depths, k = rendered_views(2, CAMERA)  # placeholders: the dry run's frames replace them before the devices open
     with fake_hardware_cell(tmp_path, depths, k, depth_unit=DEPTH_UNIT) as fake:
         fake.path.write_text(fast_cell(fake.grbl.port))
+        play_fast(fake)  # where the arm and plate go is checked here, not how long they take
         yield fake
 
 

@@ -29,16 +29,17 @@ CAMERA = CameraConfig(width=160, height=120, fx=140.0, fy=140.0, cx=79.5, cy=59.
 
 ARM_SPEED_DEG = 180.0
 """The cell file's ``max_joint_speed_deg``: the UR5's URDF limit (180 deg/s). The fake executes a trajectory in real
-time, so a move's wall time is its duration; the tests check where the arm settles and what the camera sees there,
-not how fast it got there (tests/ros2/test_ros2_scan.py, with :data:`FAST_ARM` and :data:`TABLE_SPEED_DEG`: the
-arm's fourteen moves 19 -> 14 s of wall time, the plate's turns 11 -> 7 s, against 85 deg/s and 180 deg/s)."""
+time, so a move's wall time is its duration (it cannot play one faster: the driver checks every joint state against
+where the trajectory should be by then); the tests check where the arm settles and what the camera sees there, not
+how fast it got there (tests/ros2/test_ros2_scan.py, with :data:`FAST_ARM` and a faster plate, ``table_scale``)."""
 
 TABLE_SPEED_DEG = 360.0
 """The turntable's speed, deg/s, in the cell file and in the fake (a half turn in half a second)."""
 
-FAST_ARM = ArmConfig(velocity_scale=1.0, acceleration_limit_deg=720.0)
+FAST_ARM = ArmConfig(velocity_scale=1.0, acceleration_limit_deg=2880.0)
 """The planning arm of the tests' sessions on the fake cell: the URDF's full joint speeds (kept within
-:data:`ARM_SPEED_DEG` by the cell file) and a quick ramp, so the planned trajectories are short in time."""
+:data:`ARM_SPEED_DEG` by the cell file) and a ramp of a sixteenth of a second to full speed, so the planned
+trajectories are short in time."""
 
 _next_domain = [0]
 
@@ -107,10 +108,17 @@ class FakeRos2Cell:
 
 @contextmanager
 def fake_ros2_cell(
-    folder: Path, camera: CameraConfig = CAMERA, rate_hz: float = 15.0, camera_section: str = "", **sections: Any
+    folder: Path,
+    camera: CameraConfig = CAMERA,
+    rate_hz: float = 15.0,
+    camera_section: str = "",
+    table_scale: float = 1.0,
+    **sections: Any,
 ) -> Iterator[FakeRos2Cell]:
-    """See the module docstring; ``camera_section``: extra lines of ``[devices.camera]``; ``sections``: the other
-    keywords of :func:`cell_toml`."""
+    """See the module docstring; ``camera_section``: extra lines of ``[devices.camera]``; ``table_scale``: the fake
+    plate turns this many times faster than the cell file's :data:`TABLE_SPEED_DEG` (the driver waits until it is
+    there and settled; its speed only sets the turn's timeout); ``sections``: the other keywords of
+    :func:`cell_toml`."""
     domain = fresh_domain()
     path = folder / "cell.toml"
     path.write_text(cell_toml(domain, camera=camera_section, **sections))
@@ -124,7 +132,7 @@ def fake_ros2_cell(
         "min_depth": camera.min_depth,
         "max_depth": camera.max_depth,
         "rate_hz": rate_hz,
-        "turntable_speed_deg": TABLE_SPEED_DEG,
+        "turntable_speed_deg": TABLE_SPEED_DEG * table_scale,
     }
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
     process = subprocess.Popen(

@@ -3,7 +3,8 @@
 ``FakeRTDEControl`` / ``FakeRTDEReceive`` stand in for ``rtde_control.RTDEControlInterface`` /
 ``rtde_receive.RTDEReceiveInterface``; both talk to the :class:`FakeController` registered under the host
 name (``CONTROLLERS``). The controller moves the joints in real time: a ``moveJ`` path runs each segment
-at the commanded speed (linear in joint space), a ``servoJ`` puts the joints at the command. Faults are
+at the commanded speed (linear in joint space; ``time_scale`` times faster for the tests that check where the arm
+goes, not how long it takes), a ``servoJ`` puts the joints at the command. Faults are
 scheduled with :meth:`FakeController.inject`: at that many seconds into the next motion the joints
 freeze where they are and the controller behaves like the real one (protective or emergency stop: the
 safety mode changes and the control script stops; disconnect: both interfaces report the link down).
@@ -36,6 +37,10 @@ class FakeController:
     hold_after_s: float | None = None
     """The next path stops advancing this many seconds in and keeps running (progress >= 0, the joints still)
     until it is stopped: a real arm slowed down, so that a stop certainly finds its move in flight."""
+    time_scale: float = 1.0
+    """A ``moveJ`` path runs this many times faster than its commanded speed (1: in real time). The driver waits
+    for the controller to say the path ended, so a faster fake only shortens the tests' wall time; the tests of
+    move timing (move capture stamps, timeouts) keep 1."""
     calls: list[tuple] = field(default_factory=list)
     paths: list[list[tuple[float, float, np.ndarray, np.ndarray]]] = field(default_factory=list)
     """Every path it ran: its segments (start, end on the monotonic clock, joints at start, at end), kept after the
@@ -104,7 +109,7 @@ class FakeController:
             self._segments = []
             for entry in path:
                 target, speed = np.array(entry[:6]), entry[6]
-                duration = float(np.max(np.abs(target - q))) / speed
+                duration = float(np.max(np.abs(target - q))) / (speed * self.time_scale)
                 self._segments.append((t, t + duration, q, target))
                 t, q = t + duration, target
             self.paths.append(list(self._segments))

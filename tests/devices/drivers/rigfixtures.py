@@ -28,6 +28,9 @@ from tests.devices.drivers.fake_ur import CONTROLLERS, FakeController, FakeRTDEC
 
 UR_HOST = "ur-cell"
 
+FAST_PLAYBACK = 4.0
+"""How much faster than real time :func:`play_fast` makes the fakes move."""
+
 
 @dataclass
 class FakeCell:
@@ -86,6 +89,15 @@ translation = [0.0, 0.0, 0.05]
 translation = [-0.85, 0.0, 0.0]
 """
     return text
+
+
+def play_fast(cell: FakeCell) -> None:
+    """Make the fake UR play its paths and the fake GRBL turn :data:`FAST_PLAYBACK` times faster than commanded: for
+    the session and calibration tests, which check where the arm and plate go and what the camera sees there, not
+    how long a move takes (the drivers wait for the devices to say they arrived; a move's timeout is only a ceiling).
+    The move capture tests, which check frame stamps along a move, keep real time."""
+    cell.controller.time_scale = FAST_PLAYBACK
+    cell.grbl.rate *= FAST_PLAYBACK
 
 
 @contextmanager
