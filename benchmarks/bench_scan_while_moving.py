@@ -19,9 +19,12 @@ one markdown row per (planner, label):
 
     M="../shared/models/*.obj ../shared/models/*.ply ../shared/models/extra/*.obj ../shared/models/extra/*.off"
     S="--arm ur5 --sensor realsense-d435 --calibration typical --seeds 2"
-    nbv bench --models $M --planners projection,raycast-apora $S --out out/swm-stop
-    nbv bench --models $M --planners projection,tour,path,raycast-apora $S --move-capture 2.5 --out out/swm-move
-    .venv/bin/python benchmarks/bench_scan_while_moving.py stop=out/swm-stop move=out/swm-move
+    nbv bench --models $M --planners projection $S --out out/swm-stop
+    nbv bench --models $M --planners tour,path,projection $S --move-capture 2.5 --turn-while-moving \
+        --out out/swm-move
+    nbv bench --models $M --planners tour $S --turn-while-moving --out out/swm-stop-turn
+    .venv/bin/python benchmarks/bench_scan_while_moving.py stop=out/swm-stop move+turn=out/swm-move \
+        stop+turn=out/swm-stop-turn
 """
 
 from __future__ import annotations
