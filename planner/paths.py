@@ -13,8 +13,10 @@ view can be worth going to for the path that reaches it. Each plan here:
    (``path.sweep_views``): their moves turn the plate with the camera low, the move that sees the most.
    The cell estimates each move from the current state (:data:`MovePaths`: the camera poses at
    ``path.sample_hz`` along it and its seconds; the planner never sees the arm).
-3. **Path gain** (:func:`path_gains`): the frontier voxels the view *or any frame along its move* sees, each voxel
-   counted once however many frames see it (overlapping frames add nothing twice).
+3. **Path gain** (:func:`path_gains`): the frontier voxels the view *or any frame along its move* sees, and a sample
+   of the unknown voxels they see (:func:`unknown_sample`, ``path.unknown_stride``: after the first view the frontier
+   is a thin rim, and the unknown space a sweep looks into tells a long sweep past the unseen side from a short
+   move), each voxel counted once however many frames see it (overlapping frames add nothing twice).
 4. **Rate** (:func:`path_rates`): gain / (move seconds + ``path.overhead_seconds``): frontier per second of robot
    time. The next view is the one with the highest rate.
 
