@@ -41,7 +41,9 @@ def run(args: argparse.Namespace) -> int:
 
     done = export_bag(args.journal, args.out, args.distro)
     print(
-        f"{done.path}: {done.views} views, {done.points} cloud points, {done.triangles} surface triangles, "
+        f"{done.path}: {done.views} views, "
+        + (f"{done.move_frames} frames kept during moves, " if done.move_frames else "")
+        + f"{done.points} cloud points, {done.triangles} surface triangles, "
         f"{done.bytes / 1e6:.2f} MB in {done.seconds:.1f} s (play: ros2 bag play {done.path})"
     )
     return 0

@@ -257,3 +257,69 @@ def test_export_bag_refuses_another_suffix_and_writes_nothing(scan: dict[str, An
     r = client.get(f"/api/sessions/{sid}/export.mcap")
     assert r.status_code == 409 and "no view yet" in r.json()["detail"]
     assert client.get(f"/api/sessions/{sid}/export.mcap?distro=iron").status_code == 422
+
+
+# ---------------------------------------------------------------------- capture during moves
+
+
+def test_the_frames_kept_during_moves_go_into_the_bag_between_their_views(tmp_path: Path) -> None:
+    from workbench.journal.bag import MOVE_CAMERA_INFO_TOPIC, MOVE_DEPTH_TOPIC, MOVE_POSE_TOPIC
+
+    settings = with_small_costs(AppSettings(viser_port=0, scene=False, data_dir=tmp_path / "data"))
+    views = 3
+    with TestClient(create_app(settings), base_url=BASE_URL) as client:
+        body = {"model": "mug", "config": SMALL, "seed": 4, "move_capture": 5.0}
+        sid = client.post("/api/sessions", json=body).json()["id"]
+        assert client.post(f"/api/sessions/{sid}/capture").status_code == 200
+        for _ in range(views - 1):
+            assert client.post(f"/api/sessions/{sid}/step").status_code == 200
+        r = client.get(f"/api/sessions/{sid}/export.mcap")
+        assert r.status_code == 200, r.text
+    bag = tmp_path / "moves.mcap"
+    bag.write_bytes(r.content)
+    journal = read_journal(settings.data_dir / "sessions" / sid)
+    captures = journal.of_kind("capture")
+    kept = [
+        (e, entry, frame)
+        for e in captures
+        for entry, frame in zip(e.get("move_frames", []), journal.move_frames(e), strict=True)
+    ]
+    assert len(captures) == views and len(kept) >= 2  # the moves brought frames
+    msgs = read_bag(bag)
+    view_stamps = [s for s, _ in msgs[DEPTH_TOPIC]]
+    assert len(view_stamps) == views  # the views' topic keeps one image per view
+    images = msgs[MOVE_DEPTH_TOPIC]
+    assert len(images) == len(msgs[MOVE_CAMERA_INFO_TOPIC]) == len(msgs[MOVE_POSE_TOPIC]) == len(kept)
+    stamps = [s for s, _ in images]
+    assert stamps == sorted(set(stamps))  # strictly increasing
+    assert [m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for _, m in images] == stamps
+    by_view = [captures.index(e) for e, _, _ in kept]
+    for stamp, v in zip(stamps, by_view, strict=True):  # after the view before the move, before the move's view
+        assert (view_stamps[v - 1] if v > 0 else 0) < stamp < view_stamps[v]
+    for (_, entry, (frame, registered)), (_, image), (_, pose) in zip(kept, images, msgs[MOVE_POSE_TOPIC], strict=True):
+        assert image.encoding == "32FC1" and image.header.frame_id == "camera_depth_optical_frame"
+        assert bytes(image.data) == frame.depth.astype("<f4").tobytes()  # the journaled frame, bit for bit
+        p = pose.pose.position
+        assert pose.header.frame_id == "plate"
+        assert np.allclose([p.x, p.y, p.z], Pose.from_dict(entry["pose_used"]).translation, atol=1e-12)
+        assert np.allclose([p.x, p.y, p.z], registered.translation, atol=1e-12)
+    tf = [(s, t) for s, m in msgs["/tf"] for t in m.transforms if t.child_frame_id == "camera_depth_optical_frame"]
+    assert len(tf) == views + len(kept)
+    moved = [t for s, t in tf if s in set(stamps)]
+    got = moved[0].transform.translation  # the frame's pose as captured, as the views'
+    assert np.allclose([got.x, got.y, got.z], kept[0][2][0].T_world_camera.translation, atol=1e-12)
+    assert len(load_bag(bag).frames) == views  # the playback reader takes the views only
+
+
+def test_a_move_frame_is_stamped_its_time_into_the_move_before_its_view_squeezed_into_a_shorter_window() -> None:
+    from workbench.journal.bag import move_stamps
+
+    s = 1_000_000_000
+    views = [10 * s, 20 * s, 21 * s]
+    got = move_stamps(views, [[0.5], [1.0, 2.5], [0.0, 1.0, 4.0]], [2.0, 4.0, 4.0], first=9 * s)
+    # the first move starts at the session's start (9 s), 2 s long: its window (1 s) is shorter, t scaled by 1/2;
+    # the second move (4 s) fits between its views: it ends at its view, t after its start (16 s);
+    # the third's window is 1 s for 4 s of move: scaled by 1/4, the frame at t = 0 kept after the previous view
+    assert got == [[9 * s + s // 4], [17 * s, 18 * s + s // 2], [20 * s + 1, 20 * s + s // 4, 21 * s - 1]]
+    assert move_stamps(views, [[], [], []], [0.0, 3.0, 3.0], first=None) == [[], [], []]
+    assert move_stamps([5 * s], [[1.0]], [3.0], first=None) == [[3 * s]]  # no session start: the move's own 3 s

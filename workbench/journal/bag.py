@@ -10,6 +10,14 @@ Per kept view (the ``capture`` events after discards), stamped with the capture'
   frame's pose as captured, before registration: the pose that goes with the image);
 - ``/joint_states``: the arm's joints and ``plate_joint`` (sessions on a URDF arm; the reach sphere has no joints).
 
+Per frame kept from the move to a view (capture during moves: the event's ``move_frames``), stamped within its move
+(:func:`move_stamps`), on their own topics, so the views' topic keeps one image per view (``load_bag`` replays every
+image of a bag without joint states as a view):
+
+- ``/nbv/move/depth/image_rect_raw`` and ``/nbv/move/depth/camera_info``: as the views' image and camera info;
+- ``/tf``: ``plate`` -> ``camera_depth_optical_frame`` at the frame's stamp, its pose as captured (as for the views);
+- ``/nbv/move/registered_pose``: ``geometry_msgs/PoseStamped`` in ``plate``, the registered pose the map used.
+
 Once: ``/tf_static`` ``world`` -> ``base_link`` (the arm's base; transient-local QoS, so a late RViz gets it) and
 ``/nbv/scan`` (``std_msgs/String``, JSON: session, model, source). At the end: ``/nbv/cloud`` (the registered cloud,
 ``sensor_msgs/PointCloud2`` x, y, z float32, frame ``plate``) and ``/nbv/surface`` (the reconstructed surface, a
@@ -54,6 +62,12 @@ from workbench.journal.store import Journal, read_journal
 from workbench.journal.surface import surface_of_journal
 from workbench.surface.export import layer_mesh
 
+MOVE_DEPTH_TOPIC = "/nbv/move/depth/image_rect_raw"
+"""The depth images of the frames kept during moves (``sensor_msgs/Image``, ``32FC1``, as the views')."""
+MOVE_CAMERA_INFO_TOPIC = "/nbv/move/depth/camera_info"
+"""Their camera infos (the image topic's sibling, where RViz's DepthCloud and ``depth_image_proc`` look)."""
+MOVE_POSE_TOPIC = "/nbv/move/registered_pose"
+"""Their registered poses (``geometry_msgs/PoseStamped``, frame ``plate``): the poses the map used."""
 STORAGES = {".mcap": "MCAP", ".db3": "SQLITE3"}
 """The file suffixes ``export_bag`` writes and their rosbag2 storage plugins."""
 BAG_VERSIONS: dict[str, Literal[8, 9]] = {"humble": 8, "jazzy": 9}
@@ -71,10 +85,45 @@ class BagExport:
     points: int
     triangles: int
     seconds: float
+    move_frames: int = 0
+    """The frames kept during moves that went in (capture during moves; 0 without)."""
 
 
 def _ns(seconds: float) -> int:
     return round(float(seconds) * 1e9)
+
+
+def move_stamps(
+    view_stamps: list[int], moves: list[list[float]], move_seconds: list[float], first: int | None
+) -> list[list[int]]:
+    """The stamps (ns, the views' clock) of the frames kept from the move to each view: the move ends at its view's
+    stamp and starts ``move_seconds`` before it, so a frame ``t`` seconds into the move is stamped
+    ``view - move_seconds + t``. The move never starts before the previous view (or ``first``, the session's start,
+    for the first view's move): a window shorter than the move (a simulated move is instant, so its views are closer
+    in wall time than the move is long) is shared out in proportion to ``t``. Each frame lies strictly after the
+    previous view and its move's earlier frames and strictly before its view (as long as the window has room: one
+    ns per frame).
+
+    view_stamps: the views' stamps (strictly increasing); moves: per view, the frames' ``t`` (seconds since the move
+    started, in stamp order); move_seconds: per view, the move's modelled duration."""
+    out: list[list[int]] = []
+    for i, (view, ts, seconds) in enumerate(zip(view_stamps, moves, move_seconds, strict=True)):
+        if not ts:
+            out.append([])
+            continue
+        duration = _ns(max(float(seconds), max(ts), 0.0))
+        lo = view_stamps[i - 1] if i > 0 else first
+        start = view - duration if lo is None else max(lo, view - duration)
+        scale = (view - start) / duration if duration > 0 else 0.0
+        stamps: list[int] = []
+        previous = start - 1 if lo is None else lo
+        for t in ts:
+            stamp = start + round(max(float(t), 0.0) * 1e9 * scale)
+            stamp = min(max(stamp, previous + 1), view - 1)
+            stamps.append(stamp)
+            previous = stamp
+        out.append(stamps)
+    return out
 
 
 class _Messages:
@@ -98,6 +147,18 @@ class _Messages:
             transform=t["geometry_msgs/msg/Transform"](
                 translation=t["geometry_msgs/msg/Vector3"](x=px, y=py, z=pz),
                 rotation=t["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w),
+            ),
+        )
+
+    def pose_stamped(self, stamp: int, frame: str, pose: Pose) -> Any:
+        t = self.t
+        w, x, y, z = (float(v) for v in pose.wxyz)
+        px, py, pz = (float(v) for v in pose.translation)
+        return t["geometry_msgs/msg/PoseStamped"](
+            header=self.header(stamp, frame),
+            pose=t["geometry_msgs/msg/Pose"](
+                position=t["geometry_msgs/msg/Point"](x=px, y=py, z=pz),
+                orientation=t["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w),
             ),
         )
 
@@ -240,7 +301,7 @@ def export_bag(
     from rosbags.rosbag2 import Writer
     from rosbags.rosbag2.enums import StoragePlugin
 
-    started = time.perf_counter()
+    clock = time.perf_counter()
     out = Path(out)
     suffix = out.suffix.lower()
     if suffix not in STORAGES:
@@ -260,6 +321,14 @@ def export_bag(
     stamps = [_ns(e["time"]) for e in captures]
     for i in range(1, len(stamps)):  # strictly increasing, whatever the clock did
         stamps[i] = max(stamps[i], stamps[i - 1] + 1)
+    moves = [journal.move_frames(e) for e in captures]  # (frame as captured, registered pose), in stamp order
+    move_ts = [[float(f["t"]) for f in e.get("move_frames") or []] for e in captures]
+    move_seconds = [
+        float(e.get("move_seconds") or (e.get("move_capture") or {}).get("move_seconds") or 0.0) for e in captures
+    ]
+    started = journal.header.get("time")
+    on_moves = move_stamps(stamps, move_ts, move_seconds, None if started is None else _ns(started))
+    first = min([stamps[0], *(s for m in on_moves for s in m)])
     arms = [(e.get("device_state") or {}).get("arm") for e in captures]
     joints = next((len(a["q"]) for a in arms if isinstance(a, dict) and isinstance(a.get("q"), list)), 0)
     names = [*_joint_names(devices, joints), PLATE_JOINT] if joints else []
@@ -284,6 +353,13 @@ def export_bag(
             c_image = conn(DEPTH_TOPIC, "sensor_msgs/msg/Image")
             c_info = conn(CAMERA_INFO_TOPIC, "sensor_msgs/msg/CameraInfo")
             c_joints = conn(JOINT_STATES_TOPIC, "sensor_msgs/msg/JointState") if names else None
+            c_moves = None  # capture during moves: image, camera info, registered pose
+            if any(moves):
+                c_moves = (
+                    conn(MOVE_DEPTH_TOPIC, "sensor_msgs/msg/Image"),
+                    conn(MOVE_CAMERA_INFO_TOPIC, "sensor_msgs/msg/CameraInfo"),
+                    conn(MOVE_POSE_TOPIC, "geometry_msgs/msg/PoseStamped"),
+                )
             c_cloud = conn(CLOUD_TOPIC, "sensor_msgs/msg/PointCloud2", [latched])
             c_surface = conn(SURFACE_TOPIC, "visualization_msgs/msg/Marker", [latched])
 
@@ -297,13 +373,23 @@ def export_bag(
                 "views": len(frames),
                 "frames": {"plate": PLATE_FRAME, "world": WORLD_FRAME, "camera": CAMERA_FRAME},
             }
-            put(c_scan, stamps[0], store.types["std_msgs/msg/String"](data=json.dumps(scan)))
+            if c_moves is not None:
+                scan["move_frames"] = sum(len(m) for m in moves)
+            put(c_scan, first, store.types["std_msgs/msg/String"](data=json.dumps(scan)))
             base = Pose.identity()
             if devices is not None:
                 base_xyz = devices.cell.arm.mount if devices.cell.kinematics == "urdf" else devices.cell.arm_base
                 base = Pose.from_wxyz([1.0, 0.0, 0.0, 0.0], list(base_xyz))
-            put(c_static, stamps[0], m.tf([m.transform(stamps[0], WORLD_FRAME, ARM_BASE_FRAME, base)]))
-            for stamp, frame, arm in zip(stamps, frames, arms, strict=True):
+            put(c_static, first, m.tf([m.transform(first, WORLD_FRAME, ARM_BASE_FRAME, base)]))
+            for stamp, frame, arm, move, move_at in zip(stamps, frames, arms, moves, on_moves, strict=True):
+                for at, (move_frame, T_world_camera) in zip(move_at, move, strict=True):
+                    if c_moves is None:
+                        break
+                    c_move, c_move_info, c_move_pose = c_moves
+                    put(c_tf, at, m.tf([m.transform(at, PLATE_FRAME, CAMERA_FRAME, move_frame.T_world_camera)]))
+                    put(c_move, at, m.image(at, move_frame))
+                    put(c_move_info, at, m.camera_info(at, move_frame))
+                    put(c_move_pose, at, m.pose_stamped(at, PLATE_FRAME, T_world_camera))
                 angle = float(arm["angle"]) if isinstance(arm, dict) and "angle" in arm else 0.0
                 T_world_plate = rz(angle)
                 put(
@@ -328,7 +414,13 @@ def export_bag(
     finally:
         shutil.rmtree(work, ignore_errors=True)
     return BagExport(
-        out, out.stat().st_size, len(frames), len(cloud), len(triangles) // 3, time.perf_counter() - started
+        out,
+        out.stat().st_size,
+        len(frames),
+        len(cloud),
+        len(triangles) // 3,
+        time.perf_counter() - clock,
+        sum(len(m) for m in moves),
     )
 
 
