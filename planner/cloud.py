@@ -67,12 +67,9 @@ def merge_cloud(
         cloud, from_move = cloud[~stale], from_move[~stale]
     still = np.concatenate([cloud[~from_move], points]) if not move_frame else cloud[~from_move]
     moving = np.concatenate([cloud[from_move], points]) if move_frame else cloud[from_move]
-    if size <= 0:
-        merged = np.concatenate([still, moving])
-        return merged, np.concatenate([np.zeros(len(still), dtype=bool), np.ones(len(moving), dtype=bool)])
-    still = voxel_downsample(still, size) if len(still) else still.reshape(0, 3)
-    moving = voxel_downsample(moving, size) if len(moving) else moving.reshape(0, 3)
-    if len(still) and len(moving):  # a cell with a view's points keeps those alone
-        moving = moving[~np.isin(_cells(moving, size), _cells(still, size))]
+    if size > 0:
+        still, moving = voxel_downsample(still, size), voxel_downsample(moving, size)
+        if len(still) and len(moving):  # a cell with a view's points keeps those alone
+            moving = moving[~np.isin(_cells(moving, size), _cells(still, size))]
     merged = np.concatenate([still, moving])
     return merged, np.concatenate([np.zeros(len(still), dtype=bool), np.ones(len(moving), dtype=bool)])
